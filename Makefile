@@ -1,0 +1,36 @@
+# The two commands a newcomer needs:
+#   make run    installs what is missing, builds, and runs the main job
+#   make test   installs what is missing, builds, and runs every test
+BUILD ?= build
+ASAN_BUILD ?= build-asan
+JOBS ?= $(shell nproc)
+CMAKE_FLAGS ?=
+
+.PHONY: setup configure build run test test-unit test-sanitize clean
+
+setup:
+	@scripts/install-deps.sh
+
+configure: setup
+	@cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release $(CMAKE_FLAGS) >/dev/null
+
+build: configure
+	@cmake --build $(BUILD) -j $(JOBS)
+
+run: build
+	@scripts/run-demo.sh $(BUILD)
+
+test-unit: build
+	@cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+# The readers under AddressSanitizer and UndefinedBehaviorSanitizer.
+test-sanitize: setup
+	@cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Debug -DGMR_SANITIZE=ON \
+	  -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_NET=OFF -DGMR_BUILD_TOOLS=OFF >/dev/null
+	@cmake --build $(ASAN_BUILD) -j $(JOBS) --target gmr_sanitize_tests
+	@cd $(ASAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize
+
+test: test-unit test-sanitize
+
+clean:
+	rm -rf $(BUILD) $(ASAN_BUILD)

@@ -1,0 +1,52 @@
+#include "cli_util.h"
+
+#include <charconv>
+
+namespace gmr::cli {
+namespace {
+
+std::size_t parse_index(std::string_view s, std::string_view whole) {
+  std::size_t v = 0;
+  const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (ec != std::errc() || p != s.data() + s.size())
+    throw CommandError("bad frame range '" + std::string(whole) + "': expected A:B with non-negative integers");
+  return v;
+}
+
+}  // namespace
+
+FrameRange parse_frame_range(std::string_view text) {
+  const auto colon = text.find(':');
+  if (colon == std::string_view::npos)
+    throw CommandError("bad frame range '" + std::string(text) + "': expected A:B (frames A to B-1)");
+  FrameRange r;
+  const auto a = text.substr(0, colon), b = text.substr(colon + 1);
+  if (!a.empty()) r.begin = parse_index(a, text);
+  if (!b.empty()) r.end = parse_index(b, text);
+  if (r.begin > r.end) throw CommandError("bad frame range '" + std::string(text) + "': A is after B");
+  return r;
+}
+
+FrameRange clamp_frame_range(FrameRange r, std::size_t frame_count) {
+  if (r.end > frame_count) r.end = frame_count;
+  if (r.begin > r.end)
+    throw CommandError("frame " + std::to_string(r.begin) + " is past the last frame (" +
+                       std::to_string(frame_count) + " frames)");
+  return r;
+}
+
+std::vector<std::string> split_list(std::string_view text) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  while (true) {
+    const auto comma = text.find(',', start);
+    const auto item = text.substr(start, comma == std::string_view::npos ? std::string_view::npos : comma - start);
+    if (item.empty()) throw CommandError("empty name in list '" + std::string(text) + "'");
+    out.emplace_back(item);
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
+  }
+  return out;
+}
+
+}  // namespace gmr::cli

@@ -1,0 +1,44 @@
+// Helpers shared by the subcommands: how a command fails, and frame ranges.
+#pragma once
+
+#include <cstddef>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "gmr/core/error.h"
+
+namespace gmr::cli {
+
+// Thrown by a subcommand to stop with exit status 1 and print `what()` as the
+// single line on stderr. main() catches it.
+struct CommandError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Unwraps a Result or throws CommandError with the error's "file:line:col: message".
+template <class T>
+T take(Result<T> r) {
+  if (!r.ok()) throw CommandError(r.error().to_string());
+  return std::move(r).value();
+}
+inline void check(const Status& s) {
+  if (!s.ok()) throw CommandError(s.error().to_string());
+}
+
+// Half-open frame range "A:B" (either side may be empty: ":B", "A:", ":").
+struct FrameRange {
+  std::size_t begin = 0;
+  std::size_t end = static_cast<std::size_t>(-1);
+};
+// Parses "A:B"; throws CommandError on anything else. Clamps nothing.
+FrameRange parse_frame_range(std::string_view text);
+// Clamps to [0, frame_count) and throws CommandError when begin > end or begin
+// is past the last frame of a non-empty motion.
+FrameRange clamp_frame_range(FrameRange r, std::size_t frame_count);
+
+// Splits "A,B,C" into names (empty items are an error).
+std::vector<std::string> split_list(std::string_view text);
+
+}  // namespace gmr::cli

@@ -1,0 +1,13 @@
+// Subcommands of the `gmr` command. Each group adds its own to the app.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace gmr::cli {
+
+void add_file_commands(CLI::App& app);   // info, convert, positions   (cmd_files.cpp)
+void add_ops_commands(CLI::App& app);    // roots, shift, split, join, strip-dummies (cmd_ops.cpp)
+void add_bench_commands(CLI::App& app);  // bench figure4, bench fk    (cmd_bench.cpp)
+void add_net_commands(CLI::App& app);    // ls, skeleton, query, stream (cmd_net.cpp)
+
+}  // namespace gmr::cli

@@ -1,0 +1,32 @@
+// gmr: one command, git-style subcommands. Files: info, convert, positions,
+// roots, shift, split, join, strip-dummies; benchmarks: bench; a server: ls,
+// skeleton, query, stream.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <exception>
+
+#include "cli_util.h"
+#include "commands.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"gmr: General Motion Representation tools"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "gmr 0.1.0");
+  gmr::cli::add_file_commands(app);
+  gmr::cli::add_ops_commands(app);
+  gmr::cli::add_bench_commands(app);
+  gmr::cli::add_net_commands(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // Usage errors: CLI11 prints help or the problem; --help exits 0.
+    return app.exit(e);
+  } catch (const gmr::cli::CommandError& e) {
+    std::fprintf(stderr, "gmr: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "gmr: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,82 @@
+// The skeleton: a forest of joints.
+//
+//        Hips (root)               Neck (root, soft link -> Spine)
+//       /    |                     /    |     |
+//   LHip   Spine               Head LShoulder RShoulder
+//
+// Any joint may be a root and there may be several roots. A root that a split
+// created keeps a "soft link" to the parent it had, so a join can undo it.
+// Joints are stored so that every parent comes before its children (index of
+// parent < index of child); forward kinematics is then one pass in index order.
+#pragma once
+
+#include <Eigen/Core>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "gmr/core/error.h"
+#include "gmr/core/rotation.h"
+
+namespace gmr {
+
+inline constexpr int kNoParent = -1;
+
+struct Joint {
+  std::string name;                       // unique in the skeleton, non-empty
+  int parent = kNoParent;                 // kNoParent for a root
+  int soft_parent = kNoParent;            // roots only: the parent a split removed
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // static offset from the parent (roots: position)
+  std::vector<ChannelType> channels;      // listed order; rotations compose in this order
+
+  bool has_rotation() const;
+  bool has_translation() const;
+};
+
+// A validated forest. Build with Skeleton::create(); joints cannot be edited in
+// place (take joints(), edit the copy, create() again).
+class Skeleton {
+ public:
+  Skeleton() = default;
+
+  // Checks and indexes `joints`. Fails (naming the rule and the joint) when: a
+  // name is empty or repeated; a parent or soft parent is out of range; a parent
+  // does not come before its child; a non-root has a soft parent; a joint lists
+  // the same channel twice.
+  static Result<Skeleton> create(std::vector<Joint> joints);
+
+  std::size_t size() const { return joints_.size(); }
+  bool empty() const { return joints_.empty(); }
+  const std::vector<Joint>& joints() const { return joints_; }
+  const Joint& joint(int j) const { return joints_[static_cast<std::size_t>(j)]; }
+  const Joint& operator[](int j) const { return joint(j); }
+
+  // Index of the joint with this exact name, or -1.
+  int find(std::string_view name) const;
+  bool is_root(int j) const { return joint(j).parent == kNoParent; }
+  // Root joints, in index order.
+  const std::vector<int>& roots() const { return roots_; }
+  // Children of j, in index order.
+  std::span<const int> children(int j) const;
+  // The root of the tree that holds j.
+  int root_of(int j) const;
+  // Number of edges from j up to its root.
+  int depth(int j) const;
+
+  // Index of j's first channel within one frame's values; channels of joint j
+  // occupy [channel_offset(j), channel_offset(j) + joint(j).channels.size()).
+  int channel_offset(int j) const { return channel_offsets_[static_cast<std::size_t>(j)]; }
+  // Total number of channels per frame.
+  int channel_count() const { return channel_count_; }
+
+ private:
+  std::vector<Joint> joints_;
+  std::vector<int> roots_;
+  std::vector<int> channel_offsets_;
+  std::vector<int> child_begin_;  // CSR: children of j are child_list_[child_begin_[j] .. child_begin_[j+1])
+  std::vector<int> child_list_;
+  int channel_count_ = 0;
+};
+
+}  // namespace gmr

@@ -1,0 +1,1 @@
+target_sources(gmr PRIVATE src/asf/asf_amc.cpp)

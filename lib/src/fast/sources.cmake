@@ -1,0 +1,1 @@
+# Sources of the fast area: target_sources(gmr PRIVATE src/fast/...)

@@ -1,0 +1,1 @@
+# Sources of the io area: target_sources(gmr PRIVATE src/io/...)

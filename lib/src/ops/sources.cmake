@@ -1,0 +1,1 @@
+# Sources of the ops area: target_sources(gmr PRIVATE src/ops/...)

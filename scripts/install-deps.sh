@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Installs every Debian package gmr needs to build, test and benchmark.
+# Works as root or through sudo; does nothing when everything is already there.
+set -euo pipefail
+
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libeigen3-dev            # the math: vectors, matrices, quaternions
+  libgtest-dev libgmock-dev # tests
+  libbenchmark-dev          # benchmarks in bench/
+  libhwy-dev                # Highway: run-time SIMD dispatch for the fast FK path
+  libcli11-dev              # argument parsing for the gmr and gmr-server commands
+  nlohmann-json3-dev        # JSON output (gmr bench fk --json)
+  libspdlog-dev libfmt-dev  # logging outside lib/
+  libboost-dev libboost-system-dev # Boost.Asio for the server and client
+  libprotobuf-dev protobuf-compiler # the wire protocol
+  gnuplot-nox               # the Figure 4 plot
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+
+sudo=""
+if [ "$(id -u)" -ne 0 ]; then
+  command -v sudo >/dev/null || { echo "install-deps: need root or sudo to install: ${missing[*]}" >&2; exit 1; }
+  sudo="sudo"
+fi
+echo "install-deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$sudo apt-get update -qq
+$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"

@@ -1,0 +1,61 @@
+#include "test_data.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cctype>
+#include <cstdlib>
+
+namespace gmr::test {
+namespace fs = std::filesystem;
+
+static fs::path source_dir() {
+  if (const char* s = std::getenv("GMR_SOURCE_DIR"); s != nullptr && *s != '\0') return s;
+  return fs::current_path();
+}
+
+fs::path data_dir() {
+  if (const char* d = std::getenv("GMR_DATA_DIR"); d != nullptr && *d != '\0') return d;
+  return (source_dir() / ".." / "shared" / "data").lexically_normal();
+}
+
+bool have_data() { return fs::is_directory(data_dir() / "bvh"); }
+
+bool in_ci() {
+  const char* ci = std::getenv("CI");
+  return ci != nullptr && std::string(ci) == "true";
+}
+
+std::vector<fs::path> data_files(const std::string& sub, const std::string& ext) {
+  std::vector<fs::path> out;
+  const fs::path root = data_dir() / sub;
+  if (!fs::is_directory(root)) return out;
+  for (const auto& e : fs::recursive_directory_iterator(root)) {
+    if (!e.is_regular_file()) continue;
+    std::string x = e.path().extension().string();
+    std::transform(x.begin(), x.end(), x.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (x == ext) out.push_back(e.path());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+fs::path data_file(const std::string& relative) { return data_dir() / relative; }
+
+fs::path fixture(const std::string& relative) { return source_dir() / "tests" / "data" / relative; }
+
+PositionDiff compare_positions(std::span<const Eigen::Vector3d> a, std::span<const Eigen::Vector3d> b,
+                               std::size_t joints) {
+  PositionDiff d;
+  const std::size_t n = std::min(a.size(), b.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    const double e = (a[i] - b[i]).norm();
+    if (!(e <= d.max_error)) {  // also catches NaN
+      d.max_error = std::isnan(e) ? INFINITY : e;
+      d.frame = joints ? i / joints : 0;
+      d.joint = joints ? static_cast<int>(i % joints) : -1;
+    }
+  }
+  return d;
+}
+
+}  // namespace gmr::test

@@ -1,0 +1,65 @@
+// Access to the shared real-data corpus (../shared/data) and common assertions.
+//
+// Outside CI a test that needs the corpus is skipped with a clear message when
+// it is missing; with CI=true its absence is a failure.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "gmr/skeleton/skeleton.h"
+
+namespace gmr::test {
+
+// Root of the corpus: $GMR_DATA_DIR if set, else <repo>/../shared/data.
+std::filesystem::path data_dir();
+// True when the corpus exists.
+bool have_data();
+// True when running in CI (CI=true).
+bool in_ci();
+// Every regular file under data_dir()/sub whose extension (lower-cased, with the
+// dot) is `ext`, sorted. Empty when the corpus is missing.
+std::vector<std::filesystem::path> data_files(const std::string& sub, const std::string& ext);
+// Absolute path of a file in the corpus.
+std::filesystem::path data_file(const std::string& relative);
+// Path of a fixture under tests/data.
+std::filesystem::path fixture(const std::string& relative);
+
+// Largest distance between corresponding positions, and where it happened.
+struct PositionDiff {
+  double max_error = 0.0;
+  std::size_t frame = 0;
+  int joint = -1;
+};
+// a and b are frame-major arrays of `joints` positions per frame.
+PositionDiff compare_positions(std::span<const Eigen::Vector3d> a, std::span<const Eigen::Vector3d> b,
+                               std::size_t joints);
+
+}  // namespace gmr::test
+
+// Skips the test (outside CI) or fails it (in CI) when the corpus is missing.
+#define GMR_REQUIRE_DATA()                                                                      \
+  do {                                                                                           \
+    if (!::gmr::test::have_data()) {                                                             \
+      if (::gmr::test::in_ci()) FAIL() << "CI=true but the shared data is missing at "           \
+                                       << ::gmr::test::data_dir();                               \
+      GTEST_SKIP() << "shared data not found at " << ::gmr::test::data_dir()                     \
+                   << " (set GMR_DATA_DIR or check out ../shared)";                              \
+    }                                                                                            \
+  } while (0)
+
+// Asserts that two frame-major position arrays agree within `tol`, naming the
+// worst frame and joint when they do not.
+#define EXPECT_POSITIONS_NEAR(skeleton, a, b, tol)                                               \
+  do {                                                                                           \
+    ASSERT_EQ((a).size(), (b).size());                                                           \
+    const auto gmr_diff_ = ::gmr::test::compare_positions((a), (b), (skeleton).size());          \
+    EXPECT_LE(gmr_diff_.max_error, (tol))                                                        \
+        << "worst at frame " << gmr_diff_.frame << ", joint "                                    \
+        << (gmr_diff_.joint >= 0 ? (skeleton).joint(gmr_diff_.joint).name : std::string("?"));  \
+  } while (0)
