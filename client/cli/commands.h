@@ -9,5 +9,6 @@ void add_file_commands(CLI::App& app);   // info, convert, positions   (cmd_file
 void add_ops_commands(CLI::App& app);    // roots, shift, split, join, strip-dummies (cmd_ops.cpp)
 void add_bench_commands(CLI::App& app);  // bench figure4, bench fk    (cmd_bench.cpp)
 void add_net_commands(CLI::App& app);    // ls, skeleton, query, stream (cmd_net.cpp)
+void add_demo_commands(CLI::App& app);   // demo: write the built-in library (cmd_demo.cpp)
 
 }  // namespace gmr::cli

@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   gmr::cli::add_ops_commands(app);
   gmr::cli::add_bench_commands(app);
   gmr::cli::add_net_commands(app);
+  gmr::cli::add_demo_commands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
