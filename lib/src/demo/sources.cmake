@@ -1,0 +1,1 @@
+target_sources(gmr PRIVATE src/demo/demo_library.cpp)
