@@ -1,7 +1,185 @@
+// File commands: info, convert, positions.
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include "cli_util.h"
+#include "cmd_ops.h"
 #include "commands.h"
+#include "gmr/io/motion_file.h"
+#include "gmr/io/positions_csv.h"
+#include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/motion/motion.h"
 
 namespace gmr::cli {
+namespace {
 
-void add_file_commands(CLI::App& app) { (void)app; }
+// Warnings go to stderr, one line each, only once the command has succeeded
+// (a failing command prints its one error line and nothing else).
+void print_warnings(const Warnings& warnings) {
+  for (const Error& w : warnings) std::fprintf(stderr, "gmr: warning: %s\n", w.to_string().c_str());
+}
+
+Motion load(const std::string& file, const std::string& asf, Warnings& warnings) {
+  LoadOptions options;
+  options.asf = asf;
+  return take(load_motion(file, options, &warnings));
+}
+
+std::string format_seconds(double s) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.6g", s);
+  return buf;
+}
+
+// ---- gmr info
+
+struct InfoOptions {
+  std::string file;
+  std::string asf;
+};
+
+void run_info(const InfoOptions& o) {
+  Warnings warnings;
+  const Motion m = load(o.file, o.asf, warnings);
+  const Skeleton& sk = m.skeleton;
+  std::string roots;
+  int leaves = 0;
+  for (int r : sk.roots()) roots += (roots.empty() ? "" : ", ") + sk.joint(r).name;
+  for (int j = 0; j < static_cast<int>(sk.size()); ++j) leaves += sk.children(j).empty() ? 1 : 0;
+
+  std::string out;
+  out += "file:        " + o.file + "\n";
+  out += std::string("convention:  ") +
+         (m.convention == Convention::kPostRotation ? "post-rotation (BVH: a joint's rotation moves its children)"
+                                                     : "pre-rotation (GMR: a joint's rotation moves the joint)") +
+         "\n";
+  out += "joints:      " + std::to_string(sk.size()) + " (" + std::to_string(leaves) + " leaves)\n";
+  out += "roots:       " + std::to_string(sk.roots().size()) + " (" + roots + ")\n";
+  out += "channels:    " + std::to_string(sk.channel_count()) + " per frame\n";
+  out += "frames:      " + std::to_string(m.frame_count) + "\n";
+  if (m.frame_time > 0) {
+    out += "frame time:  " + format_seconds(m.frame_time) + " s (" + format_seconds(1.0 / m.frame_time) + " fps)\n";
+    out += "duration:    " + format_seconds(m.duration()) + " s\n";
+  } else {
+    out += "frame time:  unknown (0 in the file)\n";
+    out += "duration:    unknown\n";
+  }
+  out += "hierarchy:\n";
+  // Depth-first, children indented under their parent.
+  std::vector<int> stack(sk.roots().rbegin(), sk.roots().rend());
+  while (!stack.empty()) {
+    const int j = stack.back();
+    stack.pop_back();
+    const Joint& joint = sk.joint(j);
+    out += "  " + std::string(static_cast<std::size_t>(2 * sk.depth(j)), ' ') + joint.name;
+    if (!joint.channels.empty()) {
+      out += "  [";
+      for (std::size_t c = 0; c < joint.channels.size(); ++c) {
+        if (c) out += ' ';
+        out += channel_name(joint.channels[c]);
+      }
+      out += "]";
+    }
+    if (joint.soft_parent != kNoParent) out += "  (soft link to " + sk.joint(joint.soft_parent).name + ")";
+    out += "\n";
+    const auto ch = sk.children(j);
+    for (auto it = ch.rbegin(); it != ch.rend(); ++it) stack.push_back(*it);
+  }
+  std::fwrite(out.data(), 1, out.size(), stdout);
+  print_warnings(warnings);
+}
+
+// ---- gmr convert
+
+struct ConvertOptions {
+  std::string in;
+  std::string out;
+  std::string asf;
+};
+
+void run_convert(const ConvertOptions& o) {
+  Warnings warnings;
+  const Motion m = load(o.in, o.asf, warnings);
+  check(save_motion(m, o.out));
+  print_warnings(warnings);
+}
+
+// ---- gmr positions
+
+// Options of `gmr positions`. The OPS area adds its transforms (--roots,
+// --strip-dummies, --relative-to) as fields here, registers them in
+// add_positions_transform_options() and applies them in transform_for_positions().
+struct PositionsOptions {
+  std::string file;
+  std::string asf;
+  std::string frames = ":";
+  ViewOptions view;  // --roots, --strip-dummies, --relative-to (cmd_ops.cpp)
+};
+
+void add_positions_transform_options(CLI::App& cmd, PositionsOptions& o) { add_view_options(cmd, o.view); }
+
+// The motion as loaded -> the motion whose positions are printed. Whatever it
+// does, positions must stay those of the file unless an option says otherwise.
+Motion transform_for_positions(Motion m, const PositionsOptions& o) {
+  (void)o;
+  return m;
+}
+
+void run_positions(const PositionsOptions& o) {
+  const FrameRange requested = parse_frame_range(o.frames);
+  Warnings warnings;
+  const Motion m = transform_for_positions(load(o.file, o.asf, warnings), o);
+  if (o.view.any()) {
+    write_view_positions(m, o.view, requested, std::cout);
+    std::cout.flush();
+    if (!std::cout) throw CommandError("cannot write the positions to standard output");
+    print_warnings(warnings);
+    return;
+  }
+  const FrameRange r = clamp_frame_range(requested, m.frame_count);
+  write_positions_csv_header(std::cout);
+  // Chunks keep memory flat for long motions.
+  constexpr std::size_t kChunk = 1024;
+  for (std::size_t f = r.begin; f < r.end; f += kChunk) {
+    const std::size_t e = std::min(r.end, f + kChunk);
+    const auto p = compute_positions(m, f, e);
+    write_positions_csv_rows(std::cout, m.skeleton, p, f);
+  }
+  std::cout.flush();
+  if (!std::cout) throw CommandError("cannot write the positions to standard output");
+  print_warnings(warnings);
+}
+
+}  // namespace
+
+void add_file_commands(CLI::App& app) {
+  {
+    auto o = std::make_shared<InfoOptions>();
+    CLI::App* cmd = app.add_subcommand("info", "Show a motion file's joints, roots, channels, frames and duration");
+    cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
+    cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+    cmd->callback([o] { run_info(*o); });
+  }
+  {
+    auto o = std::make_shared<ConvertOptions>();
+    CLI::App* cmd = app.add_subcommand("convert", "Convert a motion file by extension (.bvh <-> .gmr); atomic write");
+    cmd->add_option("IN", o->in, "Input motion file (.bvh, .gmr, .amc)")->required();
+    cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr)")->required();
+    cmd->add_option("--asf", o->asf, "Skeleton for an .amc input (default: the single .asf beside it)");
+    cmd->callback([o] { run_convert(*o); });
+  }
+  {
+    auto o = std::make_shared<PositionsOptions>();
+    CLI::App* cmd = app.add_subcommand(
+        "positions", "Print every joint's world position as CSV: frame,joint,x,y,z (frames from 0, file order)");
+    cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
+    cmd->add_option("--frames", o->frames, "Half-open frame range A:B (frames A to B-1; ':' = all)");
+    cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+    add_positions_transform_options(*cmd, *o);
+    cmd->callback([o] { run_positions(*o); });
+  }
+}
 
 }  // namespace gmr::cli

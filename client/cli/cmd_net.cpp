@@ -1,7 +1,321 @@
+// Server commands: ls, skeleton, query, stream (a running gmr-server).
+// Built only with GMR_BUILD_NET (GMR_WITH_NET); otherwise add_net_commands adds nothing.
 #include "commands.h"
 
-namespace gmr::cli {
+#ifdef GMR_WITH_NET
 
-void add_net_commands(CLI::App& app) { (void)app; }
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <mutex>
+#include <sstream>
+
+#include "cli_util.h"
+#include "cmd_ops.h"
+#include "gmr/client/client.h"
+#include "gmr/io/file_util.h"
+#include "gmr/io/positions_csv.h"
+
+namespace gmr::cli {
+namespace {
+
+struct ServerOptions {
+  std::string host = "127.0.0.1";
+  std::uint16_t port = 7400;
+};
+
+void add_server_options(CLI::App& cmd, ServerOptions& o) {
+  cmd.add_option("--host", o.host, "Server address")->capture_default_str();
+  cmd.add_option("--port", o.port, "Server TCP port")->capture_default_str();
+}
+
+std::unique_ptr<client::Client> connect(const ServerOptions& o) {
+  client::ClientOptions c;
+  c.host = o.host;
+  c.port = o.port;
+  c.client_name = "gmr cli";
+  return take(client::Client::connect(c));
+}
+
+// Rows in the motion's own joint order (as `gmr positions` prints them):
+// the view's joints mapped back by name, joints the view lost left out.
+struct RowOrder {
+  Skeleton names;                // unlinked joints, for write_positions_csv_rows
+  std::vector<std::size_t> from; // row r takes value index from[r] of a frame
+};
+RowOrder row_order(const Skeleton& source, const Skeleton& view, const std::vector<int>& joints) {
+  RowOrder o;
+  std::vector<Joint> js;
+  for (const auto& j : source.joints()) {
+    const int vj = view.find(j.name);
+    const auto it = std::find(joints.begin(), joints.end(), vj);
+    if (vj < 0 || it == joints.end()) continue;
+    Joint n;
+    n.name = j.name;
+    js.push_back(std::move(n));
+    o.from.push_back(static_cast<std::size_t>(it - joints.begin()));
+  }
+  o.names = take(Skeleton::create(std::move(js)));
+  return o;
+}
+
+// Applies --roots, --strip-dummies, --relative-to to a server view.
+client::ViewState make_view(client::Client& c, const std::string& motion, const ViewOptions& o) {
+  client::ViewState v = take(c.create_view(motion));
+  if (!o.roots.empty()) v = take(c.set_roots(v.id, split_list(o.roots)));
+  if (o.strip_dummies) v = take(c.strip_dummies(v.id));
+  if (!o.relative_to.empty()) v = take(c.set_coordinates(v.id, o.relative_to));
+  return v;
+}
+
+// ---- gmr ls
+void run_ls(const ServerOptions& s) {
+  auto c = connect(s);
+  const auto motions = take(c->list_motions());
+  std::printf("%-32s %7s %8s %8s %9s  %s\n", "motion", "joints", "frames", "fps", "seconds", "source");
+  for (const auto& m : motions) {
+    const double fps = m.frame_time() > 0 ? 1.0 / m.frame_time() : 0.0;
+    std::printf("%-32s %7u %8llu %8.2f %9.2f  %s\n", m.name().c_str(), m.joint_count(),
+                static_cast<unsigned long long>(m.frame_count()), fps,
+                m.frame_time() * static_cast<double>(m.frame_count()), m.source().c_str());
+  }
+}
+
+// ---- gmr skeleton
+void run_skeleton(const ServerOptions& s, const std::string& motion) {
+  auto c = connect(s);
+  const Skeleton sk = take(c->skeleton(motion));
+  std::printf("%s: %zu joints, %zu roots\n", motion.c_str(), sk.size(), sk.roots().size());
+  for (int j = 0; j < static_cast<int>(sk.size()); ++j) {
+    const Joint& jt = sk.joint(j);
+    std::string channels;
+    for (auto ch : jt.channels) {
+      if (!channels.empty()) channels += ' ';
+      channels += channel_name(ch);
+    }
+    std::printf("%*s%s  offset %s %s %s%s%s\n", 2 * sk.depth(j), "", jt.name.c_str(), format_double(jt.offset.x()).c_str(),
+                format_double(jt.offset.y()).c_str(), format_double(jt.offset.z()).c_str(),
+                channels.empty() ? "" : "  channels ", channels.c_str());
+  }
+}
+
+// ---- gmr query
+struct QueryOptions {
+  ServerOptions server;
+  std::string motion;
+  std::string frames = ":";
+  ViewOptions view;
+};
+
+void run_query(const QueryOptions& o) {
+  const FrameRange requested = parse_frame_range(o.frames);
+  auto c = connect(o.server);
+  const Skeleton source = take(c->skeleton(o.motion));
+  const client::ViewState v = make_view(*c, o.motion, o.view);
+  const FrameRange r = clamp_frame_range(requested, v.frame_count);
+  write_positions_csv_header(std::cout);
+  // Chunks keep each reply well under the server's message limit.
+  const std::size_t per_frame = v.skeleton.size() * 3 * 9 + 16;
+  const std::size_t chunk = std::max<std::size_t>(1, c->hello().max_message_bytes() / 2 / per_frame);
+  RowOrder order;
+  bool have_order = false;
+  for (std::size_t f = r.begin; f < r.end; f += chunk) {
+    const std::size_t e = std::min(r.end, f + chunk);
+    const auto q = take(c->query(v.id, static_cast<std::uint32_t>(f), static_cast<std::uint32_t>(e)));
+    if (!have_order) {
+      order = row_order(source, v.skeleton, q.joints);
+      have_order = true;
+    }
+    std::vector<Eigen::Vector3d> rows;
+    rows.reserve((e - f) * order.from.size());
+    for (std::size_t k = 0; k < e - f; ++k) {
+      for (std::size_t from : order.from) rows.push_back(q.positions[k * q.joints.size() + from]);
+    }
+    write_positions_csv_rows(std::cout, order.names, rows, f);
+  }
+  std::cout.flush();
+  if (!std::cout) throw CommandError("cannot write the positions to standard output");
+}
+
+// ---- gmr stream
+struct StreamOptions {
+  ServerOptions server;
+  std::string motion;
+  ViewOptions view;
+  bool udp = false;
+  double rate = 0.0;
+  double speed = 1.0;
+  std::uint64_t count = 0;
+  bool loop = false;
+  bool summary = false;
+  std::string joints;
+  std::string frames = ":";
+};
+
+void run_stream(const StreamOptions& o) {
+  auto c = connect(o.server);
+  const Skeleton source = take(c->skeleton(o.motion));
+  const client::ViewState v = make_view(*c, o.motion, o.view);
+  const FrameRange r = clamp_frame_range(parse_frame_range(o.frames), v.frame_count);
+  client::SubscribeOptions so;
+  so.udp = o.udp;
+  so.rate_hz = o.rate;
+  so.speed = o.speed;
+  so.loop = o.loop;
+  so.max_frames = o.count;
+  so.start_frame = static_cast<std::uint32_t>(r.begin);
+  so.end_frame = static_cast<std::uint32_t>(r.end);
+  if (!o.joints.empty()) so.joints = split_list(o.joints);
+  so.float64 = !o.summary;  // CSV prints exact numbers
+
+  struct State {
+    std::mutex mutex;
+    std::condition_variable cv;
+    bool done = false;
+    std::string end_reason;
+    std::uint64_t frames = 0, gaps = 0, last_sequence = 0, last_frame = 0;
+    std::int64_t latency_sum_ns = 0, latency_max_ns = 0;
+    std::uint64_t window_frames = 0;
+    std::int64_t window_latency_sum = 0, window_latency_max = 0;
+  };
+  auto st = std::make_shared<State>();
+  RowOrder order;
+  std::atomic<bool> have_order{false};
+  std::mutex out_mutex;
+  if (!o.summary) write_positions_csv_header(std::cout);
+  const auto started = std::chrono::steady_clock::now();
+
+  auto on_frame = [&, st](const client::ReceivedFrame& f) {
+    const std::int64_t latency = f.receive_time_ns - f.server_send_time_ns;
+    {
+      std::lock_guard lock(st->mutex);
+      if (st->frames > 0 && f.sequence > st->last_sequence + 1) st->gaps += f.sequence - st->last_sequence - 1;
+      ++st->frames;
+      st->last_sequence = f.sequence;
+      st->last_frame = f.frame_index;
+      st->latency_sum_ns += latency;
+      st->latency_max_ns = std::max(st->latency_max_ns, latency);
+      ++st->window_frames;
+      st->window_latency_sum += latency;
+      st->window_latency_max = std::max(st->window_latency_max, latency);
+    }
+    if (!o.summary && have_order) {
+      std::vector<Eigen::Vector3d> rows;
+      for (std::size_t from : order.from) rows.push_back(f.positions[from]);
+      std::lock_guard lock(out_mutex);
+      write_positions_csv_rows(std::cout, order.names, rows, f.frame_index);
+    }
+  };
+  auto on_end = [st](const client::pb::SubscriptionEnded& e) {
+    std::lock_guard lock(st->mutex);
+    st->done = true;
+    st->end_reason = e.reason();
+    st->cv.notify_all();
+  };
+  // Row order must be known before the first frame prints: take it from the
+  // view (all joints or the subset, in the order the server will send).
+  {
+    std::vector<int> joints;
+    if (so.joints.empty()) {
+      for (int j = 0; j < static_cast<int>(v.skeleton.size()); ++j) joints.push_back(j);
+    } else {
+      for (const auto& n : so.joints) joints.push_back(v.skeleton.find(n));
+    }
+    order = row_order(source, v.skeleton, joints);
+    have_order = true;
+  }
+  const auto sub = take(c->subscribe(v.id, so, on_frame, on_end));
+  if (o.summary) {
+    std::fprintf(stderr, "streaming %s over %s at %.2f Hz (subscription %u, view %u)\n", o.motion.c_str(),
+                 o.udp ? "UDP" : "TCP", sub.rate_hz, sub.id, v.id);
+  }
+  std::unique_lock lock(st->mutex);
+  for (;;) {
+    st->cv.wait_for(lock, std::chrono::milliseconds(500), [&] { return st->done || !c->connected(); });
+    if (o.summary && st->window_frames > 0) {
+      const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+      std::printf("t=%6.2fs  frames %6llu  last frame %6llu  seq %6llu  latency avg %.3f ms max %.3f ms  gaps %llu\n", t,
+                  static_cast<unsigned long long>(st->frames), static_cast<unsigned long long>(st->last_frame),
+                  static_cast<unsigned long long>(st->last_sequence),
+                  static_cast<double>(st->window_latency_sum) / static_cast<double>(st->window_frames) / 1e6,
+                  static_cast<double>(st->window_latency_max) / 1e6, static_cast<unsigned long long>(st->gaps));
+      std::fflush(stdout);
+      st->window_frames = 0;
+      st->window_latency_sum = 0;
+      st->window_latency_max = 0;
+    }
+    if (st->done) break;
+    if (!c->connected()) throw CommandError("the server closed the connection");
+  }
+  const auto frames = st->frames;
+  const auto gaps = st->gaps;
+  const auto reason = st->end_reason;
+  const double avg = frames ? static_cast<double>(st->latency_sum_ns) / static_cast<double>(frames) / 1e6 : 0.0;
+  const double max = static_cast<double>(st->latency_max_ns) / 1e6;
+  lock.unlock();
+  std::cout.flush();
+  if (o.summary) {
+    std::printf("done: %llu frames (%s), %llu lost in transit, latency avg %.3f ms, max %.3f ms\n",
+                static_cast<unsigned long long>(frames), reason.c_str(), static_cast<unsigned long long>(gaps), avg, max);
+  }
+  if (!std::cout) throw CommandError("cannot write to standard output");
+}
+
+}  // namespace
+
+void add_net_commands(CLI::App& app) {
+  {
+    auto o = std::make_shared<ServerOptions>();
+    CLI::App* cmd = app.add_subcommand("ls", "List the motions a gmr-server serves");
+    add_server_options(*cmd, *o);
+    cmd->callback([o] { run_ls(*o); });
+  }
+  {
+    auto o = std::make_shared<ServerOptions>();
+    auto motion = std::make_shared<std::string>();
+    CLI::App* cmd = app.add_subcommand("skeleton", "Show a served motion's joints, offsets and channels");
+    cmd->add_option("motion", *motion, "Motion name (see gmr ls)")->required();
+    add_server_options(*cmd, *o);
+    cmd->callback([o, motion] { run_skeleton(*o, *motion); });
+  }
+  {
+    auto o = std::make_shared<QueryOptions>();
+    CLI::App* cmd = app.add_subcommand(
+        "query", "Print a served motion's positions as CSV (frame,joint,x,y,z), like gmr positions, computed by the server");
+    cmd->add_option("motion", o->motion, "Motion name (see gmr ls)")->required();
+    cmd->add_option("--frames", o->frames, "Half-open frame range A:B (either side may be empty)")->capture_default_str();
+    add_view_options(*cmd, o->view);
+    add_server_options(*cmd, o->server);
+    cmd->callback([o] { run_query(*o); });
+  }
+  {
+    auto o = std::make_shared<StreamOptions>();
+    CLI::App* cmd = app.add_subcommand("stream", "Subscribe to a served motion and print the frames as they arrive");
+    cmd->add_option("motion", o->motion, "Motion name (see gmr ls)")->required();
+    cmd->add_flag("--udp", o->udp, "Receive frames over UDP (registered with the session token)");
+    cmd->add_option("--rate", o->rate, "Output rate in Hz (default: the motion's own rate times --speed)");
+    cmd->add_option("--speed", o->speed, "Playback speed")->capture_default_str();
+    cmd->add_option("--count", o->count, "Stop after N frames");
+    cmd->add_flag("--loop", o->loop, "Loop the frame range");
+    cmd->add_option("--frames", o->frames, "Half-open frame range A:B to play")->capture_default_str();
+    cmd->add_option("--joints", o->joints, "Only these joints, A,B,C");
+    cmd->add_flag("--summary", o->summary, "Print a live summary twice a second instead of CSV rows");
+    add_view_options(*cmd, o->view);
+    add_server_options(*cmd, o->server);
+    cmd->callback([o] { run_stream(*o); });
+  }
+}
 
 }  // namespace gmr::cli
+
+#else
+
+namespace gmr::cli {
+void add_net_commands(CLI::App& app) { (void)app; }
+}  // namespace gmr::cli
+
+#endif

@@ -1,7 +1,197 @@
+// GMR operation commands: roots, shift, split, join, strip-dummies,
+// constant-rotations; and the view options of `gmr positions`.
+//
+// Every command reads .bvh / .gmr / .amc (converted to pre-rotation first),
+// applies one operation to all frames, and saves by the output's extension
+// (atomic). Unknown joints and impossible operations exit 1 with one line.
+#include "cmd_ops.h"
+
+#include <cctype>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
 #include "commands.h"
+#include "gmr/convert/convert.h"
+#include "gmr/io/motion_file.h"
+#include "gmr/io/positions_csv.h"
+#include "gmr/ops/ops.h"
+#include "gmr/ops/view.h"
 
 namespace gmr::cli {
+namespace {
 
-void add_ops_commands(CLI::App& app) { (void)app; }
+struct OpOptions {
+  std::string file;
+  std::string out;
+  std::string asf;
+  std::string joints;  // --set / --to / --at / --root
+};
+
+void print_warnings(const Warnings& warnings) {
+  for (const Error& w : warnings) std::fprintf(stderr, "gmr: warning: %s\n", w.to_string().c_str());
+}
+
+// Loads FILE as a pre-rotation motion.
+Motion load_pre(const OpOptions& o, Warnings& warnings) {
+  LoadOptions options;
+  options.asf = o.asf;
+  Motion m = take(load_motion(o.file, options, &warnings));
+  return take(to_pre_rotation(m));
+}
+
+void save(const Motion& m, const OpOptions& o) {
+  LoadOptions options;
+  check(save_motion(m, o.out, options));
+}
+
+void run_roots(const OpOptions& o) {
+  Warnings w;
+  const Motion m = load_pre(o, w);
+  const std::vector<std::string> names = split_list(o.joints);
+  const std::vector<int> roots = take(find_joints(m.skeleton, names));
+  save(take(set_roots(m, roots)), o);
+  print_warnings(w);
+}
+
+void run_shift(const OpOptions& o) {
+  Warnings w;
+  const Motion m = load_pre(o, w);
+  const std::vector<int> j = take(find_joints(m.skeleton, std::vector<std::string>{o.joints}));
+  save(take(shift_root(m, j[0])), o);
+  print_warnings(w);
+}
+
+void run_split(const OpOptions& o) {
+  Warnings w;
+  const Motion m = load_pre(o, w);
+  const std::vector<int> j = take(find_joints(m.skeleton, std::vector<std::string>{o.joints}));
+  save(take(split_tree(m, j[0])), o);
+  print_warnings(w);
+}
+
+void run_join(const OpOptions& o) {
+  Warnings w;
+  const Motion m = load_pre(o, w);
+  const std::vector<int> j = take(find_joints(m.skeleton, std::vector<std::string>{o.joints}));
+  JoinReport report;
+  save(take(join_tree(m, j[0], &report)), o);
+  if (report.translation_channels) {
+    std::printf("joined %s: its offset varies over frames (spread %.9g), kept as translation channels\n",
+                o.joints.c_str(), report.offset_spread);
+  } else {
+    std::printf("joined %s: static offset (spread %.3g)\n", o.joints.c_str(), report.offset_spread);
+  }
+  print_warnings(w);
+}
+
+void run_strip(const OpOptions& o) {
+  Warnings w;
+  const Motion m = load_pre(o, w);
+  std::vector<RemovedJoint> removed;
+  const Motion stripped = take(strip_dummies(m, &removed));
+  save(stripped, o);
+  for (const RemovedJoint& r : removed) std::printf("removed %s (zero-length, child of %s)\n", r.name.c_str(), r.parent.c_str());
+  if (removed.empty()) std::printf("no zero-length joints to remove\n");
+  // BVH cannot let siblings rotate independently without zero-length joints:
+  // say so when the writer had to insert some back.
+  std::string ext = std::filesystem::path(o.out).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".bvh") {
+    const auto post = to_post_rotation(stripped);
+    if (post && post->skeleton.size() > stripped.skeleton.size()) {
+      std::fprintf(stderr,
+                   "gmr: note: BVH needs zero-length joints where siblings rotate independently: %zu were "
+                   "inserted (*_gmr_pre); write .gmr to keep them out\n",
+                   post->skeleton.size() - stripped.skeleton.size());
+    }
+  }
+  print_warnings(w);
+}
+
+void run_constant(const OpOptions& o, double tolerance) {
+  Warnings w;
+  LoadOptions options;
+  options.asf = o.asf;
+  const Motion m = take(load_motion(o.file, options, &w));
+  for (const std::string& name : constant_rotation_joints(m, tolerance)) std::printf("%s\n", name.c_str());
+  print_warnings(w);
+}
+
+CLI::App* add_op(CLI::App& app, const char* name, const char* help, const std::shared_ptr<OpOptions>& o) {
+  CLI::App* cmd = app.add_subcommand(name, help);
+  cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
+  cmd->add_option("-o,--output", o->out, "Output file (.gmr, .bvh); written atomically")->required();
+  cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+  return cmd;
+}
+
+}  // namespace
+
+void add_view_options(CLI::App& cmd, ViewOptions& o) {
+  cmd.add_option("--roots", o.roots, "Joints to make the roots, A,B,C (all frames; positions do not change)");
+  cmd.add_flag("--strip-dummies", o.strip_dummies, "Remove zero-length joints (e.g. CMU LHipJoint) before printing");
+  cmd.add_option("--relative-to", o.relative_to,
+                 "Give coordinates in this joint's frame (its GMR bone frame, see docs/operations.md)");
+}
+
+void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out) {
+  ViewSpec spec;
+  if (!o.roots.empty()) spec.roots = split_list(o.roots);
+  spec.strip_dummies = o.strip_dummies;
+  spec.relative_to = o.relative_to;
+  const View view = take(apply_view(motion, spec));
+  const FrameRange r = clamp_frame_range(requested, view.motion.frame_count);
+  const Skeleton names = view_names(view);
+  write_positions_csv_header(out);
+  constexpr std::size_t kChunk = 1024;  // keeps memory flat for long motions
+  for (std::size_t f = r.begin; f < r.end; f += kChunk) {
+    const std::size_t e = std::min(r.end, f + kChunk);
+    write_positions_csv_rows(out, names, view_positions(view, f, e), f);
+  }
+}
+
+void add_ops_commands(CLI::App& app) {
+  {
+    auto o = std::make_shared<OpOptions>();
+    CLI::App* cmd = add_op(app, "roots", "Make exactly the given joints the roots (any set, all frames)", o);
+    cmd->add_option("--set", o->joints, "Joints to be roots, A,B,C")->required();
+    cmd->callback([o] { run_roots(*o); });
+  }
+  {
+    auto o = std::make_shared<OpOptions>();
+    CLI::App* cmd = add_op(app, "shift", "Move the root of a joint's tree to that joint", o);
+    cmd->add_option("--to", o->joints, "The joint that becomes the root")->required();
+    cmd->callback([o] { run_shift(*o); });
+  }
+  {
+    auto o = std::make_shared<OpOptions>();
+    CLI::App* cmd = add_op(app, "split", "Make a joint a root with a soft link to its parent", o);
+    cmd->add_option("--at", o->joints, "The joint that becomes a root")->required();
+    cmd->callback([o] { run_split(*o); });
+  }
+  {
+    auto o = std::make_shared<OpOptions>();
+    CLI::App* cmd = add_op(app, "join", "Put a split root back under its soft-link parent", o);
+    cmd->add_option("--root", o->joints, "The root to join")->required();
+    cmd->callback([o] { run_join(*o); });
+  }
+  {
+    auto o = std::make_shared<OpOptions>();
+    CLI::App* cmd = add_op(app, "strip-dummies", "Remove zero-length joints exactly and print what was removed", o);
+    cmd->callback([o] { run_strip(*o); });
+  }
+  {
+    auto o = std::make_shared<OpOptions>();
+    auto tolerance = std::make_shared<double>(1e-9);
+    CLI::App* cmd = app.add_subcommand("constant-rotations", "List joints whose rotation never changes");
+    cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
+    cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+    cmd->add_option("--tolerance", *tolerance, "Largest change from frame 0, in degrees (default 1e-9)");
+    cmd->callback([o, tolerance] { run_constant(*o, *tolerance); });
+  }
+}
 
 }  // namespace gmr::cli

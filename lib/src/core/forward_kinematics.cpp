@@ -3,36 +3,61 @@
 #include <algorithm>
 #include <cassert>
 
+#include "gmr/kinematics/fk_stats.h"
+
 namespace gmr {
+namespace {
+
+thread_local std::uint64_t t_rotation_evaluations = 0;
+
+// One frame. `world` is scratch (or the caller's output when want_orientations).
+// A joint's rotation is evaluated only when something reads it:
+//   - the caller asked for orientations, or
+//   - the joint has children (their frames and positions hang on W_j), or
+//   - pre-rotation and the joint is not a root (P_j = P_p + W_j t_j).
+// So a pre-rotation root with no children (every joint of the fully
+// translational configuration) is read, not computed: P = t_root.
+void frame_impl(const Motion& motion, std::size_t f, std::span<Eigen::Vector3d> out_positions,
+                std::span<Eigen::Matrix3d> world, bool want_orientations) {
+  const Skeleton& s = motion.skeleton;
+  const int n = static_cast<int>(s.size());
+  const bool pre = motion.convention == Convention::kPreRotation;
+  std::uint64_t evaluations = 0;
+  for (int j = 0; j < n; ++j) {
+    const int p = s.joint(j).parent;
+    const Eigen::Vector3d t = motion.local_offset(f, j);
+    const bool need_rotation = want_orientations || !s.children(j).empty() || (pre && p != kNoParent);
+    if (need_rotation) {
+      ++evaluations;
+      const Eigen::Matrix3d r = motion.local_rotation(f, j);
+      world[j] = p == kNoParent ? r : Eigen::Matrix3d(world[p] * r);
+    }
+    if (p == kNoParent) {
+      out_positions[j] = t;
+    } else {
+      out_positions[j] = out_positions[p] + (pre ? world[j] : world[p]) * t;
+    }
+  }
+  t_rotation_evaluations += evaluations;
+}
+
+}  // namespace
+
+std::uint64_t fk_rotation_evaluations() { return t_rotation_evaluations; }
+void reset_fk_rotation_evaluations() { t_rotation_evaluations = 0; }
 
 void compute_frame(const Motion& motion, std::size_t f, std::span<Eigen::Vector3d> out_positions,
                    std::span<Eigen::Matrix3d> out_orientations) {
   const Skeleton& s = motion.skeleton;
-  const int n = static_cast<int>(s.size());
   assert(f < motion.frame_count);
   assert(out_positions.size() == s.size());
   assert(out_orientations.empty() || out_orientations.size() == s.size());
-
-  // Orientations are needed for every parent even when the caller wants none.
-  std::vector<Eigen::Matrix3d> local_world;
-  std::span<Eigen::Matrix3d> world = out_orientations;
-  if (world.empty()) {
-    local_world.resize(s.size());
-    world = local_world;
+  if (!out_orientations.empty()) {
+    frame_impl(motion, f, out_positions, out_orientations, true);
+    return;
   }
-  const bool pre = motion.convention == Convention::kPreRotation;
-  for (int j = 0; j < n; ++j) {
-    const Eigen::Matrix3d r = motion.local_rotation(f, j);
-    const Eigen::Vector3d t = motion.local_offset(f, j);
-    const int p = s.joint(j).parent;
-    if (p == kNoParent) {
-      world[j] = r;
-      out_positions[j] = t;
-    } else {
-      world[j] = world[p] * r;
-      out_positions[j] = out_positions[p] + (pre ? world[j] : world[p]) * t;
-    }
-  }
+  std::vector<Eigen::Matrix3d> scratch(s.size());
+  frame_impl(motion, f, out_positions, scratch, false);
 }
 
 std::vector<Eigen::Vector3d> compute_positions(const Motion& motion, std::size_t begin, std::size_t end) {
@@ -42,7 +67,7 @@ std::vector<Eigen::Vector3d> compute_positions(const Motion& motion, std::size_t
   std::vector<Eigen::Vector3d> out((end - begin) * n);
   std::vector<Eigen::Matrix3d> world(n);
   for (std::size_t f = begin; f < end; ++f) {
-    compute_frame(motion, f, std::span<Eigen::Vector3d>(out).subspan((f - begin) * n, n), world);
+    frame_impl(motion, f, std::span<Eigen::Vector3d>(out).subspan((f - begin) * n, n), world, false);
   }
   return out;
 }

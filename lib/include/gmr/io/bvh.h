@@ -21,14 +21,33 @@
 namespace gmr {
 
 // Parses BVH text. `file_label` names the source in errors ("file:line:col: ...").
-// Odd but readable input (a frame count that does not match the rows, a zero
-// frame time) loads and adds a warning to *out_warnings when given.
+// Never throws; no input crashes it or makes it allocate more than the text
+// can hold. Odd but readable input loads and adds a warning to *out_warnings
+// (when given):
+// - complete frames that do not match `Frames:`: all complete frames load;
+// - `Frame Time:` missing or 0: frame_time = 0 (unknown);
+// - a joint without OFFSET: 0 0 0.
+// Errors (file:line:column, what was expected and what was found): a file that
+// ends inside a frame, or has no rows while `Frames:` > 0 (truncated);
+// numbers run together (`0.0-7.5`), NaN or infinite values; a CHANNELS count
+// that does not match the names; duplicate names or channels; names with
+// control characters; joints nested deeper than 1024; a negative frame time.
+// Values may wrap across lines; any whitespace separates tokens (tabs, CR, LF,
+// CRLF); keywords are case-insensitive; a CHANNELS line after a child JOINT
+// is accepted (row columns follow the order of the CHANNELS lines).
 Result<Motion> parse_bvh(std::string_view text, std::string_view file_label, Warnings* out_warnings = nullptr);
 // Reads and parses a BVH file.
 Result<Motion> read_bvh(const std::filesystem::path& path, Warnings* out_warnings = nullptr);
 
 // BVH text of a post-rotation motion (fails for a pre-rotation one: convert it
-// first). Numbers are written in their shortest round-tripping form.
+// first, for a motion that fails validate(), or for a name that could not be
+// read back). Numbers are written in their shortest round-tripping form, so
+// parse_bvh(format_bvh(m)) has m's values exactly. Each tree is written as one
+// ROOT block, depth-first (values permuted to match, so a motion whose joints
+// are not in depth-first order reads back in that order with the same values
+// per joint name). A non-root leaf without channels is written as `End Site`,
+// with its name after it unless it is the name the reader would make up.
+// Soft links are not written.
 Result<std::string> format_bvh(const Motion& motion);
 // Writes format_bvh() to `path` atomically (temporary file, then rename).
 Status write_bvh(const Motion& motion, const std::filesystem::path& path);

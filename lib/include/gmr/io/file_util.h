@@ -9,14 +9,20 @@
 
 namespace gmr {
 
-// Whole file as bytes; an Error naming the file when it cannot be read.
+// Whole file as bytes; an Error naming the file (and the system's reason) when
+// it cannot be opened or read, or is a directory.
 Result<std::string> read_file(const std::filesystem::path& path);
 
-// Writes `bytes` to a temporary file beside `path`, flushes it, then renames it
-// over `path`: readers see the old file or the new one, never half of one.
+// Writes `bytes` to a temporary file beside `path` (same directory, so the
+// rename is atomic), fsyncs it, then renames it over `path`: readers see the
+// old file or the new one, never half of one. A replaced file's permission
+// bits are kept. On failure the temporary is removed, an existing `path` is
+// left as it was, and the Error names `path` and the system's reason. A
+// symbolic link at `path` is replaced, not written through.
 Status write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
 
-// Shortest decimal text that reads back to exactly `v` (std::to_chars).
+// Shortest decimal text that reads back to exactly `v` (std::to_chars), e.g.
+// "0.1", "-6.101614", "1e-07", "0.30000000000000004".
 std::string format_double(double v);
 
 }  // namespace gmr

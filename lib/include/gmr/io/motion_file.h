@@ -1,8 +1,10 @@
 // Loading and saving a motion by file extension.
 //
 //   .bvh  BVH (post-rotation)             .gmr  GMR text (pre-rotation)
-//   .amc  Acclaim motion; needs the skeleton (.asf) in LoadOptions
+//   .amc  Acclaim motion; its skeleton (.asf) from LoadOptions, else the single
+//         .asf in the .amc's folder (error if there is none or several)
 //   .gmrb GMR binary (see docs/performance.md), when built in
+// Extensions are matched case-insensitively; any other is an error.
 #pragma once
 
 #include <filesystem>
@@ -16,12 +18,14 @@ struct LoadOptions {
   std::filesystem::path asf;  // skeleton for .amc input; empty: look for a single .asf in the same folder
 };
 
-// The motion as the file holds it (BVH and AMC stay post-rotation).
+// The motion as the file holds it: BVH stays post-rotation, GMR is
+// pre-rotation, AMC comes converted to pre-rotation by read_asf_amc().
 Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions& options = {},
                            Warnings* out_warnings = nullptr);
 
-// Saves by extension, converting between conventions as needed (.bvh and .amc
-// want post-rotation, .gmr/.gmrb pre-rotation). Atomic.
+// Saves by extension, converting between conventions as needed (.bvh wants
+// post-rotation; .gmr, .gmrb and .amc pre-rotation). Atomic. For .amc the
+// skeleton is written to options.asf, else beside it with the extension .asf.
 Status save_motion(const Motion& motion, const std::filesystem::path& path, const LoadOptions& options = {});
 
 }  // namespace gmr

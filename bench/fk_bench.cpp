@@ -1,0 +1,151 @@
+// Forward kinematics: positions of every joint of every frame of CMU 01_01
+// (31 joints + 7 end sites, 2752 frames), one core. Each benchmark reports
+// ns_per_frame (time / frames computed) and the bytes per frame its input
+// representation holds. Warm cache: the whole motion (~1 MB as floats) stays
+// in L2/L3 across iterations, as it does for a server that streams one clip.
+//
+//   reference_double    gmr::compute_frame (Eigen, double): the reference path
+//   scalar_float        one frame at a time, float, std::sin/std::cos
+//   fast/bvh            SIMD across frames, Euler channels (post-rotation)
+//   fast/gmr_roots:k    the GMR form with k roots (k = 1 .. all)
+//   fast/gmr_all_roots  every joint a root: a copy of the stored positions
+//   gmr_all_roots_view  the zero-copy view (no work at all)
+//   single_frame/...    FkFrameJob, one frame per call (a server tick)
+//   memcpy              baseline: copying the output bytes
+#include <benchmark/benchmark.h>
+
+#include <cstring>
+#include <vector>
+
+#include "bench_data.h"
+#include "gmr/fast/fast_fk.h"
+#include "gmr/kinematics/forward_kinematics.h"
+
+namespace gmr::bench {
+namespace {
+
+using fast::CompiledMotion;
+using fast::FkFrameJob;
+using fast::FkRangeJob;
+using fast::Layout;
+
+const Motion& bvh() {
+  static const Motion m = load_main_bvh();
+  return m;
+}
+
+void set_counters(benchmark::State& state, std::size_t frames, std::size_t bytes_per_frame) {
+  // Seconds per frame (printed as e.g. "39.2n"), from CPU time.
+  state.counters["per_frame"] = benchmark::Counter(
+      static_cast<double>(frames), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+  state.counters["input_bytes_per_frame"] = static_cast<double>(bytes_per_frame);
+  state.counters["joints"] = static_cast<double>(bvh().skeleton.size());
+}
+
+void BM_ReferenceDouble(benchmark::State& state) {
+  const Motion& m = bvh();
+  std::vector<Eigen::Vector3d> pos(m.skeleton.size());
+  std::vector<Eigen::Matrix3d> world(m.skeleton.size());
+  for (auto _ : state) {
+    for (std::size_t f = 0; f < m.frame_count; ++f) compute_frame(m, f, pos, world);
+    benchmark::DoNotOptimize(pos.data());
+  }
+  set_counters(state, m.frame_count, m.stride() * sizeof(double));
+}
+BENCHMARK(BM_ReferenceDouble)->Name("reference_double/bvh")->Unit(benchmark::kMillisecond);
+
+void BM_ScalarFloat(benchmark::State& state) {
+  auto cm = CompiledMotion::compile(bvh()).value();
+  std::vector<float> ws(fast::fk_workspace_size(cm)), pos(cm.joint_count() * 3);
+  for (auto _ : state) {
+    for (std::size_t f = 0; f < cm.frame_count(); ++f) fast::scalar_float_frame(cm, f, pos, ws);
+    benchmark::DoNotOptimize(pos.data());
+  }
+  set_counters(state, cm.frame_count(), cm.bytes_per_frame());
+}
+BENCHMARK(BM_ScalarFloat)->Name("scalar_float/bvh")->Unit(benchmark::kMillisecond);
+
+void run_range(benchmark::State& state, const Motion& m, Layout layout) {
+  auto cm = CompiledMotion::compile(m).value();
+  std::vector<float> ws(fast::fk_workspace_size(cm)), pos(cm.frame_count() * cm.joint_count() * 3);
+  const FkRangeJob job{.motion = &cm, .begin = 0, .end = cm.frame_count(), .layout = layout, .out_positions = pos,
+                       .workspace = ws};
+  for (auto _ : state) {
+    job.run();
+    benchmark::DoNotOptimize(pos.data());
+    benchmark::ClobberMemory();
+  }
+  set_counters(state, cm.frame_count(), cm.bytes_per_frame());
+  state.SetLabel(std::string(fast::simd_target_name()) + (layout == Layout::kFrameMajor ? " frame-major" : " joint-major"));
+}
+
+void BM_FastBvh(benchmark::State& state) { run_range(state, bvh(), static_cast<Layout>(state.range(0))); }
+BENCHMARK(BM_FastBvh)->Name("fast/bvh")->ArgName("joint_major")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// k roots: 1 (the conversion's own), a few, many, and every joint.
+void BM_FastGmrRoots(benchmark::State& state) {
+  static std::vector<std::pair<std::size_t, Motion>> cache;
+  const std::size_t k = static_cast<std::size_t>(state.range(0));
+  const Motion* m = nullptr;
+  for (auto& [kk, mm] : cache) {
+    if (kk == k) m = &mm;
+  }
+  if (m == nullptr) m = &cache.emplace_back(k, with_roots(bvh(), k, 42)).second;
+  run_range(state, *m, static_cast<Layout>(state.range(1)));
+}
+BENCHMARK(BM_FastGmrRoots)
+    ->Name("fast/gmr")
+    ->ArgNames({"roots", "joint_major"})
+    ->ArgsProduct({{1, 2, 4, 8, 16, 24, 32, 38}, {0, 1}})
+    ->Unit(benchmark::kMicrosecond);
+
+void BM_AllRootsView(benchmark::State& state) {
+  auto cm = CompiledMotion::compile(with_roots(bvh(), 1000, 1)).value();
+  for (auto _ : state) {
+    auto view = cm.stored_positions();
+    benchmark::DoNotOptimize(view.data());
+  }
+  set_counters(state, cm.frame_count(), cm.bytes_per_frame());
+}
+BENCHMARK(BM_AllRootsView)->Name("fast/gmr_all_roots_view");
+
+void run_single(benchmark::State& state, const Motion& m) {
+  auto cm = CompiledMotion::compile(m).value();
+  std::vector<float> ws(fast::fk_workspace_size(cm)), pos(cm.joint_count() * 3);
+  for (auto _ : state) {
+    for (std::size_t f = 0; f < cm.frame_count(); ++f) {
+      FkFrameJob{.motion = &cm, .frame = f, .out_positions = pos, .workspace = ws}.run();
+      benchmark::DoNotOptimize(pos.data());
+    }
+  }
+  set_counters(state, cm.frame_count(), cm.bytes_per_frame());
+  state.SetLabel(fast::simd_target_name());
+}
+void BM_SingleBvh(benchmark::State& state) { run_single(state, bvh()); }
+BENCHMARK(BM_SingleBvh)->Name("single_frame/bvh")->Unit(benchmark::kMicrosecond);
+void BM_SingleGmr(benchmark::State& state) {
+  static const Motion m = with_roots(bvh(), static_cast<std::size_t>(state.range(0)), 42);
+  run_single(state, m);
+}
+BENCHMARK(BM_SingleGmr)->Name("single_frame/gmr_one_root")->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// The floor for every path: writing the output bytes. In cache (the 2752
+// frames' positions, 1.25 MB, fit L2+L3) and from a 64 MB buffer (DRAM).
+void BM_Memcpy(benchmark::State& state) {
+  const std::size_t frames = static_cast<std::size_t>(state.range(0));
+  const std::size_t floats = bvh().skeleton.size() * 3;
+  std::vector<float> src(frames * floats, 1.0f), dst(frames * floats);
+  for (auto _ : state) {
+    std::memcpy(dst.data(), src.data(), src.size() * sizeof(float));
+    benchmark::DoNotOptimize(dst.data());
+    benchmark::ClobberMemory();
+  }
+  set_counters(state, frames, floats * sizeof(float));
+  state.SetBytesProcessed(static_cast<std::int64_t>(state.iterations()) * static_cast<std::int64_t>(src.size() * sizeof(float)));
+}
+BENCHMARK(BM_Memcpy)->Name("memcpy_positions")->ArgName("frames")->Arg(2752)->Arg(2752 * 64)->Unit(benchmark::kMicrosecond);
+
+}  // namespace
+}  // namespace gmr::bench
+
+BENCHMARK_MAIN();

@@ -1,0 +1,30 @@
+// The OPS options of `gmr positions` (--roots, --strip-dummies, --relative-to),
+// implemented in cmd_ops.cpp so cmd_files.cpp only forwards to them.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <ostream>
+#include <string>
+
+#include "cli_util.h"
+#include "gmr/motion/motion.h"
+
+namespace gmr::cli {
+
+struct ViewOptions {
+  std::string roots;         // "A,B,C": the joints that become roots
+  bool strip_dummies = false;
+  std::string relative_to;   // joint whose frame the coordinates are in
+  bool any() const { return !roots.empty() || strip_dummies || !relative_to.empty(); }
+};
+
+// Registers --roots, --strip-dummies and --relative-to on `cmd`.
+void add_view_options(CLI::App& cmd, ViewOptions& o);
+
+// Writes the positions CSV (header and rows, same contract as plain `gmr
+// positions`: rows in the file's joint order, dummies left out when stripped)
+// of frames `requested` of the view of `motion`. Throws CommandError for an
+// unknown joint or an impossible root set.
+void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out);
+
+}  // namespace gmr::cli

@@ -1,0 +1,167 @@
+// gmr-load: N clients subscribe to a gmr-server and measure what arrives.
+//
+//   gmr-load [--host H] [--port P] [--clients N] [--motion M] [--seconds S]
+//            [--rate HZ] [--udp] [--shared] [--orientations] [--float64]
+//
+// Prints latency (server send time -> client receive time, both system_clock
+// on the same machine, so only meaningful on one host or with synced clocks)
+// p50/p99/max, frames and drops per second (sequence gaps seen by clients and
+// frames the server dropped for slow clients), and the drop policy in effect.
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "gmr/client/client.h"
+
+namespace {
+
+struct ClientRun {
+  std::unique_ptr<gmr::client::Client> client;
+  std::uint32_t subscription = 0;
+  std::mutex mutex;
+  std::vector<std::int64_t> latencies_ns;
+  std::uint64_t frames = 0;
+  std::uint64_t gaps = 0;
+  std::uint64_t last_sequence = 0;
+  bool measuring = false;
+};
+
+double percentile(std::vector<std::int64_t>& v, double p) {
+  if (v.empty()) return 0.0;
+  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return static_cast<double>(v[k]) / 1e6;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"gmr-load: load-test a gmr-server with N streaming clients"};
+  std::string host = "127.0.0.1";
+  std::uint16_t port = 7400;
+  int clients = 10;
+  std::string motion = "walk";
+  double seconds = 5.0;
+  double warmup = 0.5;
+  double rate = 0.0;
+  bool udp = false, shared = false, orientations = false, float64 = false;
+  app.add_option("--host", host)->capture_default_str();
+  app.add_option("--port", port)->capture_default_str();
+  app.add_option("--clients", clients, "Connections, one subscription each")->capture_default_str()->check(CLI::Range(1, 10000));
+  app.add_option("--motion", motion, "Motion to stream (looped)")->capture_default_str();
+  app.add_option("--seconds", seconds, "Measurement time")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--warmup", warmup, "Seconds ignored after subscribing")->capture_default_str();
+  app.add_option("--rate", rate, "Output rate in Hz (0: the motion's rate)")->capture_default_str();
+  app.add_flag("--udp", udp, "Frames over UDP");
+  app.add_flag("--shared", shared, "All clients join one shared stream (one FK and encoding per tick)");
+  app.add_flag("--orientations", orientations, "Send orientations too");
+  app.add_flag("--float64", float64, "Send float64 numbers");
+  CLI11_PARSE(app, argc, argv);
+
+  std::vector<std::unique_ptr<ClientRun>> runs;
+  gmr::client::SubscribeOptions so;
+  so.loop = true;
+  so.rate_hz = rate;
+  so.udp = udp;
+  so.shared = shared;
+  so.orientations = orientations;
+  so.float64 = float64;
+  double rate_in_effect = 0.0;
+  for (int i = 0; i < clients; ++i) {
+    auto run = std::make_unique<ClientRun>();
+    gmr::client::ClientOptions co;
+    co.host = host;
+    co.port = port;
+    co.client_name = "gmr-load " + std::to_string(i);
+    auto c = gmr::client::Client::connect(co);
+    if (!c.ok()) {
+      std::fprintf(stderr, "gmr-load: client %d: %s\n", i, c.error().to_string().c_str());
+      return 1;
+    }
+    run->client = std::move(c).value();
+    auto view = run->client->create_view(motion);
+    if (!view.ok()) {
+      std::fprintf(stderr, "gmr-load: %s\n", view.error().to_string().c_str());
+      return 1;
+    }
+    ClientRun* r = run.get();
+    auto sub = run->client->subscribe(view->id, so, [r](const gmr::client::ReceivedFrame& f) {
+      std::lock_guard lock(r->mutex);
+      if (!r->measuring) {
+        r->last_sequence = f.sequence;
+        return;
+      }
+      if (r->frames > 0 && f.sequence > r->last_sequence + 1) r->gaps += f.sequence - r->last_sequence - 1;
+      r->last_sequence = f.sequence;
+      ++r->frames;
+      r->latencies_ns.push_back(f.receive_time_ns - f.server_send_time_ns);
+    });
+    if (!sub.ok()) {
+      std::fprintf(stderr, "gmr-load: %s\n", sub.error().to_string().c_str());
+      return 1;
+    }
+    rate_in_effect = sub->rate_hz;
+    run->subscription = sub->id;
+    runs.push_back(std::move(run));
+  }
+  std::this_thread::sleep_for(std::chrono::duration<double>(warmup));
+  for (auto& r : runs) {
+    std::lock_guard lock(r->mutex);
+    r->measuring = true;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  for (auto& r : runs) {
+    std::lock_guard lock(r->mutex);
+    r->measuring = false;
+  }
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  std::vector<std::int64_t> all;
+  std::uint64_t frames = 0, gaps = 0, server_dropped = 0, server_sent = 0;
+  for (auto& r : runs) {
+    {
+      std::lock_guard lock(r->mutex);
+      all.insert(all.end(), r->latencies_ns.begin(), r->latencies_ns.end());
+      frames += r->frames;
+      gaps += r->gaps;
+    }
+    if (auto st = r->client->stats(); st.ok()) {
+      server_dropped += st->frames_dropped();
+      server_sent += st->frames_sent();
+    }
+    (void)r->client->unsubscribe(r->subscription);
+  }
+  std::uint64_t computed = 0, encoded = 0;
+  if (!runs.empty()) {
+    if (auto st = runs[0]->client->stats(); st.ok()) {
+      computed = st->frames_computed();
+      encoded = st->frames_encoded();
+    }
+  }
+  const double max_ms = all.empty() ? 0.0 : static_cast<double>(*std::max_element(all.begin(), all.end())) / 1e6;
+  std::printf("gmr-load: %d clients, motion %s, %s, %.1f Hz each, %s stream%s, %.1f s measured\n", clients,
+              motion.c_str(), udp ? "UDP" : "TCP", rate_in_effect, shared ? "one shared" : "one",
+              shared ? "" : " per client", elapsed);
+  std::printf("frames received  %llu (%.1f/s in all, %.1f/s per client; expected %.1f/s per client)\n",
+              static_cast<unsigned long long>(frames), static_cast<double>(frames) / elapsed,
+              static_cast<double>(frames) / elapsed / clients, rate_in_effect);
+  std::printf("latency          p50 %.3f ms  p99 %.3f ms  max %.3f ms\n", percentile(all, 0.50), percentile(all, 0.99),
+              max_ms);
+  std::printf("drops            %.2f/s seen by clients (sequence gaps), %llu dropped by the server in all\n",
+              static_cast<double>(gaps) / elapsed, static_cast<unsigned long long>(server_dropped));
+  std::printf("server work      %llu FK runs, %llu encodings, %llu frames sent (whole run)\n",
+              static_cast<unsigned long long>(computed), static_cast<unsigned long long>(encoded),
+              static_cast<unsigned long long>(server_sent));
+  std::printf("policy           %s\n",
+              udp ? "UDP: a frame is dropped whole when its connection has too many datagrams in flight; "
+                    "a client drops a frame with a lost fragment"
+                  : "TCP: bounded queue per client, latest-frame-wins per subscription, drop counter");
+  return 0;
+}

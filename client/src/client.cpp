@@ -1,0 +1,606 @@
+#include "gmr/client/client.h"
+
+#include <atomic>
+#include <boost/asio.hpp>
+#include <condition_variable>
+#include <deque>
+#include <future>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "gmr/wire/convert.h"
+#include "gmr/wire/framing.h"
+#include "gmr/wire/udp.h"
+
+namespace gmr::client {
+
+namespace net = boost::asio;
+using tcp = net::ip::tcp;
+using udp = net::ip::udp;
+
+namespace {
+
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+template <class T, class R>
+void unpack3(const R& values, std::vector<T>& out) {
+  out.resize(static_cast<std::size_t>(values.size() / 3));
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const int k = static_cast<int>(3 * i);
+    out[i] = T(values.Get(k), values.Get(k + 1), values.Get(k + 2));
+  }
+}
+
+template <class R>
+void unpack4(const R& values, std::vector<Eigen::Quaterniond>& out) {
+  out.resize(static_cast<std::size_t>(values.size() / 4));
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const int k = static_cast<int>(4 * i);
+    // Eigen's constructor takes w first.
+    out[i] = Eigen::Quaterniond(values.Get(k + 3), values.Get(k), values.Get(k + 1), values.Get(k + 2));
+  }
+}
+
+}  // namespace
+
+struct Client::Impl : std::enable_shared_from_this<Impl> {
+  ClientOptions options;
+  net::io_context io;
+  tcp::socket socket{io};
+  udp::socket udp_socket{io};
+  udp::endpoint server_udp;
+  net::steady_timer heartbeat{io};
+  std::thread thread;
+  pb::HelloReply hello;
+
+  std::atomic<bool> open{false};
+  std::atomic<std::uint64_t> next_request{1};
+  struct Pending {
+    std::promise<pb::ServerMessage> promise;
+    std::function<void(const pb::ServerMessage&)> on_reply;  // runs on the I/O thread before the promise is set
+  };
+  mutable std::mutex mutex;
+  std::map<std::uint64_t, Pending> pending;
+  struct Sub {
+    FrameCallback on_frame;
+    EndCallback on_end;
+  };
+  std::map<std::uint32_t, std::shared_ptr<Sub>> subs;
+  // A UDP frame can overtake the TCP reply to its Subscribe: frames for an
+  // unknown subscription wait here (bounded) while a Subscribe is in flight.
+  int subscribes_in_flight = 0;
+  std::deque<std::pair<pb::ServerMessage, bool>> early_frames;
+  static constexpr std::size_t kMaxEarlyFrames = 256;
+  std::string close_reason;
+  bool udp_registered = false;
+  std::condition_variable udp_cv;
+  ClientCounters counters;
+
+  // I/O-thread state
+  std::deque<std::string> write_queue;
+  bool writing = false;
+  std::array<std::uint8_t, wire::kLengthPrefixBytes> prefix{};
+  std::string body;
+  std::array<char, 2048> udp_buffer{};
+  udp::endpoint udp_sender;
+  wire::Reassembler reassembler;
+
+  void send(std::string framed) {
+    net::post(io, [self = shared_from_this(), framed = std::move(framed)]() mutable {
+      if (!self->open) return;
+      self->write_queue.push_back(std::move(framed));
+      self->write_next();
+    });
+  }
+  void write_next() {
+    if (writing || write_queue.empty()) return;
+    writing = true;
+    net::async_write(socket, net::buffer(write_queue.front()),
+                     [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+                       self->writing = false;
+                       if (!self->write_queue.empty()) self->write_queue.pop_front();
+                       if (ec) return self->fail("write failed: " + ec.message());
+                       self->write_next();
+                     });
+  }
+  void read_prefix() {
+    net::async_read(socket, net::buffer(prefix), [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+      if (ec) return self->fail(ec == net::error::eof ? "the server closed the connection" : "read failed: " + ec.message());
+      const std::uint32_t n = wire::read_length_prefix(self->prefix);
+      if (auto s = wire::check_length(n, self->options.max_message_bytes); !s.ok()) {
+        return self->fail("bad length prefix from the server: " + s.error().message);
+      }
+      self->body.resize(n);
+      net::async_read(self->socket, net::buffer(self->body), [self](const boost::system::error_code& ec2, std::size_t) {
+        if (ec2) return self->fail("read failed: " + ec2.message());
+        pb::ServerMessage m;
+        if (!m.ParseFromString(self->body)) return self->fail("the server sent a message that does not parse");
+        self->on_message(m, false);
+        self->read_prefix();
+      });
+    });
+  }
+  void read_udp() {
+    udp_socket.async_receive_from(net::buffer(udp_buffer), udp_sender,
+                                  [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
+                                    if (ec == net::error::operation_aborted || !self->open) return;
+                                    // Only datagrams from the server's address count.
+                                    if (!ec && self->udp_sender == self->server_udp) {
+                                      if (auto msg = self->reassembler.add(std::string_view(self->udp_buffer.data(), n))) {
+                                        pb::ServerMessage m;
+                                        if (m.ParseFromString(*msg) && m.has_frame()) self->on_message(m, true);
+                                      }
+                                      std::lock_guard lock(self->mutex);
+                                      self->counters.udp_incomplete_dropped = self->reassembler.dropped();
+                                      self->counters.udp_malformed = self->reassembler.malformed();
+                                    }
+                                    self->read_udp();
+                                  });
+  }
+  void arm_heartbeat() {
+    const auto interval = std::chrono::milliseconds(
+        std::max<std::uint32_t>(10, std::min(hello.heartbeat_interval_ms(), hello.idle_timeout_ms() / 3)));
+    heartbeat.expires_after(interval);
+    heartbeat.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
+      if (ec || !self->open) return;
+      pb::ClientMessage m;
+      m.mutable_heartbeat()->set_client_time_ns(static_cast<std::uint64_t>(now_ns()));
+      self->send(wire::frame_message(m).value());
+      self->arm_heartbeat();
+    });
+  }
+
+  void on_message(const pb::ServerMessage& m, bool via_udp) {
+    if (m.has_frame()) {
+      const auto& f = m.frame();
+      std::shared_ptr<Sub> sub;
+      {
+        std::lock_guard lock(mutex);
+        (via_udp ? counters.frames_udp : counters.frames_tcp)++;
+        if (auto it = subs.find(f.subscription_id()); it != subs.end()) {
+          sub = it->second;
+        } else if (subscribes_in_flight > 0) {
+          if (early_frames.size() == kMaxEarlyFrames) early_frames.pop_front();
+          early_frames.emplace_back(m, via_udp);
+          (via_udp ? counters.frames_udp : counters.frames_tcp)--;  // counted when replayed
+          return;
+        }
+      }
+      if (!sub || !sub->on_frame) return;
+      ReceivedFrame r;
+      r.receive_time_ns = now_ns();
+      r.view_id = f.view_id();
+      r.subscription_id = f.subscription_id();
+      r.stream_id = f.stream_id();
+      r.skeleton_version = f.skeleton_version();
+      r.frame_index = f.frame_index();
+      r.motion_time = f.motion_time();
+      r.sequence = f.sequence();
+      r.server_send_time_ns = f.server_send_time_ns();
+      r.udp = via_udp;
+      if (f.positions_f64_size() > 0) {
+        unpack3(f.positions_f64(), r.positions);
+        unpack4(f.orientations_f64(), r.orientations);
+      } else {
+        unpack3(f.positions(), r.positions);
+        unpack4(f.orientations(), r.orientations);
+      }
+      sub->on_frame(r);
+      return;
+    }
+    if (m.request_id() != 0) {
+      Pending p;
+      {
+        std::lock_guard lock(mutex);
+        auto it = pending.find(m.request_id());
+        if (it == pending.end()) return;
+        p = std::move(it->second);
+        pending.erase(it);
+      }
+      if (p.on_reply) p.on_reply(m);
+      p.promise.set_value(m);
+      return;
+    }
+    if (m.has_subscription_ended()) {
+      std::shared_ptr<Sub> sub;
+      {
+        std::lock_guard lock(mutex);
+        if (auto it = subs.find(m.subscription_ended().subscription_id()); it != subs.end()) {
+          sub = it->second;
+          subs.erase(it);
+        }
+      }
+      if (sub && sub->on_end) sub->on_end(m.subscription_ended());
+    } else if (m.has_udp_registered()) {
+      std::lock_guard lock(mutex);
+      udp_registered = true;
+      udp_cv.notify_all();
+    } else if (m.has_error()) {
+      std::lock_guard lock(mutex);
+      close_reason = std::string(wire::error_code_name(m.error().code())) + ": " + m.error().message();
+    }
+  }
+
+  void fail(const std::string& reason) {
+    if (!open.exchange(false)) return;
+    boost::system::error_code ec;
+    socket.close(ec);
+    udp_socket.close(ec);
+    heartbeat.cancel();
+    std::map<std::uint64_t, Pending> orphans;
+    {
+      std::lock_guard lock(mutex);
+      if (close_reason.empty()) close_reason = reason;
+      orphans.swap(pending);
+      udp_cv.notify_all();
+    }
+    for (auto& [id, p] : orphans) p.promise.set_exception(std::make_exception_ptr(std::runtime_error(close_reason)));
+  }
+
+  Result<pb::ServerMessage> call(pb::ClientMessage m, std::function<void(const pb::ServerMessage&)> on_reply = {}) {
+    const std::uint64_t id = next_request++;
+    m.set_request_id(id);
+    auto framed = wire::frame_message(m, 1u << 30);
+    if (!framed.ok()) return framed.error();
+    std::future<pb::ServerMessage> future;
+    {
+      std::lock_guard lock(mutex);
+      if (!open) return make_error("not connected: " + close_reason);
+      Pending p;
+      p.on_reply = std::move(on_reply);
+      future = p.promise.get_future();
+      pending.emplace(id, std::move(p));
+    }
+    send(std::move(framed).value());
+    if (future.wait_for(options.timeout) != std::future_status::ready) {
+      std::lock_guard lock(mutex);
+      pending.erase(id);
+      return make_error("no reply from the server within " + std::to_string(options.timeout.count()) + " ms");
+    }
+    try {
+      return future.get();
+    } catch (const std::exception& e) {
+      return make_error(std::string("connection lost: ") + e.what());
+    }
+  }
+
+  // A reply of the expected kind, or the server's Error as an Error.
+  Result<pb::ServerMessage> expect(pb::ClientMessage m, pb::ServerMessage::BodyCase expected,
+                                   std::function<void(const pb::ServerMessage&)> on_reply = {}) {
+    auto r = call(std::move(m), std::move(on_reply));
+    if (!r.ok()) return r;
+    if (r->has_error()) {
+      return make_error(std::string(wire::error_code_name(r->error().code())) + ": " + r->error().message());
+    }
+    if (r->body_case() != expected) return make_error("unexpected reply from the server");
+    return r;
+  }
+};
+
+namespace {
+
+Result<ViewState> to_view(Result<pb::ServerMessage> r) {
+  if (!r.ok()) return r.error();
+  const pb::ViewInfo& v = r->view();
+  auto sk = wire::from_proto(v.skeleton());
+  if (!sk.ok()) return make_error("the server sent an invalid skeleton: " + sk.error().message);
+  ViewState s;
+  s.id = v.view_id();
+  s.motion = v.motion();
+  s.skeleton_version = v.skeleton_version();
+  s.skeleton = std::move(sk).value();
+  s.relative_to = v.relative_to();
+  s.frame_count = v.frame_count();
+  s.frame_time = v.frame_time();
+  s.removed.assign(v.removed().begin(), v.removed().end());
+  s.join_offset_spread = v.join_offset_spread();
+  return s;
+}
+
+Status to_status(Result<pb::ServerMessage> r) {
+  if (!r.ok()) return r.error();
+  return Ok{};
+}
+
+}  // namespace
+
+Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
+  std::unique_ptr<Client> c(new Client());
+  c->impl_ = std::make_shared<Impl>();
+  auto& d = *c->impl_;
+  d.options = options;
+  boost::system::error_code ec;
+  tcp::resolver resolver(d.io);
+  auto endpoints = resolver.resolve(options.host, std::to_string(options.port), ec);
+  if (ec) return make_error("cannot resolve " + options.host + ": " + ec.message());
+  // Connect on the I/O thread so the timeout applies.
+  std::promise<boost::system::error_code> connected;
+  auto connected_future = connected.get_future();
+  d.socket.open(endpoints.begin()->endpoint().protocol(), ec);
+  if (options.receive_buffer > 0) d.socket.set_option(net::socket_base::receive_buffer_size(options.receive_buffer), ec);
+  net::async_connect(d.socket, endpoints, [&connected](const boost::system::error_code& e, const tcp::endpoint&) {
+    connected.set_value(e);
+  });
+  d.thread = std::thread([impl = c->impl_] {
+    auto guard = net::make_work_guard(impl->io);
+    impl->io.run();
+  });
+  const std::string where = options.host + ":" + std::to_string(options.port);
+  if (connected_future.wait_for(options.timeout) != std::future_status::ready) {
+    net::post(d.io, [impl = c->impl_] { boost::system::error_code e; impl->socket.close(e); });
+    connected_future.wait();
+    c->close();
+    return make_error("cannot connect to " + where + ": timed out");
+  }
+  if (auto e = connected_future.get()) {
+    c->close();
+    return make_error("cannot connect to " + where + ": " + e.message());
+  }
+  d.socket.set_option(tcp::no_delay(true), ec);
+  d.open = true;
+  const auto remote = d.socket.remote_endpoint(ec);
+  net::post(d.io, [impl = c->impl_] { impl->read_prefix(); });
+
+  pb::ClientMessage hello;
+  hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+  hello.mutable_hello()->set_client_name(options.client_name);
+  auto r = d.expect(hello, pb::ServerMessage::kHello);
+  if (!r.ok()) {
+    c->close();
+    return make_error("handshake with " + where + " failed: " + r.error().message);
+  }
+  d.hello = r->hello();
+  d.server_udp = udp::endpoint(remote.address(), static_cast<std::uint16_t>(d.hello.udp_port()));
+  d.udp_socket.open(remote.address().is_v4() ? udp::v4() : udp::v6(), ec);
+  if (!ec) d.udp_socket.bind(udp::endpoint(remote.address().is_loopback() ? remote.address() : net::ip::address(), 0), ec);
+  // A deep receive buffer rides out scheduling stalls of the I/O thread (the
+  // kernel caps it at net.core.rmem_max).
+  if (!ec) d.udp_socket.set_option(net::socket_base::receive_buffer_size(4 << 20), ec);
+  net::post(d.io, [impl = c->impl_] {
+    if (impl->udp_socket.is_open()) impl->read_udp();
+    impl->arm_heartbeat();
+  });
+  return c;
+}
+
+Client::~Client() { close(); }
+
+void Client::close() {
+  if (!impl_) return;
+  net::post(impl_->io, [impl = impl_] {
+    impl->fail("closed by the client");
+    impl->io.stop();
+  });
+  if (impl_->thread.joinable()) {
+    if (impl_->thread.get_id() == std::this_thread::get_id()) {
+      impl_->thread.detach();  // close() from a callback: the thread ends by itself
+    } else {
+      impl_->thread.join();
+    }
+  }
+}
+
+const pb::HelloReply& Client::hello() const { return impl_->hello; }
+bool Client::connected() const { return impl_->open; }
+
+ClientCounters Client::counters() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->counters;
+}
+
+Result<pb::ServerMessage> Client::request(pb::ClientMessage message) { return impl_->call(std::move(message)); }
+
+Result<std::vector<pb::MotionInfo>> Client::list_motions() {
+  pb::ClientMessage m;
+  m.mutable_list_motions();
+  auto r = impl_->expect(m, pb::ServerMessage::kMotions);
+  if (!r.ok()) return r.error();
+  return std::vector<pb::MotionInfo>(r->motions().motions().begin(), r->motions().motions().end());
+}
+
+Result<Skeleton> Client::skeleton(const std::string& motion) {
+  pb::ClientMessage m;
+  m.mutable_get_skeleton()->set_motion(motion);
+  auto r = impl_->expect(m, pb::ServerMessage::kSkeleton);
+  if (!r.ok()) return r.error();
+  return wire::from_proto(r->skeleton().skeleton());
+}
+
+Result<ViewState> Client::create_view(const std::string& motion) {
+  pb::ClientMessage m;
+  m.mutable_create_view()->set_motion(motion);
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
+Status Client::close_view(std::uint32_t view) {
+  pb::ClientMessage m;
+  m.mutable_close_view()->set_view_id(view);
+  return to_status(impl_->expect(m, pb::ServerMessage::kAck));
+}
+
+Result<ViewState> Client::shift_root(std::uint32_t view, const std::string& joint) {
+  pb::ClientMessage m;
+  m.mutable_shift_root()->set_view_id(view);
+  m.mutable_shift_root()->set_joint(joint);
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
+Result<ViewState> Client::split(std::uint32_t view, const std::string& joint) {
+  pb::ClientMessage m;
+  m.mutable_split()->set_view_id(view);
+  m.mutable_split()->set_joint(joint);
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
+Result<ViewState> Client::join(std::uint32_t view, const std::string& root) {
+  pb::ClientMessage m;
+  m.mutable_join()->set_view_id(view);
+  m.mutable_join()->set_root(root);
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
+Result<ViewState> Client::set_roots(std::uint32_t view, const std::vector<std::string>& roots) {
+  pb::ClientMessage m;
+  m.mutable_set_roots()->set_view_id(view);
+  for (const auto& r : roots) m.mutable_set_roots()->add_roots(r);
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
+Result<ViewState> Client::strip_dummies(std::uint32_t view) {
+  pb::ClientMessage m;
+  m.mutable_strip_dummies()->set_view_id(view);
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
+Result<ViewState> Client::set_coordinates(std::uint32_t view, const std::string& relative_to) {
+  pb::ClientMessage m;
+  m.mutable_set_coordinates()->set_view_id(view);
+  m.mutable_set_coordinates()->set_relative_to(relative_to);
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
+Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, bool orientations,
+                                  const std::vector<std::string>& joints) {
+  pb::ClientMessage m;
+  auto* q = m.mutable_query_frames();
+  q->set_view_id(view);
+  q->set_begin(begin);
+  q->set_end(end);
+  q->set_orientations(orientations);
+  for (const auto& j : joints) q->add_joints(j);
+  auto r = impl_->expect(m, pb::ServerMessage::kFrames);
+  if (!r.ok()) return r.error();
+  const auto& b = r->frames();
+  QueryResult out;
+  out.skeleton_version = b.skeleton_version();
+  out.begin = b.begin();
+  out.end = b.end();
+  out.joints.assign(b.joints().begin(), b.joints().end());
+  unpack3(b.positions(), out.positions);
+  unpack4(b.orientations(), out.orientations);
+  if (out.positions.size() != static_cast<std::size_t>(out.end - out.begin) * out.joints.size()) {
+    return make_error("the server sent " + std::to_string(out.positions.size()) + " positions for " +
+                      std::to_string(out.end - out.begin) + " frames of " + std::to_string(out.joints.size()) +
+                      " joints");
+  }
+  return out;
+}
+
+Status Client::register_udp() {
+  auto& d = *impl_;
+  if (!d.udp_socket.is_open() || d.hello.udp_port() == 0) return make_error("the server offers no UDP");
+  const std::string datagram = wire::make_register_datagram(d.hello.session_token());
+  const auto deadline = std::chrono::steady_clock::now() + d.options.timeout;
+  std::unique_lock lock(d.mutex);
+  // Registration datagrams can be lost like any other: resend until the
+  // server confirms over TCP.
+  while (!d.udp_registered && d.open) {
+    lock.unlock();
+    net::post(d.io, [impl = impl_, datagram] {
+      boost::system::error_code ec;
+      impl->udp_socket.send_to(net::buffer(datagram), impl->server_udp, 0, ec);
+    });
+    lock.lock();
+    if (std::chrono::steady_clock::now() >= deadline) break;
+    d.udp_cv.wait_for(lock, std::chrono::milliseconds(50));
+  }
+  if (d.udp_registered) return Ok{};
+  return make_error(d.open ? "the server did not confirm the UDP registration in time" : "not connected: " + d.close_reason);
+}
+
+Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOptions& o, FrameCallback on_frame,
+                                           EndCallback on_end) {
+  if (o.udp) {
+    if (auto s = register_udp(); !s.ok()) return s.error();
+  }
+  pb::ClientMessage m;
+  auto* s = m.mutable_subscribe();
+  s->set_view_id(view);
+  s->set_start_frame(o.start_frame);
+  s->set_end_frame(o.end_frame);
+  s->set_loop(o.loop);
+  s->set_speed(o.speed);
+  s->set_rate_hz(o.rate_hz);
+  s->set_skip_repeats(o.skip_repeats);
+  s->set_orientations(o.orientations);
+  for (const auto& j : o.joints) s->add_joints(j);
+  s->set_transport(o.udp ? pb::TRANSPORT_UDP : pb::TRANSPORT_TCP);
+  s->set_precision(o.float64 ? pb::PRECISION_FLOAT64 : pb::PRECISION_FLOAT32);
+  s->set_shared(o.shared);
+  s->set_max_frames(o.max_frames);
+  auto sub = std::make_shared<Impl::Sub>(Impl::Sub{std::move(on_frame), std::move(on_end)});
+  // Registered on the I/O thread as the reply is read, before any frame.
+  {
+    std::lock_guard lock(impl_->mutex);
+    ++impl_->subscribes_in_flight;
+  }
+  auto replied = std::make_shared<std::atomic<bool>>(false);
+  auto r = impl_->expect(m, pb::ServerMessage::kSubscribed, [impl = impl_.get(), sub, replied](const pb::ServerMessage& reply) {
+    std::deque<std::pair<pb::ServerMessage, bool>> replay;
+    {
+      std::lock_guard lock(impl->mutex);
+      *replied = true;
+      --impl->subscribes_in_flight;
+      if (reply.has_subscribed()) impl->subs[reply.subscribed().subscription_id()] = sub;
+      if (impl->subscribes_in_flight == 0) replay.swap(impl->early_frames);
+    }
+    for (auto& [frame, via_udp] : replay) impl->on_message(frame, via_udp);
+  });
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (!*replied) --impl_->subscribes_in_flight;  // timed out or lost: no reply will come
+  }
+  if (!r.ok()) return r.error();
+  const auto& sr = r->subscribed();
+  SubscriptionInfo info;
+  info.id = sr.subscription_id();
+  info.view_id = sr.view_id();
+  info.skeleton_version = sr.skeleton_version();
+  info.joints.assign(sr.joints().begin(), sr.joints().end());
+  info.rate_hz = sr.rate_hz();
+  info.stream_id = sr.stream_id();
+  info.joined_running = sr.joined_running();
+  return info;
+}
+
+Status Client::unsubscribe(std::uint32_t subscription) {
+  pb::ClientMessage m;
+  m.mutable_unsubscribe()->set_subscription_id(subscription);
+  auto r = impl_->expect(m, pb::ServerMessage::kAck);
+  std::lock_guard lock(impl_->mutex);
+  impl_->subs.erase(subscription);
+  return to_status(std::move(r));
+}
+
+Status Client::pause(std::uint32_t subscription) {
+  pb::ClientMessage m;
+  m.mutable_pause()->set_subscription_id(subscription);
+  return to_status(impl_->expect(m, pb::ServerMessage::kAck));
+}
+
+Status Client::resume(std::uint32_t subscription) {
+  pb::ClientMessage m;
+  m.mutable_resume()->set_subscription_id(subscription);
+  return to_status(impl_->expect(m, pb::ServerMessage::kAck));
+}
+
+Status Client::seek(std::uint32_t subscription, std::uint32_t frame) {
+  pb::ClientMessage m;
+  m.mutable_seek()->set_subscription_id(subscription);
+  m.mutable_seek()->set_frame(frame);
+  return to_status(impl_->expect(m, pb::ServerMessage::kAck));
+}
+
+Result<pb::Stats> Client::stats() {
+  pb::ClientMessage m;
+  m.mutable_get_stats();
+  auto r = impl_->expect(m, pb::ServerMessage::kStats);
+  if (!r.ok()) return r.error();
+  return r->stats();
+}
+
+}  // namespace gmr::client

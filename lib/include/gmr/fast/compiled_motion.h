@@ -1,0 +1,121 @@
+// A compiled, read-only float form of a motion for fast forward kinematics.
+//
+// Layout (structure of arrays across frames):
+//
+//   stream s:  [ f0 f1 f2 ... f(n-1) | 0 0 ... 0 ]   frame_stride() floats, 64-byte aligned
+//               one stream per rotation channel (degrees, reduced to [-180, 180])
+//               and per position channel (file units)
+//
+// so forward kinematics runs across frames in SIMD lanes: one vector holds the
+// same channel of 4, 8 or 16 consecutive frames. Streams are padded with zeros
+// to a multiple of kFrameAlignment plus one extra block, so a vector load that
+// starts at any frame < frame_count() stays inside the stream.
+//
+// Siblings whose rotation channels are identical in every frame (what a BVH ->
+// GMR conversion makes: each child carries a copy of its parent's rotation)
+// share one world rotation, computed once; the copies get no streams.
+//
+// Per joint the compiler precomputes what the convention needs (JointPlan):
+// the parent, the rotation axes in listed order, which offset components come
+// from position channels, the static offset, and where the joint's world
+// rotation lives (its own slot, its parent's when it has no rotation, or the
+// identity).
+//
+// When every joint is a root (the all-roots GMR form) the positions are the
+// joints' effective offsets: they are also stored frame-major, exactly as the
+// FK jobs write them, and stored_positions() is a zero-copy view of them.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "gmr/core/error.h"
+#include "gmr/motion/motion.h"
+
+namespace gmr::fast {
+
+// Frames per padded block: 16 floats = one AVX-512 register (smaller vectors
+// divide it).
+inline constexpr std::size_t kFrameAlignment = 16;
+
+// No stream: the value is static.
+inline constexpr std::int32_t kNoStream = -1;
+// World-rotation slot of a joint whose world rotation is the identity.
+inline constexpr std::int32_t kIdentitySlot = -1;
+
+// What forward kinematics needs to know about one joint.
+struct JointPlan {
+  std::int32_t parent = kNoParent;
+  std::int32_t rotation_count = 0;               // 0..3 rotation channels computed (0: shares a twin's)
+  std::uint8_t axes[3] = {0, 0, 0};              // Axis of each rotation channel, listed order
+  std::int32_t rotation_stream[3] = {kNoStream, kNoStream, kNoStream};
+  std::int32_t offset_stream[3] = {kNoStream, kNoStream, kNoStream};  // per axis: stream or static
+  float offset[3] = {0, 0, 0};                   // static offset components (used where no stream)
+  std::int32_t world_slot = kIdentitySlot;       // where W_j lives (shared with the parent without rotation)
+  std::int32_t parent_slot = kIdentitySlot;      // where W_p lives (roots: identity)
+  bool owns_slot = false;                        // W_j is computed into world_slot (it has rotation channels)
+  bool world_for_positions = false;              // W_j must be computed even when no orientation is asked
+  bool zero_offset = false;                      // t_j is statically zero
+};
+
+class CompiledMotion {
+ public:
+  CompiledMotion() = default;
+  CompiledMotion(CompiledMotion&&) noexcept = default;
+  CompiledMotion& operator=(CompiledMotion&&) noexcept = default;
+  CompiledMotion(const CompiledMotion&) = delete;
+  CompiledMotion& operator=(const CompiledMotion&) = delete;
+
+  // Compiles `motion` (either convention). Fails when motion.validate() fails
+  // or the motion is too large to index with 32-bit stream offsets.
+  static Result<CompiledMotion> compile(const Motion& motion);
+
+  Convention convention() const { return convention_; }
+  std::size_t frame_count() const { return frame_count_; }
+  std::size_t joint_count() const { return plans_.size(); }
+  std::size_t stream_count() const { return stream_count_; }
+  // Floats per stream (frame_count rounded up to kFrameAlignment, plus one block).
+  std::size_t frame_stride() const { return frame_stride_; }
+  // Number of world-rotation slots a frame needs.
+  std::size_t slot_count() const { return slot_count_; }
+  std::span<const JointPlan> joints() const { return plans_; }
+  // Values of stream s: frame_stride() floats, 64-byte aligned.
+  const float* stream(std::size_t s) const { return streams_.get() + s * frame_stride_; }
+
+  // For one-frame FK: stream(s) - stream(0) of every computed rotation
+  // channel, in joint order, padded with zeros to a multiple of
+  // kFrameAlignment (a frame's angles are one gather).
+  std::span<const std::int32_t> rotation_gather_offsets() const { return rotation_offsets_; }
+
+  // True when every joint is a root.
+  bool all_roots() const { return all_roots_; }
+  // All roots: the positions of every frame, frame-major (frame, joint, xyz),
+  // identical to what FkRangeJob writes. Empty otherwise.
+  std::span<const float> stored_positions() const { return stored_positions_; }
+
+  // Bytes held per frame (streams and stored positions, padding excluded).
+  std::size_t bytes_per_frame() const;
+  // Bytes held in total (padding included).
+  std::size_t bytes() const;
+
+ private:
+  struct AlignedFree {
+    void operator()(float* p) const;
+  };
+
+  Convention convention_ = Convention::kPreRotation;
+  std::size_t frame_count_ = 0;
+  std::size_t stream_count_ = 0;
+  std::size_t frame_stride_ = kFrameAlignment;
+  std::size_t slot_count_ = 0;
+  bool all_roots_ = false;
+  std::vector<JointPlan> plans_;
+  std::unique_ptr<float[], AlignedFree> streams_;
+  std::vector<float> stored_positions_;
+  std::vector<std::int32_t> rotation_offsets_;
+};
+
+}  // namespace gmr::fast

@@ -1,0 +1,188 @@
+#include "gmr/fast/compiled_motion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <new>
+#include <string>
+
+namespace gmr::fast {
+
+void CompiledMotion::AlignedFree::operator()(float* p) const { ::operator delete[](p, std::align_val_t{64}); }
+
+namespace {
+
+// Rounds up to a multiple of kFrameAlignment and adds one block, so a vector
+// load starting at any valid frame stays inside the stream.
+std::size_t padded_frames(std::size_t frames) {
+  return (frames + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment + kFrameAlignment;
+}
+
+}  // namespace
+
+Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
+  if (Status s = motion.validate(); !s.ok()) return s.error();
+  const Skeleton& sk = motion.skeleton;
+  const std::size_t joints = sk.size();
+
+  CompiledMotion out;
+  out.convention_ = motion.convention;
+  out.frame_count_ = motion.frame_count;
+  out.frame_stride_ = padded_frames(motion.frame_count);
+  out.all_roots_ = joints > 0 && sk.roots().size() == joints;
+  out.plans_.resize(joints);
+
+  // Streams: every rotation channel, and every position channel unless all
+  // joints are roots (then positions come from stored_positions_).
+  std::int32_t streams = 0;
+  std::int32_t slots = 0;
+  for (std::size_t j = 0; j < joints; ++j) {
+    const Joint& joint = sk.joint(static_cast<int>(j));
+    JointPlan& p = out.plans_[j];
+    p.parent = joint.parent;
+    p.parent_slot = joint.parent == kNoParent ? kIdentitySlot : out.plans_[static_cast<std::size_t>(joint.parent)].world_slot;
+    for (int a = 0; a < 3; ++a) p.offset[a] = static_cast<float>(joint.offset[a]);
+    int rotation_channel[3] = {0, 0, 0};  // index of each rotation channel in joint.channels
+    for (std::size_t i = 0; i < joint.channels.size(); ++i) {
+      if (!is_rotation(joint.channels[i])) continue;
+      rotation_channel[p.rotation_count] = static_cast<int>(i);
+      p.axes[p.rotation_count++] = static_cast<std::uint8_t>(axis_of(joint.channels[i]));
+    }
+    // Siblings that rotate identically share one world rotation: converting
+    // BVH to GMR gives each child of a joint a copy of its rotation channels,
+    // and computing them once keeps the one-root GMR as cheap as the BVH.
+    int twin = -1;
+    for (std::size_t i = 0; i < j && p.rotation_count > 0 && twin < 0; ++i) {
+      const JointPlan& q = out.plans_[i];
+      if (!q.owns_slot || q.parent_slot != p.parent_slot || q.rotation_count != p.rotation_count ||
+          !std::equal(q.axes, q.axes + 3, p.axes)) {
+        continue;
+      }
+      const Joint& other = sk.joint(static_cast<int>(i));
+      std::size_t k = 0;
+      int other_channel[3] = {0, 0, 0};
+      for (std::size_t c = 0; c < other.channels.size(); ++c) {
+        if (is_rotation(other.channels[c])) other_channel[k++] = static_cast<int>(c);
+      }
+      bool same = true;
+      const std::size_t stride = motion.stride();
+      const std::size_t a0 = static_cast<std::size_t>(sk.channel_offset(static_cast<int>(j)));
+      const std::size_t b0 = static_cast<std::size_t>(sk.channel_offset(static_cast<int>(i)));
+      for (int r = 0; r < p.rotation_count && same; ++r) {
+        const double* a = motion.values.data() + a0 + static_cast<std::size_t>(rotation_channel[r]);
+        const double* b = motion.values.data() + b0 + static_cast<std::size_t>(other_channel[r]);
+        for (std::size_t f = 0; f < motion.frame_count && same; ++f) same = a[f * stride] == b[f * stride];
+      }
+      if (same) twin = static_cast<int>(i);
+    }
+    if (twin >= 0) {
+      // No rotation of its own to compute: it uses its twin's world rotation.
+      p.rotation_count = 0;
+      p.world_slot = out.plans_[static_cast<std::size_t>(twin)].world_slot;
+    } else {
+      for (int r = 0; r < p.rotation_count; ++r) p.rotation_stream[r] = streams++;
+    }
+    for (ChannelType c : joint.channels) {
+      if (is_position(c) && !out.all_roots_) p.offset_stream[static_cast<int>(axis_of(c))] = streams++;
+    }
+    bool has_pos = false;
+    for (ChannelType c : joint.channels) has_pos = has_pos || is_position(c);
+    p.zero_offset = !has_pos && joint.offset.isZero(0.0);
+    p.owns_slot = p.rotation_count > 0;
+    if (twin < 0) p.world_slot = p.owns_slot ? slots++ : p.parent_slot;
+    if (streams < 0 || slots < 0) return make_error("motion has too many channels to compile");
+  }
+
+  // Which world rotations positions need (orientation requests compute all):
+  // post-rotation reads W_p, pre-rotation W_j; computing a slot needs its
+  // parent's slot. Owners come before their users, so one backward pass
+  // propagates the marks.
+  std::vector<char> needed(static_cast<std::size_t>(slots), 0);
+  const bool pre = motion.convention == Convention::kPreRotation;
+  for (const JointPlan& p : out.plans_) {
+    if (p.parent == kNoParent || p.zero_offset) continue;
+    const std::int32_t s = pre ? p.world_slot : p.parent_slot;
+    if (s != kIdentitySlot) needed[static_cast<std::size_t>(s)] = 1;
+  }
+  for (std::size_t j = joints; j-- > 0;) {
+    JointPlan& p = out.plans_[j];
+    if (!p.owns_slot || !needed[static_cast<std::size_t>(p.world_slot)]) continue;
+    p.world_for_positions = true;
+    if (p.parent_slot != kIdentitySlot) needed[static_cast<std::size_t>(p.parent_slot)] = 1;
+  }
+
+  out.stream_count_ = static_cast<std::size_t>(streams);
+  out.slot_count_ = static_cast<std::size_t>(slots);
+  const std::size_t total = out.stream_count_ * out.frame_stride_;
+  // 32-bit stream offsets keep gathers possible; 2^31 floats is 8 GiB per motion.
+  if (out.frame_stride_ > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()) ||
+      (out.stream_count_ != 0 && total / out.stream_count_ != out.frame_stride_) ||
+      total > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max())) {
+    return make_error("motion too large to compile (" + std::to_string(motion.frame_count) + " frames x " +
+                      std::to_string(out.stream_count_) + " channels)");
+  }
+  if (total > 0) {
+    out.streams_.reset(static_cast<float*>(::operator new[](total * sizeof(float), std::align_val_t{64})));
+    std::memset(out.streams_.get(), 0, total * sizeof(float));
+  }
+
+  const std::size_t stride = motion.stride();
+  for (std::size_t j = 0; j < joints; ++j) {
+    const Joint& joint = sk.joint(static_cast<int>(j));
+    const JointPlan& p = out.plans_[j];
+    const std::size_t first = static_cast<std::size_t>(sk.channel_offset(static_cast<int>(j)));
+    int r = 0;
+    for (std::size_t i = 0; i < joint.channels.size(); ++i) {
+      const ChannelType c = joint.channels[i];
+      std::int32_t s = kNoStream;
+      bool angle = false;
+      if (is_rotation(c)) {
+        s = p.rotation_stream[r++];  // kNoStream for a joint that shares its twin's rotation
+        angle = true;
+      } else {
+        s = p.offset_stream[static_cast<int>(axis_of(c))];
+      }
+      if (s == kNoStream) continue;
+      float* dst = out.streams_.get() + static_cast<std::size_t>(s) * out.frame_stride_;
+      const double* src = motion.values.data() + first + i;
+      // Angles are reduced to [-180, 180] in double before rounding to float,
+      // so a file's 7200 degrees keeps the precision of 0 degrees.
+      if (angle) {
+        for (std::size_t f = 0; f < motion.frame_count; ++f) dst[f] = static_cast<float>(std::remainder(src[f * stride], 360.0));
+      } else {
+        for (std::size_t f = 0; f < motion.frame_count; ++f) dst[f] = static_cast<float>(src[f * stride]);
+      }
+    }
+  }
+
+  for (const JointPlan& p : out.plans_) {
+    for (int r = 0; r < p.rotation_count; ++r) {
+      out.rotation_offsets_.push_back(p.rotation_stream[r] * static_cast<std::int32_t>(out.frame_stride_));
+    }
+  }
+  out.rotation_offsets_.resize((out.rotation_offsets_.size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment, 0);
+
+  if (out.all_roots_) {
+    out.stored_positions_.resize(motion.frame_count * joints * 3);
+    for (std::size_t f = 0; f < motion.frame_count; ++f) {
+      for (std::size_t j = 0; j < joints; ++j) {
+        const Eigen::Vector3d t = motion.local_offset(f, static_cast<int>(j));
+        float* dst = out.stored_positions_.data() + (f * joints + j) * 3;
+        for (int a = 0; a < 3; ++a) dst[a] = static_cast<float>(t[a]);
+      }
+    }
+  }
+  return out;
+}
+
+std::size_t CompiledMotion::bytes_per_frame() const {
+  return (stream_count_ + (all_roots_ ? joint_count() * 3 : 0)) * sizeof(float);
+}
+
+std::size_t CompiledMotion::bytes() const {
+  return (stream_count_ * frame_stride_ + stored_positions_.size()) * sizeof(float) +
+         plans_.size() * sizeof(JointPlan);
+}
+
+}  // namespace gmr::fast

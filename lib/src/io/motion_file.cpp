@@ -1,0 +1,81 @@
+// load_motion(). save_motion() is in motion_save.cpp so that a program that
+// only loads does not link the convention conversions.
+#include "gmr/io/motion_file.h"
+
+#include <algorithm>
+#include <cctype>
+#include <system_error>
+
+#include "gmr/io/asf_amc.h"
+#include "gmr/io/bvh.h"
+#include "gmr/io/gmr_file.h"
+#include "gmr/io/gmrb.h"
+#include "extension.h"
+
+namespace gmr {
+
+namespace detail {
+
+std::string lower_extension(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+Error unknown_extension(const std::filesystem::path& path, std::string_view verb) {
+  Error e;
+  e.file = path.string();
+  const std::string ext = lower_extension(path);
+  e.message = "cannot " + std::string(verb) + " " + (ext.empty() ? std::string("a file without extension") : "'" + ext + "' files") +
+              ": expected .bvh, .gmr, .amc or .gmrb";
+  return e;
+}
+
+}  // namespace detail
+
+namespace {
+
+// The skeleton for an AMC: the one given, else the single .asf in its folder.
+Result<std::filesystem::path> find_asf(const std::filesystem::path& amc, const LoadOptions& options) {
+  if (!options.asf.empty()) return options.asf;
+  const std::filesystem::path dir = amc.parent_path().empty() ? std::filesystem::path(".") : amc.parent_path();
+  std::vector<std::filesystem::path> found;
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (detail::lower_extension(it->path()) == ".asf" && it->is_regular_file(ec)) found.push_back(it->path());
+  }
+  Error e;
+  e.file = amc.string();
+  if (ec) {
+    e.message = "cannot list " + dir.string() + " to find the .asf skeleton: " + ec.message();
+    return e;
+  }
+  if (found.size() == 1) return found.front();
+  std::sort(found.begin(), found.end());
+  if (found.empty()) {
+    e.message = "no .asf skeleton in " + dir.string() + ": name one with --asf";
+  } else {
+    e.message = "several .asf skeletons in " + dir.string() + " (";
+    for (std::size_t i = 0; i < found.size(); ++i) e.message += (i ? ", " : "") + found[i].filename().string();
+    e.message += "): name one with --asf";
+  }
+  return e;
+}
+
+}  // namespace
+
+Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions& options, Warnings* out_warnings) {
+  const std::string ext = detail::lower_extension(path);
+  if (ext == ".bvh") return read_bvh(path, out_warnings);
+  if (ext == ".gmr") return read_gmr(path, out_warnings);
+  if (ext == ".amc") {
+    auto asf = find_asf(path, options);
+    if (!asf) return asf.error();
+    return read_asf_amc(*asf, path, out_warnings);
+  }
+  // ---- .gmrb (GMR binary, PERF area: lib/src/fast/gmrb.cpp)
+  if (ext == ".gmrb") return read_gmrb(path);
+  return detail::unknown_extension(path, "read");
+}
+
+}  // namespace gmr

@@ -1,0 +1,63 @@
+#include "gmr/io/positions_csv.h"
+
+#include <charconv>
+#include <string>
+
+namespace gmr {
+namespace {
+
+// RFC 4180 quoting, only for names that need it (a ',', '"' or line break).
+std::string csv_field(std::string_view s) {
+  if (s.find_first_of(",\"\r\n") == std::string_view::npos) return std::string(s);
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"') out += '"';
+    out += c;
+  }
+  out += '"';
+  return out;
+}
+
+void append_number(std::string& out, double v) {
+  if (v == 0.0) v = 0.0;  // "-0" and "0" are the same position: print one form
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  out.append(buf, r.ptr);
+}
+
+}  // namespace
+
+void write_positions_csv_header(std::ostream& out) { out << "frame,joint,x,y,z\n"; }
+
+void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
+                              std::size_t first_frame) {
+  const std::size_t joints = skeleton.size();
+  if (joints == 0) return;
+  std::vector<std::string> names;
+  names.reserve(joints);
+  for (const Joint& j : skeleton.joints()) names.push_back(csv_field(j.name));
+  std::string buf;
+  buf.reserve(1 << 16);
+  const std::size_t frames = positions.size() / joints;
+  for (std::size_t f = 0; f < frames; ++f) {
+    const std::string frame = std::to_string(first_frame + f);
+    for (std::size_t j = 0; j < joints; ++j) {
+      const Eigen::Vector3d& p = positions[f * joints + j];
+      buf += frame;
+      buf += ',';
+      buf += names[j];
+      for (int i = 0; i < 3; ++i) {
+        buf += ',';
+        append_number(buf, p[i]);
+      }
+      buf += '\n';
+    }
+    if (buf.size() > (1 << 16) - 1024) {
+      out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+      buf.clear();
+    }
+  }
+  out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+}
+
+}  // namespace gmr

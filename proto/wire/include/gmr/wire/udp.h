@@ -1,0 +1,82 @@
+// UDP datagrams. Every datagram starts with the same 8 bytes:
+//
+//   0       4         5      6        8
+//   +-------+---------+------+--------+
+//   | "GMRU"| version | kind | 0 0    |
+//   +-------+---------+------+--------+
+//
+// kind 1, register (client -> server), 16 bytes: header + session token
+//   (uint64, big-endian) that the client got in HelloReply over TCP. The
+//   server sends UDP frames only to an endpoint registered this way.
+// kind 2, fragment (server -> client): header + message id (uint32), fragment
+//   index (uint16), fragment count (uint16), total size (uint32), then the
+//   fragment's bytes. The fragments of one message, in index order, are one
+//   serialized ServerMessage (a Frame). Every fragment but the last carries
+//   exactly kMaxFragmentPayload bytes. A message with a missing fragment is
+//   dropped whole.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace gmr::wire {
+
+inline constexpr std::uint8_t kUdpVersion = 1;
+inline constexpr std::size_t kUdpHeaderBytes = 8;
+inline constexpr std::size_t kRegisterBytes = kUdpHeaderBytes + 8;
+inline constexpr std::size_t kFragmentHeaderBytes = kUdpHeaderBytes + 12;
+// Each datagram stays under the ~1280-byte IPv6 minimum MTU minus IP/UDP headers.
+inline constexpr std::size_t kMaxDatagramBytes = 1200;
+inline constexpr std::size_t kMaxFragmentPayload = kMaxDatagramBytes - kFragmentHeaderBytes;
+// Largest message a fragment header may announce (bounds reassembly memory).
+inline constexpr std::uint32_t kMaxUdpMessageBytes = 1u << 20;
+
+enum class DatagramKind : std::uint8_t { kRegister = 1, kFragment = 2 };
+
+// The registration datagram for `token`.
+std::string make_register_datagram(std::uint64_t token);
+// The token of a well-formed registration datagram, else nothing.
+std::optional<std::uint64_t> parse_register_datagram(std::string_view datagram);
+
+// Splits `message` into datagrams (at least one, even for an empty message).
+// Requires message.size() <= kMaxUdpMessageBytes.
+std::vector<std::string> fragment_message(std::uint32_t message_id, std::string_view message);
+
+// Rebuilds messages from fragments that may arrive late, twice, out of order
+// or not at all. Keeps at most kMaxPartial messages in progress; starting one
+// more drops the oldest incomplete one whole. Memory is bounded by
+// kMaxPartial * kMaxUdpMessageBytes.
+class Reassembler {
+ public:
+  static constexpr std::size_t kMaxPartial = 8;
+
+  // Feeds one datagram. Returns the whole message when this datagram completed
+  // one. Malformed datagrams are counted and ignored.
+  std::optional<std::string> add(std::string_view datagram);
+
+  std::uint64_t completed() const { return completed_; }
+  std::uint64_t dropped() const { return dropped_; }      // messages given up incomplete
+  std::uint64_t malformed() const { return malformed_; }  // datagrams that were not valid fragments
+
+ private:
+  struct Partial {
+    std::uint32_t id = 0;
+    std::uint16_t count = 0;
+    std::uint32_t total = 0;
+    std::uint16_t received = 0;
+    std::vector<bool> have;
+    std::string bytes;
+  };
+  std::deque<Partial> partial_;
+  std::deque<std::uint32_t> recent_done_;  // ids completed lately: a duplicate fragment must not restart them
+  std::uint64_t completed_ = 0;
+  std::uint64_t dropped_ = 0;
+  std::uint64_t malformed_ = 0;
+};
+
+}  // namespace gmr::wire

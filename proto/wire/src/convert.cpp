@@ -1,0 +1,55 @@
+#include "gmr/wire/convert.h"
+
+#include <string>
+
+namespace gmr::wire {
+
+void to_proto(const Skeleton& skeleton, pb::Skeleton& out) {
+  out.Clear();
+  out.mutable_joints()->Reserve(static_cast<int>(skeleton.size()));
+  for (const Joint& j : skeleton.joints()) {
+    pb::Joint* m = out.add_joints();
+    m->set_name(j.name);
+    m->set_parent(j.parent);
+    m->set_soft_parent(j.soft_parent);
+    m->mutable_offset()->set_x(j.offset.x());
+    m->mutable_offset()->set_y(j.offset.y());
+    m->mutable_offset()->set_z(j.offset.z());
+    for (ChannelType c : j.channels) m->add_channels(static_cast<pb::ChannelType>(static_cast<int>(c)));
+  }
+}
+
+Result<Skeleton> from_proto(const pb::Skeleton& message) {
+  std::vector<Joint> joints;
+  joints.reserve(static_cast<std::size_t>(message.joints_size()));
+  for (int i = 0; i < message.joints_size(); ++i) {
+    const pb::Joint& m = message.joints(i);
+    Joint j;
+    j.name = m.name();
+    j.parent = m.parent();
+    j.soft_parent = m.soft_parent();
+    j.offset = Eigen::Vector3d(m.offset().x(), m.offset().y(), m.offset().z());
+    for (int c : m.channels()) {
+      if (c < 0 || c > 5) return make_error("joint " + std::to_string(i) + ": unknown channel type " + std::to_string(c));
+      j.channels.push_back(static_cast<ChannelType>(c));
+    }
+    joints.push_back(std::move(j));
+  }
+  return Skeleton::create(std::move(joints));
+}
+
+const char* error_code_name(pb::ErrorCode code) {
+  switch (code) {
+    case pb::ERROR_CODE_BAD_REQUEST: return "BAD_REQUEST";
+    case pb::ERROR_CODE_UNKNOWN_REQUEST: return "UNKNOWN_REQUEST";
+    case pb::ERROR_CODE_VERSION_MISMATCH: return "VERSION_MISMATCH";
+    case pb::ERROR_CODE_NOT_FOUND: return "NOT_FOUND";
+    case pb::ERROR_CODE_FAILED_PRECONDITION: return "FAILED_PRECONDITION";
+    case pb::ERROR_CODE_RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
+    case pb::ERROR_CODE_HANDSHAKE_REQUIRED: return "HANDSHAKE_REQUIRED";
+    case pb::ERROR_CODE_INTERNAL: return "INTERNAL";
+    default: return "UNSPECIFIED";
+  }
+}
+
+}  // namespace gmr::wire

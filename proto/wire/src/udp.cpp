@@ -1,0 +1,128 @@
+#include "gmr/wire/udp.h"
+
+#include <algorithm>
+#include <cstring>
+
+namespace gmr::wire {
+namespace {
+
+constexpr char kMagic[4] = {'G', 'M', 'R', 'U'};
+
+void put_header(std::string& out, DatagramKind kind) {
+  out.append(kMagic, 4);
+  out.push_back(static_cast<char>(kUdpVersion));
+  out.push_back(static_cast<char>(kind));
+  out.append(2, '\0');
+}
+
+template <class T>
+void put_be(std::string& out, T v) {
+  for (int shift = static_cast<int>(sizeof(T) * 8) - 8; shift >= 0; shift -= 8) {
+    out.push_back(static_cast<char>(static_cast<std::uint8_t>(v >> shift)));
+  }
+}
+
+template <class T>
+T get_be(std::string_view in, std::size_t at) {
+  T v = 0;
+  for (std::size_t i = 0; i < sizeof(T); ++i) v = static_cast<T>((v << 8) | static_cast<std::uint8_t>(in[at + i]));
+  return v;
+}
+
+bool header_is(std::string_view d, DatagramKind kind) {
+  return d.size() >= kUdpHeaderBytes && std::memcmp(d.data(), kMagic, 4) == 0 &&
+         static_cast<std::uint8_t>(d[4]) == kUdpVersion && static_cast<std::uint8_t>(d[5]) == static_cast<std::uint8_t>(kind);
+}
+
+}  // namespace
+
+std::string make_register_datagram(std::uint64_t token) {
+  std::string out;
+  out.reserve(kRegisterBytes);
+  put_header(out, DatagramKind::kRegister);
+  put_be(out, token);
+  return out;
+}
+
+std::optional<std::uint64_t> parse_register_datagram(std::string_view d) {
+  if (d.size() != kRegisterBytes || !header_is(d, DatagramKind::kRegister)) return std::nullopt;
+  return get_be<std::uint64_t>(d, kUdpHeaderBytes);
+}
+
+std::vector<std::string> fragment_message(std::uint32_t message_id, std::string_view message) {
+  const std::size_t count = std::max<std::size_t>(1, (message.size() + kMaxFragmentPayload - 1) / kMaxFragmentPayload);
+  std::vector<std::string> out;
+  out.reserve(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    const std::string_view part = message.substr(std::min(message.size(), i * kMaxFragmentPayload), kMaxFragmentPayload);
+    std::string d;
+    d.reserve(kFragmentHeaderBytes + part.size());
+    put_header(d, DatagramKind::kFragment);
+    put_be(d, message_id);
+    put_be(d, static_cast<std::uint16_t>(i));
+    put_be(d, static_cast<std::uint16_t>(count));
+    put_be(d, static_cast<std::uint32_t>(message.size()));
+    d.append(part);
+    out.push_back(std::move(d));
+  }
+  return out;
+}
+
+std::optional<std::string> Reassembler::add(std::string_view d) {
+  if (d.size() < kFragmentHeaderBytes || !header_is(d, DatagramKind::kFragment)) {
+    ++malformed_;
+    return std::nullopt;
+  }
+  const auto id = get_be<std::uint32_t>(d, kUdpHeaderBytes);
+  const auto index = get_be<std::uint16_t>(d, kUdpHeaderBytes + 4);
+  const auto count = get_be<std::uint16_t>(d, kUdpHeaderBytes + 6);
+  const auto total = get_be<std::uint32_t>(d, kUdpHeaderBytes + 8);
+  const std::string_view payload = d.substr(kFragmentHeaderBytes);
+  // The header must describe a consistent message: count matches total, the
+  // fragment has exactly the size its index implies.
+  const std::size_t expect_count = std::max<std::size_t>(1, (total + kMaxFragmentPayload - 1) / kMaxFragmentPayload);
+  const std::size_t expect_size =
+      index + 1u < count ? kMaxFragmentPayload : total - std::min<std::size_t>(total, std::size_t{index} * kMaxFragmentPayload);
+  if (total > kMaxUdpMessageBytes || count != expect_count || index >= count || payload.size() != expect_size) {
+    ++malformed_;
+    return std::nullopt;
+  }
+  if (std::find(recent_done_.begin(), recent_done_.end(), id) != recent_done_.end()) return std::nullopt;
+
+  auto done = [&](std::string bytes) {
+    ++completed_;
+    recent_done_.push_back(id);
+    if (recent_done_.size() > 4 * kMaxPartial) recent_done_.pop_front();
+    return std::optional<std::string>(std::move(bytes));
+  };
+  if (count == 1) return done(std::string(payload));
+
+  auto it = std::find_if(partial_.begin(), partial_.end(), [&](const Partial& p) { return p.id == id; });
+  if (it == partial_.end()) {
+    if (partial_.size() == kMaxPartial) {
+      partial_.pop_front();
+      ++dropped_;
+    }
+    Partial p;
+    p.id = id;
+    p.count = count;
+    p.total = total;
+    p.have.assign(count, false);
+    p.bytes.assign(total, '\0');
+    partial_.push_back(std::move(p));
+    it = partial_.end() - 1;
+  } else if (it->count != count || it->total != total) {
+    ++malformed_;  // same id, different shape: not ours to trust
+    return std::nullopt;
+  }
+  if (it->have[index]) return std::nullopt;  // duplicate
+  it->have[index] = true;
+  ++it->received;
+  std::memcpy(it->bytes.data() + std::size_t{index} * kMaxFragmentPayload, payload.data(), payload.size());
+  if (it->received < it->count) return std::nullopt;
+  std::string bytes = std::move(it->bytes);
+  partial_.erase(it);
+  return done(std::move(bytes));
+}
+
+}  // namespace gmr::wire

@@ -1,0 +1,46 @@
+// The motions a server serves: loaded from a folder, or the built-in demo.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "gmr/motion/motion.h"
+
+namespace gmr::server {
+
+struct LibraryEntry {
+  std::string name;                     // unique: path relative to the folder without extension, '/'-separated
+  std::string source;                   // the file it came from, or "builtin"
+  std::shared_ptr<const Motion> motion;  // pre-rotation (GMR), validated
+};
+
+struct Rejection {
+  std::filesystem::path path;
+  std::string reason;  // the reader's "file:line:column: message"
+};
+
+struct LibraryLoad {
+  std::vector<LibraryEntry> entries;  // sorted by name
+  std::vector<Rejection> rejected;    // sorted by path
+  std::size_t skipped = 0;            // files of other kinds (C3D, TRC, text, a lone .asf)
+};
+
+// Progress: called from worker threads (serialised) after each file.
+using LoadProgress = std::function<void(std::size_t done, std::size_t total, const std::filesystem::path& file,
+                                        const std::string* rejection_reason)>;
+
+// Loads every .bvh, .gmr, .gmrb and .amc (with the .asf of its folder: the only
+// one, or the one whose stem prefixes the .amc's) under `dir`, recursively, on
+// `threads` threads (0: hardware concurrency). Never stops at a bad file: it is
+// listed in `rejected` with the reason. Each motion is converted to
+// pre-rotation. Fails only when `dir` is not a readable folder.
+Result<LibraryLoad> load_library(const std::filesystem::path& dir, unsigned threads = 0,
+                                 const LoadProgress& progress = {});
+
+// The built-in demo library (gmr/demo/demo_library.h).
+std::vector<LibraryEntry> builtin_library();
+
+}  // namespace gmr::server

@@ -1,0 +1,70 @@
+// The streaming server: a TCP listener for requests and pushed frames, a UDP
+// socket for registered endpoints, and the library it serves.
+//
+//   client --TCP--> Session --requests--> View (per connection)
+//                      ^                     |
+//                      | frames              v
+//                   Stream (one FK + one encoding per tick) --UDP--> registered endpoint
+//
+// All networking and state live on one I/O thread; per tick the work is one
+// forward-kinematics pass and one encoding per stream, a few microseconds.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "gmr/server/config.h"
+#include "gmr/server/library.h"
+
+namespace gmr::server {
+
+struct SessionStats {
+  std::uint64_t id = 0;
+  std::uint64_t frames_sent = 0;
+  std::uint64_t frames_dropped = 0;   // replaced by a newer frame before it was written, or UDP over its bound
+  std::uint64_t queued_bytes = 0;     // now: replies + frames waiting or being written
+  std::uint64_t max_queued_bytes = 0; // high-water mark
+  bool udp_registered = false;
+};
+
+struct ServerStats {
+  std::size_t connections = 0;
+  std::size_t streams = 0;
+  std::uint64_t frames_computed = 0;  // forward-kinematics runs for streams
+  std::uint64_t frames_encoded = 0;   // shared encodings
+  std::uint64_t udp_rejected = 0;     // datagrams that were not a valid registration
+  std::uint64_t connections_refused = 0;
+  std::vector<SessionStats> sessions;
+};
+
+class Server {
+ public:
+  Server(ServerConfig config, std::vector<LibraryEntry> library);
+  ~Server();  // stop() and join
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // Binds the TCP and UDP ports and starts the I/O thread. Throws
+  // std::runtime_error naming the address when a port cannot be bound.
+  void start();
+  std::uint16_t tcp_port() const;
+  std::uint16_t udp_port() const;
+
+  // Graceful stop: stops accepting, ends every stream, lets replies drain for
+  // up to config.shutdown_grace, closes every connection, joins the I/O
+  // thread. Idempotent; call from any thread but the I/O thread.
+  void stop();
+  // Blocks until the server has stopped.
+  void wait();
+
+  // A snapshot taken on the I/O thread.
+  ServerStats stats() const;
+
+  struct Impl;
+
+ private:
+  std::shared_ptr<Impl> impl_;
+};
+
+}  // namespace gmr::server

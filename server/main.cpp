@@ -1,0 +1,109 @@
+// gmr-server: serves a motion library over TCP and UDP (docs/protocol.md).
+//
+//   gmr-server [--library DIR] [--port P] [--udp-port U] [--bind ADDR] [limits...]
+//
+// Startup failures (a bad flag, a port in use, an unreadable library folder)
+// exit 1 with one line on stderr. SIGINT/SIGTERM stop gracefully, exit 0.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <chrono>
+#include <cstdio>
+#include <exception>
+
+#include "gmr/io/file_util.h"
+#include "gmr/server/library.h"
+#include "gmr/server/server.h"
+
+int main(int argc, char** argv) {
+  using namespace gmr::server;
+  CLI::App app{"gmr-server: streams GMR motions over TCP and UDP"};
+  ServerConfig cfg;
+  std::string library_dir;
+  std::string log_level = "info";
+  std::string port_file;
+  unsigned threads = 0;
+  long long idle_ms = cfg.idle_timeout.count();
+  long long heartbeat_ms = cfg.heartbeat_interval.count();
+  long long write_ms = cfg.write_timeout.count();
+  app.add_option("--library", library_dir, "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library)");
+  app.add_option("--port", cfg.port, "TCP port (0: any free port)")->capture_default_str();
+  app.add_option("--udp-port", cfg.udp_port, "UDP port (default: the TCP port number; 0: any free port)");
+  app.add_option("--bind", cfg.bind_address, "Address to listen on (loopback unless told otherwise)")->capture_default_str();
+  app.add_option("--max-message-bytes", cfg.max_message_bytes, "Largest message either way")->capture_default_str();
+  app.add_option("--max-connections", cfg.max_connections, "Connections served at once")->capture_default_str();
+  app.add_option("--max-views", cfg.max_views_per_connection, "Views per connection")->capture_default_str();
+  app.add_option("--max-subscriptions", cfg.max_subscriptions_per_connection, "Subscriptions per connection")
+      ->capture_default_str();
+  app.add_option("--idle-timeout-ms", idle_ms, "Close a connection silent for this long")->capture_default_str();
+  app.add_option("--heartbeat-ms", heartbeat_ms, "Send a heartbeat after this long without writing")->capture_default_str();
+  app.add_option("--write-timeout-ms", write_ms, "Close a connection whose write stalls this long")->capture_default_str();
+  app.add_option("--load-threads", threads, "Threads loading the library (0: one per core)");
+  app.add_option("--port-file", port_file, "Write the TCP port here once listening (for scripts using --port 0)");
+  app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  spdlog::set_level(spdlog::level::from_str(log_level));
+  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e %^%l%$ %v");
+  if (idle_ms <= 0 || heartbeat_ms <= 0 || write_ms <= 0) {
+    std::fprintf(stderr, "gmr-server: timeouts must be positive\n");
+    return 1;
+  }
+  if (cfg.max_message_bytes < 4096 || cfg.max_connections == 0 || cfg.max_views_per_connection == 0 ||
+      cfg.max_subscriptions_per_connection == 0) {
+    std::fprintf(stderr, "gmr-server: --max-message-bytes must be at least 4096 and the other limits at least 1\n");
+    return 1;
+  }
+  cfg.idle_timeout = std::chrono::milliseconds(idle_ms);
+  cfg.heartbeat_interval = std::chrono::milliseconds(heartbeat_ms);
+  cfg.write_timeout = std::chrono::milliseconds(write_ms);
+
+  try {
+    std::vector<LibraryEntry> library;
+    if (library_dir.empty()) {
+      library = builtin_library();
+      spdlog::info("built-in demo library: {} motions", library.size());
+    } else {
+      spdlog::info("loading {}", library_dir);
+      auto loaded = load_library(library_dir, threads, [](std::size_t done, std::size_t total,
+                                                          const std::filesystem::path& file, const std::string* why) {
+        // Rejections are listed once, sorted, when loading is done.
+        if (!why) spdlog::debug("loaded {}", file.string());
+        if (done == total || done % 10 == 0) spdlog::info("loading: {}/{} files", done, total);
+      });
+      if (!loaded.ok()) {
+        std::fprintf(stderr, "gmr-server: %s\n", loaded.error().to_string().c_str());
+        return 1;
+      }
+      for (const auto& r : loaded->rejected) spdlog::warn("rejected {}: {}", r.path.string(), r.reason);
+      spdlog::info("library: {} motions loaded, {} files rejected, {} other files skipped", loaded->entries.size(),
+                   loaded->rejected.size(), loaded->skipped);
+      library = std::move(loaded->entries);
+    }
+    Server server(cfg, std::move(library));
+    server.start();
+    if (!port_file.empty()) {
+      if (auto s = gmr::write_file_atomic(port_file, std::to_string(server.tcp_port()) + "\n"); !s.ok()) {
+        throw std::runtime_error(s.error().to_string());
+      }
+    }
+    // The main thread waits for a signal; the server runs on its own thread.
+    boost::asio::io_context signals_io;
+    boost::asio::signal_set signals(signals_io, SIGINT, SIGTERM);
+    signals.async_wait([&](const boost::system::error_code& ec, int sig) {
+      if (!ec) spdlog::info("signal {}: stopping", sig);
+    });
+    signals_io.run();
+    server.stop();
+    spdlog::info("stopped");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "gmr-server: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

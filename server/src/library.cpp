@@ -1,0 +1,137 @@
+#include "gmr/server/library.h"
+
+#include <algorithm>
+#include <atomic>
+#include <mutex>
+#include <system_error>
+#include <thread>
+
+#include "gmr/convert/convert.h"
+#include "gmr/demo/demo_library.h"
+#include "gmr/io/motion_file.h"
+
+namespace gmr::server {
+namespace fs = std::filesystem;
+namespace {
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return s;
+}
+
+struct Job {
+  fs::path path;
+  LoadOptions options;
+  std::string name;
+};
+
+// The .asf for an .amc: the only one in its folder, else the one whose stem
+// starts the .amc's stem ("07-walk.asf" for "07_05-walk.amc" via "07").
+Result<fs::path> asf_for(const fs::path& amc) {
+  std::vector<fs::path> asfs;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(amc.parent_path(), ec)) {
+    if (e.is_regular_file(ec) && lower(e.path().extension().string()) == ".asf") asfs.push_back(e.path());
+  }
+  if (asfs.size() == 1) return asfs[0];
+  const std::string stem = amc.stem().string();
+  const std::string subject = stem.substr(0, stem.find_first_of("_-"));
+  std::vector<fs::path> match;
+  for (const auto& a : asfs) {
+    const std::string s = a.stem().string();
+    if (s.substr(0, s.find_first_of("_-")) == subject) match.push_back(a);
+  }
+  if (match.size() == 1) return match[0];
+  return Error{amc.string(), 0, 0,
+               asfs.empty() ? "no .asf skeleton in the folder of this .amc"
+                            : "cannot tell which .asf of the folder this .amc uses (" + std::to_string(asfs.size()) +
+                                  " candidates)"};
+}
+
+Result<LibraryEntry> load_one(const Job& job) {
+  auto loaded = load_motion(job.path, job.options);
+  if (!loaded.ok()) return loaded.error();
+  auto pre = to_pre_rotation(*loaded);
+  if (!pre.ok()) return pre.error();
+  if (auto s = pre->validate(); !s.ok()) return s.error();
+  if (pre->frame_count == 0) return Error{job.path.string(), 0, 0, "the motion has no frames"};
+  if (!(pre->frame_time > 0.0)) return Error{job.path.string(), 0, 0, "the motion has no frame time"};
+  return LibraryEntry{job.name, job.path.string(), std::make_shared<const Motion>(std::move(pre).value())};
+}
+
+}  // namespace
+
+Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const LoadProgress& progress) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return Error{dir.string(), 0, 0, "not a readable folder"};
+
+  LibraryLoad out;
+  std::vector<Job> jobs;
+  std::vector<fs::path> files;
+  for (auto it = fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied, ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (it->is_regular_file(ec)) files.push_back(it->path());
+  }
+  if (ec) return Error{dir.string(), 0, 0, "cannot list the folder: " + ec.message()};
+  std::sort(files.begin(), files.end());
+  for (const auto& f : files) {
+    const std::string ext = lower(f.extension().string());
+    Job job{f, {}, fs::relative(f, dir, ec).replace_extension().generic_string()};
+    if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb") {
+      jobs.push_back(std::move(job));
+    } else if (ext == ".amc") {
+      auto asf = asf_for(f);
+      if (!asf.ok()) {
+        out.rejected.push_back({f, asf.error().to_string()});
+        continue;
+      }
+      job.options.asf = *asf;
+      jobs.push_back(std::move(job));
+    } else {
+      ++out.skipped;
+    }
+  }
+
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  threads = std::min<unsigned>(threads, static_cast<unsigned>(std::max<std::size_t>(1, jobs.size())));
+  std::vector<std::optional<Result<LibraryEntry>>> results(jobs.size());
+  std::atomic<std::size_t> next{0};
+  std::size_t done = 0;
+  std::mutex mutex;
+  auto worker = [&] {
+    for (std::size_t i; (i = next.fetch_add(1)) < jobs.size();) {
+      results[i] = load_one(jobs[i]);
+      std::lock_guard lock(mutex);
+      ++done;
+      if (progress) {
+        const std::string reason = results[i]->ok() ? std::string() : results[i]->error().to_string();
+        progress(done, jobs.size(), jobs[i].path, results[i]->ok() ? nullptr : &reason);
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+
+  for (std::size_t i = 0; i < jobs.size(); ++i) {
+    if (results[i]->ok()) {
+      out.entries.push_back(std::move(*results[i]).value());
+    } else {
+      out.rejected.push_back({jobs[i].path, results[i]->error().to_string()});
+    }
+  }
+  std::sort(out.entries.begin(), out.entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
+  std::sort(out.rejected.begin(), out.rejected.end(), [](const auto& a, const auto& b) { return a.path < b.path; });
+  return out;
+}
+
+std::vector<LibraryEntry> builtin_library() {
+  std::vector<LibraryEntry> out;
+  for (auto& m : demo_library()) {
+    out.push_back({m.name, "builtin", std::make_shared<const Motion>(std::move(m.motion))});
+  }
+  return out;
+}
+
+}  // namespace gmr::server

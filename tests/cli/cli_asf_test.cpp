@@ -1,0 +1,135 @@
+// ASF/AMC through the `gmr` command: info, positions and convert with --asf,
+// and the one-line error for broken files.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <Eigen/Core>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "gmr/io/asf_amc.h"
+#include "gmr/io/file_util.h"
+#include "gmr/kinematics/forward_kinematics.h"
+#include "test_data.h"
+
+namespace gmr {
+namespace {
+namespace fs = std::filesystem;
+
+struct Outcome {
+  int status = -1;
+  std::string out;
+  std::string err;
+};
+
+std::string sh_quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+class CliAsf : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("gmr_cli_asf_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  Outcome gmr(const std::string& args) {
+    const fs::path out = dir_ / "stdout", err = dir_ / "stderr";
+    const std::string cmd =
+        sh_quote(GMR_CLI_PATH) + " " + args + " >" + sh_quote(out.string()) + " 2>" + sh_quote(err.string());
+    const int raw = std::system(cmd.c_str());
+    Outcome r;
+    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+    r.out = read_file(out).value();
+    r.err = read_file(err).value();
+    return r;
+  }
+  fs::path dir_;
+};
+
+// Positions of a `gmr positions` CSV, in row order.
+std::vector<Eigen::Vector3d> csv_positions(const std::string& csv) {
+  std::vector<Eigen::Vector3d> out;
+  std::istringstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  while (std::getline(in, line)) {
+    const auto c2 = line.find(',', line.find(',') + 1);
+    Eigen::Vector3d p;
+    if (std::sscanf(line.c_str() + c2 + 1, "%lf,%lf,%lf", &p.x(), &p.y(), &p.z()) == 3) out.push_back(p);
+  }
+  return out;
+}
+
+const std::string kAsf = "asfamc/09/09-run.asf";
+const std::string kAmc = "asfamc/09/09_06-run.amc";
+
+TEST_F(CliAsf, InfoAndPositions) {
+  GMR_REQUIRE_DATA();
+  const std::string args = sh_quote(test::data_file(kAmc).string()) + " --asf " + sh_quote(test::data_file(kAsf).string());
+  const Outcome info = gmr("info " + args);
+  ASSERT_EQ(info.status, 0) << info.err;
+  EXPECT_NE(info.out.find("141"), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("lfemur"), std::string::npos);
+
+  const Outcome pos = gmr("positions " + args);
+  ASSERT_EQ(pos.status, 0) << pos.err;
+  EXPECT_EQ(pos.out.rfind("frame,joint,x,y,z\n0,root,", 0), 0u);
+  // Exactly the library's positions (the CSV holds shortest round-trip numbers).
+  auto g = read_asf_amc(test::data_file(kAsf), test::data_file(kAmc));
+  ASSERT_TRUE(g.ok());
+  const auto expect = compute_positions(*g);
+  const auto got = csv_positions(pos.out);
+  ASSERT_EQ(got.size(), expect.size());
+  for (std::size_t i = 0; i < got.size(); ++i) ASSERT_EQ(got[i], expect[i]) << "row " << i;
+}
+
+TEST_F(CliAsf, ConvertToGmrAndToAmc) {
+  GMR_REQUIRE_DATA();
+  const std::string in = sh_quote(test::data_file(kAmc).string()) + " --asf " + sh_quote(test::data_file(kAsf).string());
+  const std::string gmr_out = (dir_ / "run.gmr").string();
+  const std::string amc_out = (dir_ / "run.amc").string();
+  ASSERT_EQ(gmr("convert " + in + " " + sh_quote(gmr_out)).status, 0);
+  const Outcome to_amc = gmr("convert " + in + " " + sh_quote(amc_out));
+  ASSERT_EQ(to_amc.status, 0) << to_amc.err;
+  EXPECT_TRUE(fs::exists(dir_ / "run.asf"));  // the skeleton goes beside the motion
+
+  const auto ref = csv_positions(gmr("positions " + in).out);
+  const auto from_gmr = csv_positions(gmr("positions " + sh_quote(gmr_out)).out);
+  const auto from_amc =
+      csv_positions(gmr("positions " + sh_quote(amc_out) + " --asf " + sh_quote((dir_ / "run.asf").string())).out);
+  ASSERT_EQ(from_gmr.size(), ref.size());
+  ASSERT_EQ(from_amc.size(), ref.size());
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    ASSERT_EQ(from_gmr[i], ref[i]) << "row " << i;
+    ASSERT_LE((from_amc[i] - ref[i]).norm(), 1e-9 * 30.0) << "row " << i;
+  }
+}
+
+TEST_F(CliAsf, BrokenFilesGiveOneLocatedLine) {
+  GMR_REQUIRE_DATA();
+  const std::string amc = test::data_file("malformed/TRUNC_07_05-walk_mid_frame.amc").string();
+  const std::string asf = test::data_file("asfamc/07/07-walk.asf").string();
+  const std::string bad_asf = test::data_file("malformed/TRUNC_07-walk_in_bonedata.asf").string();
+  const Outcome a = gmr("info " + sh_quote(amc) + " --asf " + sh_quote(asf));
+  EXPECT_EQ(a.status, 1);
+  EXPECT_EQ(a.err, "gmr: " + amc + ":2345:26: expected 6 values for bone 'root' (order TX TY TZ RX RY RZ), found 3\n");
+  const Outcome b = gmr("positions " + sh_quote(amc) + " --asf " + sh_quote(bad_asf));
+  EXPECT_EQ(b.status, 1);
+  EXPECT_EQ(b.err, "gmr: " + bad_asf + ":147:12: expected 1 number after 'length', found 0\n");
+  EXPECT_TRUE(b.out.empty());
+}
+
+}  // namespace
+}  // namespace gmr

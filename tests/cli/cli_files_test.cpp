@@ -1,0 +1,184 @@
+// The file commands of the `gmr` binary: info, convert, positions.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <Eigen/Core>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <sstream>
+#include <filesystem>
+#include <string>
+
+#include "gmr/io/file_util.h"
+#include "test_data.h"
+
+namespace gmr {
+namespace {
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::StartsWith;
+
+struct Outcome {
+  int status = -1;
+  std::string out;
+  std::string err;
+};
+
+std::string quoted(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+class CliFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("gmr_cli_test_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // Runs `gmr ARGS`, capturing stdout, stderr and the exit status.
+  Outcome gmr(const std::string& args) {
+    const fs::path out = dir_ / "stdout", err = dir_ / "stderr";
+    const std::string cmd = quoted(GMR_CLI_PATH) + " " + args + " >" + quoted(out.string()) + " 2>" + quoted(err.string());
+    const int raw = std::system(cmd.c_str());
+    Outcome r;
+    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+    r.out = read_file(out).value();
+    r.err = read_file(err).value();
+    return r;
+  }
+  fs::path dir_;
+};
+
+// "frame,joint" -> position, from `gmr positions` output (names without quotes).
+std::map<std::string, Eigen::Vector3d> parse_csv(const std::string& csv) {
+  std::map<std::string, Eigen::Vector3d> out;
+  std::istringstream in(csv);
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    const auto c2 = line.find(',', line.find(',') + 1);
+    Eigen::Vector3d p;
+    std::sscanf(line.c_str() + c2 + 1, "%lf,%lf,%lf", &p.x(), &p.y(), &p.z());
+    out[line.substr(0, c2)] = p;
+  }
+  return out;
+}
+
+std::size_t lines(const std::string& s) { return static_cast<std::size_t>(std::count(s.begin(), s.end(), '\n')); }
+
+TEST_F(CliFiles, PositionsOfARealFile) {
+  GMR_REQUIRE_DATA();
+  const std::string file = quoted(test::data_file("bvh/cmu/02_01.bvh").string());
+  const Outcome all = gmr("positions " + file);
+  ASSERT_EQ(all.status, 0) << all.err;
+  EXPECT_THAT(all.out, StartsWith("frame,joint,x,y,z\n0,Hips,10.4194,16.7048,-30.1003\n"));
+  EXPECT_EQ(lines(all.out), 1 + 344u * 38u);  // every frame x (31 joints + 7 End Sites)
+  EXPECT_TRUE(all.err.empty()) << all.err;
+
+  const Outcome some = gmr("positions " + file + " --frames 10:20");
+  ASSERT_EQ(some.status, 0) << some.err;
+  EXPECT_EQ(lines(some.out), 1 + 10u * 38u);
+  EXPECT_THAT(some.out, StartsWith("frame,joint,x,y,z\n10,Hips,"));
+  EXPECT_NE(some.out.find("\n19,LeftToeBase_End,"), std::string::npos);
+  EXPECT_EQ(some.out.find("\n20,"), std::string::npos);
+
+  const Outcome tail = gmr("positions " + file + " --frames 340:");
+  EXPECT_EQ(lines(tail.out), 1 + 4u * 38u);
+}
+
+TEST_F(CliFiles, MalformedFileGivesOneLineWithTheLocation) {
+  GMR_REQUIRE_DATA();
+  const std::string path = test::data_file("malformed/TRUNC_02_01_mid_frame.bvh").string();
+  for (const char* cmd : {"positions", "info"}) {
+    const Outcome r = gmr(std::string(cmd) + " " + quoted(path));
+    EXPECT_EQ(r.status, 1) << cmd;
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    EXPECT_THAT(r.err, StartsWith("gmr: " + path + ":317:375: file ends in frame 129")) << r.err;
+    EXPECT_TRUE(r.out.empty() || std::string(cmd) == "info");
+  }
+  const Outcome fused = gmr("info " + quoted(test::data_file("malformed/TRUNC_02_01_in_hierarchy.bvh").string()));
+  EXPECT_EQ(fused.status, 1);
+  EXPECT_EQ(lines(fused.err), 1u);
+  EXPECT_THAT(fused.err, HasSubstr("TRUNC_02_01_in_hierarchy.bvh:"));
+}
+
+TEST_F(CliFiles, WarningsGoToStderrAndTheCommandSucceeds) {
+  GMR_REQUIRE_DATA();
+  const Outcome r = gmr("info " + quoted(test::data_file("malformed/Boxing_Toes_frames_off_by_one.bvh").string()));
+  EXPECT_EQ(r.status, 0);
+  EXPECT_THAT(r.out, HasSubstr("frames:      3070\n"));
+  EXPECT_THAT(r.err, HasSubstr("gmr: warning: "));
+  EXPECT_THAT(r.err, HasSubstr(":128:1: 'Frames: 3069' but the file holds 3070"));
+}
+
+TEST_F(CliFiles, Info) {
+  GMR_REQUIRE_DATA();
+  const Outcome r = gmr("info " + quoted(test::data_file("bvh/cmu/02_01.bvh").string()));
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("joints:      38"));
+  EXPECT_THAT(r.out, HasSubstr("roots:       1 (Hips)"));
+  EXPECT_THAT(r.out, HasSubstr("channels:    96 per frame"));
+  EXPECT_THAT(r.out, HasSubstr("frames:      344"));
+  EXPECT_THAT(r.out, HasSubstr("frame time:  0.0083333 s (120"));
+  EXPECT_THAT(r.out, HasSubstr("duration:    2.86666 s"));
+  EXPECT_THAT(r.out, HasSubstr("\n    LHipJoint  [Zrotation Yrotation Xrotation]\n"));
+}
+
+TEST_F(CliFiles, ConvertBvhToGmrAndBackKeepsPositions) {
+  GMR_REQUIRE_DATA();
+  const std::string src = quoted(test::data_file("bvh/cmu/02_01.bvh").string());
+  const std::string gmr_file = quoted((dir_ / "walk.gmr").string());
+  const std::string bvh_file = quoted((dir_ / "walk.bvh").string());
+  ASSERT_EQ(gmr("convert " + src + " " + gmr_file).status, 0);
+  ASSERT_EQ(gmr("convert " + gmr_file + " " + bvh_file).status, 0);
+  EXPECT_THAT(read_file(dir_ / "walk.gmr").value(), StartsWith("GMR 1\nHIERARCHY\n"));
+  const Outcome a = gmr("positions " + src + " --frames 0:50");
+  const Outcome b = gmr("positions " + gmr_file + " --frames 0:50");
+  const Outcome c = gmr("positions " + bvh_file + " --frames 0:50");
+  ASSERT_EQ(a.status, 0);
+  ASSERT_EQ(b.status, 0) << b.err;
+  ASSERT_EQ(c.status, 0) << c.err;
+  // Every row of the source is in both conversions with the same position
+  // (the conversions may add zero-length joints: extra rows are allowed).
+  EXPECT_EQ(lines(a.out), 1 + 50u * 38u);
+  const auto pa = parse_csv(a.out), pb = parse_csv(b.out), pc = parse_csv(c.out);
+  ASSERT_EQ(pa.size(), 50u * 38u);
+  for (const auto& [key, p] : pa) {
+    ASSERT_TRUE(pb.count(key)) << key;
+    ASSERT_TRUE(pc.count(key)) << key;
+    EXPECT_LE((pb.at(key) - p).norm(), 1e-9) << key;
+    EXPECT_LE((pc.at(key) - p).norm(), 1e-9) << key;
+  }
+}
+
+TEST_F(CliFiles, BadArgumentsFailWithOneLine) {
+  GMR_REQUIRE_DATA();
+  const std::string src = quoted(test::data_file("bvh/cmu/02_01.bvh").string());
+  const Outcome range = gmr("positions " + src + " --frames 5");
+  EXPECT_EQ(range.status, 1);
+  EXPECT_EQ(lines(range.err), 1u);
+  EXPECT_THAT(range.err, HasSubstr("expected A:B"));
+  const Outcome past = gmr("positions " + src + " --frames 400:");
+  EXPECT_EQ(past.status, 1);
+  EXPECT_THAT(past.err, HasSubstr("past the last frame"));
+  const Outcome ext = gmr("convert " + src + " " + quoted((dir_ / "out.xyz").string()));
+  EXPECT_EQ(ext.status, 1);
+  EXPECT_EQ(lines(ext.err), 1u);
+  EXPECT_THAT(ext.err, HasSubstr("cannot write '.xyz' files"));
+  EXPECT_FALSE(fs::exists(dir_ / "out.xyz"));
+  const Outcome missing = gmr("info " + quoted((dir_ / "nope.bvh").string()));
+  EXPECT_EQ(missing.status, 1);
+  EXPECT_THAT(missing.err, HasSubstr("nope.bvh: cannot open file"));
+}
+
+}  // namespace
+}  // namespace gmr

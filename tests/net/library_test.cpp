@@ -1,0 +1,66 @@
+// Loading a library folder: every good file becomes a motion, every bad one
+// is reported with its reason, and loading does not stop at the first.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+#include "gmr/server/library.h"
+#include "test_data.h"
+
+namespace gmr::test {
+namespace {
+
+TEST(Library, LoadsTheSharedDataAndReportsRejectedFiles) {
+  GMR_REQUIRE_DATA();
+  std::size_t progress_calls = 0;
+  auto lib = server::load_library(data_dir(), 2, [&](std::size_t done, std::size_t total, const auto&, const auto*) {
+    ++progress_calls;
+    EXPECT_LE(done, total);
+  });
+  ASSERT_TRUE(lib.ok()) << lib.error().to_string();
+  // BVH, AMC (with their ASF) load; C3D, TRC and text are skipped.
+  EXPECT_GE(lib->entries.size(), 40u);
+  EXPECT_GT(lib->skipped, 0u);
+  auto has = [&](const std::string& name) {
+    return std::any_of(lib->entries.begin(), lib->entries.end(), [&](const auto& e) { return e.name == name; });
+  };
+  EXPECT_TRUE(has("bvh/cmu/02_01"));
+  EXPECT_TRUE(has("asfamc/07/07_05-walk"));
+  for (const auto& e : lib->entries) {
+    EXPECT_EQ(e.motion->convention, Convention::kPreRotation) << e.name;
+    EXPECT_GT(e.motion->frame_count, 0u) << e.name;
+  }
+  // The truncated files are rejected, each with a located reason.
+  auto rejected = [&](const std::string& file) {
+    const auto it = std::find_if(lib->rejected.begin(), lib->rejected.end(),
+                                 [&](const auto& r) { return r.path.filename() == file; });
+    return it == lib->rejected.end() ? std::string() : it->reason;
+  };
+  for (const char* f : {"TRUNC_02_01_in_hierarchy.bvh", "TRUNC_02_01_mid_frame.bvh", "TRUNC_02_01_no_motion_lines.bvh"}) {
+    const std::string why = rejected(f);
+    EXPECT_FALSE(why.empty()) << f << " was not rejected";
+    EXPECT_NE(why.find(f), std::string::npos) << why;
+  }
+  // One progress call per file read (an .amc without a usable .asf is rejected before reading).
+  EXPECT_GE(progress_calls, lib->entries.size());
+  EXPECT_LE(progress_calls, lib->entries.size() + lib->rejected.size());
+}
+
+TEST(Library, AMissingFolderIsAnError) {
+  auto lib = server::load_library("/nonexistent/gmr/library");
+  ASSERT_FALSE(lib.ok());
+  EXPECT_NE(lib.error().to_string().find("/nonexistent/gmr/library"), std::string::npos);
+}
+
+TEST(Library, BuiltinLibraryIsPreRotationAndNamed) {
+  const auto lib = server::builtin_library();
+  ASSERT_FALSE(lib.empty());
+  for (const auto& e : lib) {
+    EXPECT_FALSE(e.name.empty());
+    EXPECT_EQ(e.source, "builtin");
+    EXPECT_EQ(e.motion->convention, Convention::kPreRotation);
+  }
+}
+
+}  // namespace
+}  // namespace gmr::test

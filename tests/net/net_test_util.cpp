@@ -1,0 +1,157 @@
+#include "net_test_util.h"
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <cerrno>
+#include <cstring>
+
+#include "gmr/convert/convert.h"
+#include "gmr/io/motion_file.h"
+#include "gmr/wire/framing.h"
+#include "test_data.h"
+
+namespace gmr::test {
+
+std::filesystem::path cmu_file() { return data_file("bvh/cmu/02_01.bvh"); }
+
+std::vector<server::LibraryEntry> test_library() {
+  auto lib = server::builtin_library();
+  if (have_data()) {
+    auto m = load_motion(cmu_file());
+    if (m.ok()) {
+      auto pre = to_pre_rotation(*m);
+      if (pre.ok()) {
+        lib.push_back({"cmu/02_01", cmu_file().string(), std::make_shared<const Motion>(std::move(pre).value())});
+      }
+    }
+  }
+  return lib;
+}
+
+TestServer::TestServer(server::ServerConfig cfg, std::vector<server::LibraryEntry> library)
+    : server((cfg.port = 0, cfg.udp_port = 0, cfg.bind_address = "127.0.0.1", cfg), std::move(library)) {
+  // Warnings and errors only: the tests provoke many closed connections.
+  spdlog::set_level(spdlog::level::warn);
+  server.start();
+}
+
+std::unique_ptr<client::Client> TestServer::connect(client::ClientOptions o) {
+  o.host = "127.0.0.1";
+  o.port = port();
+  auto c = client::Client::connect(o);
+  EXPECT_TRUE(c.ok()) << c.error().to_string();
+  if (!c.ok()) return nullptr;
+  return std::move(c).value();
+}
+
+RawConnection::RawConnection(std::uint16_t port, int receive_buffer) {
+  fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (receive_buffer > 0) ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &receive_buffer, sizeof receive_buffer);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(port);
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+    ADD_FAILURE() << "connect: " << std::strerror(errno);
+    closed_ = true;
+  }
+}
+
+RawConnection::~RawConnection() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void RawConnection::send_bytes(const std::string& bytes) {
+  std::size_t sent = 0;
+  while (sent < bytes.size()) {
+    const ssize_t n = ::send(fd_, bytes.data() + sent, bytes.size() - sent, MSG_NOSIGNAL);
+    if (n <= 0) return;  // the server may have closed already; tests check that separately
+    sent += static_cast<std::size_t>(n);
+  }
+}
+
+void RawConnection::send(const pb::ClientMessage& m) { send_bytes(wire::frame_message(m).value()); }
+
+void RawConnection::shutdown_send() { ::shutdown(fd_, SHUT_WR); }
+
+bool RawConnection::read_exact(char* out, std::size_t n, std::chrono::steady_clock::time_point deadline) {
+  std::size_t got = 0;
+  while (got < n) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return false;
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return false;
+    const ssize_t r = ::recv(fd_, out + got, n - got, 0);
+    if (r <= 0) {
+      closed_ = true;
+      return false;
+    }
+    got += static_cast<std::size_t>(r);
+  }
+  return true;
+}
+
+std::optional<pb::ServerMessage> RawConnection::receive(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  char prefix[4];
+  if (!read_exact(prefix, 4, deadline)) return std::nullopt;
+  const auto n = wire::read_length_prefix(std::span<const std::uint8_t, 4>(reinterpret_cast<std::uint8_t*>(prefix), 4));
+  if (n > (64u << 20)) return std::nullopt;
+  std::string body(n, '\0');
+  if (!read_exact(body.data(), n, deadline)) return std::nullopt;
+  pb::ServerMessage m;
+  if (!m.ParseFromString(body)) return std::nullopt;
+  return m;
+}
+
+std::optional<pb::ServerMessage> RawConnection::reply(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return std::nullopt;
+    auto m = receive(left);
+    if (!m) return m;
+    if (m->has_frame() || m->has_heartbeat()) continue;
+    return m;
+  }
+}
+
+bool RawConnection::wait_closed(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  char buf[4096];
+  while (!closed_) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return false;
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return false;
+    const ssize_t r = ::recv(fd_, buf, sizeof buf, 0);
+    if (r <= 0) closed_ = true;
+  }
+  return true;
+}
+
+pb::HelloReply RawConnection::handshake() {
+  pb::ClientMessage m;
+  m.set_request_id(1);
+  m.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+  m.mutable_hello()->set_client_name("raw-test");
+  send(m);
+  auto r = reply();
+  EXPECT_TRUE(r && r->has_hello());
+  return r && r->has_hello() ? r->hello() : pb::HelloReply{};
+}
+
+pb::ClientMessage request(std::uint64_t id) {
+  pb::ClientMessage m;
+  m.set_request_id(id);
+  return m;
+}
+
+}  // namespace gmr::test

@@ -1,0 +1,89 @@
+// Loopback helpers for the server tests: an in-process server on 127.0.0.1
+// port 0, a raw TCP connection that speaks bytes (for bad input), and a
+// bounded wait. Nothing here sleeps; every wait has a deadline.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "gmr/client/client.h"
+#include "gmr/server/server.h"
+#include "gmr/stream/v1/stream.pb.h"
+
+namespace gmr::test {
+
+namespace pb = ::gmr::stream::v1;
+
+// The demo library plus, when the corpus is there, cmu/02_01.bvh as "cmu/02_01".
+std::vector<server::LibraryEntry> test_library();
+// The BVH behind "cmu/02_01".
+std::filesystem::path cmu_file();
+
+// A server started on a free loopback port (TCP and UDP).
+struct TestServer {
+  explicit TestServer(server::ServerConfig cfg = {}, std::vector<server::LibraryEntry> library = test_library());
+  server::Server server;
+  std::uint16_t port() const { return server.tcp_port(); }
+  std::unique_ptr<client::Client> connect(client::ClientOptions o = {});
+};
+
+// A blocking TCP connection with deadlines, for sending malformed bytes.
+class RawConnection {
+ public:
+  explicit RawConnection(std::uint16_t port, int receive_buffer = 0);
+  ~RawConnection();
+  void send_bytes(const std::string& bytes);
+  void send(const pb::ClientMessage& m);
+  // The next server message, or nothing when the connection closed or the
+  // deadline passed (closed() tells which).
+  std::optional<pb::ServerMessage> receive(std::chrono::milliseconds timeout = std::chrono::seconds(5));
+  // Next non-push reply (skips frames, heartbeats).
+  std::optional<pb::ServerMessage> reply(std::chrono::milliseconds timeout = std::chrono::seconds(5));
+  // True once the server closed the connection (read returned 0 or reset).
+  bool wait_closed(std::chrono::milliseconds timeout = std::chrono::seconds(5));
+  bool closed() const { return closed_; }
+  void shutdown_send();
+  // Hello + reply; returns the reply.
+  pb::HelloReply handshake();
+
+ private:
+  bool read_exact(char* out, std::size_t n, std::chrono::steady_clock::time_point deadline);
+  int fd_ = -1;
+  bool closed_ = false;
+};
+
+// A value that another thread sets; wait() has a deadline.
+template <class T>
+class Latch {
+ public:
+  void set(T v) {
+    std::lock_guard lock(m_);
+    if (!value_) value_ = std::move(v);
+    cv_.notify_all();
+  }
+  void reset() {
+    std::lock_guard lock(m_);
+    value_.reset();
+  }
+  std::optional<T> wait(std::chrono::milliseconds timeout = std::chrono::seconds(20)) {
+    std::unique_lock lock(m_);
+    cv_.wait_for(lock, timeout, [&] { return value_.has_value(); });
+    return value_;
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::optional<T> value_;
+};
+
+pb::ClientMessage request(std::uint64_t id);
+
+}  // namespace gmr::test

@@ -1,0 +1,297 @@
+// Positions a client receives (query replies, TCP streams, UDP streams) equal
+// what `gmr positions` computes for the same file and view options: for world
+// coordinates, shifted, split and joined roots, set roots, stripped dummies
+// and the intrinsic viewpoint. Every frame of each motion is checked.
+#include <gtest/gtest.h>
+
+#include <functional>
+#include <mutex>
+
+#include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/ops/view.h"
+#include "net_test_util.h"
+#include "test_data.h"
+
+namespace gmr::test {
+namespace {
+
+using client::Client;
+using client::ReceivedFrame;
+using client::ViewState;
+
+// Picks the joints the cases operate on from the skeleton's shape.
+struct Picks {
+  std::string root, leaf, mid, viewer;
+};
+Picks pick(const Skeleton& s) {
+  Picks p;
+  p.root = s.joint(s.roots()[0]).name;
+  int leaf = 0, mid = -1, head = -1;
+  for (int j = 0; j < static_cast<int>(s.size()); ++j) {
+    if (s.depth(j) > s.depth(leaf)) leaf = j;
+    if (mid < 0 && s.depth(j) == 2 && !s.children(j).empty()) mid = j;
+    if (head < 0 && (s.joint(j).name == "head" || s.joint(j).name == "Head")) head = j;
+  }
+  p.leaf = s.joint(leaf).name;
+  p.mid = s.joint(mid).name;
+  p.viewer = s.joint(head >= 0 ? head : s.joint(leaf).parent).name;
+  return p;
+}
+
+struct Case {
+  std::string label;
+  // Applies the case to a server view; returns the view's new state.
+  std::function<Result<ViewState>(Client&, std::uint32_t, const Picks&)> apply;
+  // The same options for `gmr positions`.
+  std::function<ViewSpec(const Picks&)> spec;
+};
+
+std::vector<Case> cases() {
+  return {
+      {"world", [](Client& c, std::uint32_t v, const Picks&) { return c.set_coordinates(v, ""); },
+       [](const Picks&) { return ViewSpec{}; }},
+      {"shift_root_to_leaf", [](Client& c, std::uint32_t v, const Picks& p) { return c.shift_root(v, p.leaf); },
+       [](const Picks& p) { return ViewSpec{{p.leaf}, false, ""}; }},
+      {"split", [](Client& c, std::uint32_t v, const Picks& p) { return c.split(v, p.mid); },
+       [](const Picks& p) { return ViewSpec{{p.root, p.mid}, false, ""}; }},
+      {"split_then_join",
+       [](Client& c, std::uint32_t v, const Picks& p) -> Result<ViewState> {
+         auto s = c.split(v, p.mid);
+         if (!s.ok()) return s;
+         return c.join(v, p.mid);
+       },
+       [](const Picks&) { return ViewSpec{}; }},
+      {"set_roots", [](Client& c, std::uint32_t v, const Picks& p) { return c.set_roots(v, {p.leaf, p.mid}); },
+       [](const Picks& p) { return ViewSpec{{p.leaf, p.mid}, false, ""}; }},
+      {"strip_dummies", [](Client& c, std::uint32_t v, const Picks&) { return c.strip_dummies(v); },
+       [](const Picks&) { return ViewSpec{{}, true, ""}; }},
+      {"intrinsic", [](Client& c, std::uint32_t v, const Picks& p) { return c.set_coordinates(v, p.viewer); },
+       [](const Picks& p) { return ViewSpec{{}, false, p.viewer}; }},
+      {"shifted_and_intrinsic",
+       [](Client& c, std::uint32_t v, const Picks& p) -> Result<ViewState> {
+         auto s = c.shift_root(v, p.leaf);
+         if (!s.ok()) return s;
+         return c.set_coordinates(v, p.viewer);
+       },
+       [](const Picks& p) { return ViewSpec{{p.leaf}, false, p.viewer}; }},
+  };
+}
+
+// `gmr positions` for the spec: rows in the source's joint order.
+struct Reference {
+  std::vector<std::string> names;
+  std::vector<Eigen::Vector3d> positions;  // frame-major
+  Skeleton skeleton;                       // names only, for EXPECT_POSITIONS_NEAR
+  double size = 1.0;
+};
+Reference reference(const Motion& source, const ViewSpec& spec) {
+  auto v = apply_view(source, spec);
+  EXPECT_TRUE(v.ok()) << v.error().to_string();
+  Reference r;
+  if (!v.ok()) return r;
+  r.skeleton = view_names(*v);
+  for (const auto& j : r.skeleton.joints()) r.names.push_back(j.name);
+  r.positions = view_positions(*v, 0, v->motion.frame_count);
+  r.size = skeleton_size(source);
+  return r;
+}
+
+// Reorders per-view-joint values (joint indices `joints` of `view`) to the
+// reference's rows, by name.
+std::vector<Eigen::Vector3d> reorder(const Skeleton& view, const std::vector<int>& joints,
+                                     const std::vector<Eigen::Vector3d>& values, const Reference& ref) {
+  std::vector<int> column(ref.names.size(), -1);
+  for (std::size_t k = 0; k < joints.size(); ++k) {
+    const auto& name = view.joint(joints[k]).name;
+    for (std::size_t r = 0; r < ref.names.size(); ++r) {
+      if (ref.names[r] == name) column[r] = static_cast<int>(k);
+    }
+  }
+  std::vector<Eigen::Vector3d> out;
+  const std::size_t frames = joints.empty() ? 0 : values.size() / joints.size();
+  for (std::size_t f = 0; f < frames; ++f) {
+    for (std::size_t r = 0; r < ref.names.size(); ++r) {
+      EXPECT_GE(column[r], 0) << "joint " << ref.names[r] << " missing from the view";
+      out.push_back(column[r] >= 0 ? values[f * joints.size() + static_cast<std::size_t>(column[r])]
+                                   : Eigen::Vector3d::Constant(std::nan("")));
+    }
+  }
+  return out;
+}
+
+struct Collected {
+  std::mutex mutex;
+  std::vector<ReceivedFrame> frames;
+  Latch<pb::SubscriptionEnded> ended;
+};
+
+// Streams every frame of the view once, one frame per tick at `rate_hz`, and
+// returns the frames in arrival order.
+std::vector<ReceivedFrame> stream_all(Client& c, const ViewState& v, bool udp, bool float64, bool orientations,
+                                      double rate_hz = 2000.0) {
+  auto col = std::make_shared<Collected>();
+  client::SubscribeOptions o;
+  o.udp = udp;
+  o.float64 = float64;
+  o.orientations = orientations;
+  o.speed = rate_hz * v.frame_time;  // rate = speed / frame_time, one frame per tick
+  auto sub = c.subscribe(
+      v.id, o,
+      [col](const ReceivedFrame& f) {
+        std::lock_guard lock(col->mutex);
+        col->frames.push_back(f);
+      },
+      [col](const pb::SubscriptionEnded& e) { col->ended.set(e); });
+  EXPECT_TRUE(sub.ok()) << sub.error().to_string();
+  if (!sub.ok()) return {};
+  auto end = col->ended.wait();
+  EXPECT_TRUE(end.has_value()) << "the stream did not end";
+  if (end) {
+    EXPECT_EQ(end->reason(), "end of motion");
+  }
+  std::lock_guard lock(col->mutex);
+  return col->frames;
+}
+
+class ServerPositions : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override {
+    if (GetParam() != "walk") GMR_REQUIRE_DATA();
+    server_ = std::make_unique<TestServer>();
+    client_ = server_->connect();
+    ASSERT_NE(client_, nullptr);
+    for (const auto& e : test_library()) {
+      if (e.name == GetParam()) source_ = e.motion;
+    }
+    ASSERT_NE(source_, nullptr) << "no motion " << GetParam();
+  }
+  std::unique_ptr<TestServer> server_;
+  std::unique_ptr<Client> client_;
+  std::shared_ptr<const Motion> source_;
+};
+
+TEST_P(ServerPositions, QueryEqualsGmrPositionsForEveryView) {
+  const Picks p = pick(source_->skeleton);
+  for (const auto& c : cases()) {
+    SCOPED_TRACE(c.label);
+    auto v = client_->create_view(GetParam());
+    ASSERT_TRUE(v.ok()) << v.error().to_string();
+    auto applied = c.apply(*client_, v->id, p);
+    ASSERT_TRUE(applied.ok()) << applied.error().to_string();
+    const Reference ref = reference(*source_, c.spec(p));
+    auto q = client_->query(v->id, 0, static_cast<std::uint32_t>(source_->frame_count));
+    ASSERT_TRUE(q.ok()) << q.error().to_string();
+    EXPECT_EQ(q->skeleton_version, applied->skeleton_version);
+    const auto got = reorder(applied->skeleton, q->joints, q->positions, ref);
+    EXPECT_POSITIONS_NEAR(ref.skeleton, got, ref.positions, 1e-9 * ref.size);
+  }
+}
+
+TEST_P(ServerPositions, TcpStreamEqualsGmrPositionsForEveryView) {
+  const Picks p = pick(source_->skeleton);
+  for (const auto& c : cases()) {
+    SCOPED_TRACE(c.label);
+    auto v = client_->create_view(GetParam());
+    ASSERT_TRUE(v.ok());
+    auto applied = c.apply(*client_, v->id, p);
+    ASSERT_TRUE(applied.ok()) << applied.error().to_string();
+    const Reference ref = reference(*source_, c.spec(p));
+    const auto frames = stream_all(*client_, *applied, false, true, false);
+    ASSERT_EQ(frames.size(), source_->frame_count);
+    std::vector<Eigen::Vector3d> got;
+    std::vector<int> all(applied->skeleton.size());
+    for (std::size_t j = 0; j < all.size(); ++j) all[j] = static_cast<int>(j);
+    for (std::size_t f = 0; f < frames.size(); ++f) {
+      EXPECT_EQ(frames[f].frame_index, f);
+      EXPECT_EQ(frames[f].sequence, f);
+      EXPECT_EQ(frames[f].view_id, v->id);
+      EXPECT_EQ(frames[f].skeleton_version, applied->skeleton_version);
+      EXPECT_DOUBLE_EQ(frames[f].motion_time, static_cast<double>(f) * source_->frame_time);
+      EXPECT_FALSE(frames[f].udp);
+      EXPECT_GT(frames[f].server_send_time_ns, 0);
+      got.insert(got.end(), frames[f].positions.begin(), frames[f].positions.end());
+    }
+    EXPECT_POSITIONS_NEAR(ref.skeleton, reorder(applied->skeleton, all, got, ref), ref.positions, 1e-9 * ref.size);
+  }
+}
+
+TEST_P(ServerPositions, UdpStreamEqualsGmrPositionsWithFragmentedFrames) {
+  const Picks p = pick(source_->skeleton);
+  for (const auto& c : cases()) {
+    SCOPED_TRACE(c.label);
+    auto v = client_->create_view(GetParam());
+    ASSERT_TRUE(v.ok());
+    auto applied = c.apply(*client_, v->id, p);
+    ASSERT_TRUE(applied.ok()) << applied.error().to_string();
+    const Reference ref = reference(*source_, c.spec(p));
+    // float64 positions and orientations: more than one datagram per frame.
+    const auto frames = stream_all(*client_, *applied, true, true, true, 1000.0);
+    // UDP may lose datagrams even on loopback (a busy machine starves the
+    // receiving thread): every frame that arrives must be exact, most must
+    // arrive, and the server itself must have dropped none.
+    EXPECT_GE(frames.size() * 2, source_->frame_count);
+    std::vector<int> all(applied->skeleton.size());
+    for (std::size_t j = 0; j < all.size(); ++j) all[j] = static_cast<int>(j);
+    const std::size_t n = ref.names.size();
+    for (const auto& f : frames) {
+      ASSERT_TRUE(f.udp);
+      ASSERT_LT(f.frame_index, source_->frame_count);
+      EXPECT_EQ(f.orientations.size(), applied->skeleton.size());
+      const auto got = reorder(applied->skeleton, all, f.positions, ref);
+      const std::span<const Eigen::Vector3d> want(ref.positions.data() + f.frame_index * n, n);
+      EXPECT_POSITIONS_NEAR(ref.skeleton, got, std::vector<Eigen::Vector3d>(want.begin(), want.end()),
+                            1e-9 * ref.size);
+    }
+  }
+  const auto counters = client_->counters();
+  EXPECT_GT(counters.frames_udp, 0u);
+  EXPECT_EQ(counters.udp_malformed, 0u);
+  auto st = client_->stats();
+  ASSERT_TRUE(st.ok());
+  EXPECT_EQ(st->frames_dropped(), 0u);
+}
+
+TEST_P(ServerPositions, Float32StreamIsWithinFloatPrecision) {
+  auto v = client_->create_view(GetParam());
+  ASSERT_TRUE(v.ok());
+  const Reference ref = reference(*source_, {});
+  const auto frames = stream_all(*client_, *v, false, false, false);
+  ASSERT_EQ(frames.size(), source_->frame_count);
+  std::vector<Eigen::Vector3d> got;
+  for (const auto& f : frames) got.insert(got.end(), f.positions.begin(), f.positions.end());
+  std::vector<int> all(v->skeleton.size());
+  for (std::size_t j = 0; j < all.size(); ++j) all[j] = static_cast<int>(j);
+  EXPECT_POSITIONS_NEAR(ref.skeleton, reorder(v->skeleton, all, got, ref), ref.positions, 1e-6 * ref.size);
+}
+
+INSTANTIATE_TEST_SUITE_P(Motions, ServerPositions, ::testing::Values("walk", "cmu/02_01"),
+                         [](const auto& p) { return p.param == "walk" ? std::string("DemoWalk") : std::string("Cmu02_01"); });
+
+TEST(ServerPositions, JointSubsetAndOrientationsMatchForwardKinematics) {
+  TestServer server;
+  auto c = server.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("wave");
+  ASSERT_TRUE(v.ok());
+  const auto& lib = test_library();
+  const Motion& m = *std::find_if(lib.begin(), lib.end(), [](const auto& e) { return e.name == "wave"; })->motion;
+  auto q = c->query(v->id, 3, 9, true, {"head", "l_hand"});
+  ASSERT_TRUE(q.ok()) << q.error().to_string();
+  ASSERT_EQ(q->joints.size(), 2u);
+  ASSERT_EQ(q->positions.size(), 12u);
+  ASSERT_EQ(q->orientations.size(), 12u);
+  std::vector<Eigen::Vector3d> p(m.skeleton.size());
+  std::vector<Eigen::Matrix3d> w(m.skeleton.size());
+  for (std::size_t f = 3; f < 9; ++f) {
+    compute_frame(m, f, p, w);
+    for (std::size_t k = 0; k < 2; ++k) {
+      const int j = q->joints[k];
+      EXPECT_EQ(m.skeleton.joint(j).name, k == 0 ? "head" : "l_hand");
+      EXPECT_LT((q->positions[(f - 3) * 2 + k] - p[static_cast<std::size_t>(j)]).norm(), 1e-12);
+      EXPECT_LT((q->orientations[(f - 3) * 2 + k].toRotationMatrix() - w[static_cast<std::size_t>(j)]).norm(), 1e-12);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace gmr::test

@@ -1,0 +1,308 @@
+// Streaming behaviour: pacing controls (pause, resume, seek, loop, max
+// frames), shared streams (one FK and one encoding per tick), a client that
+// never reads (bounded memory, others unaffected), structure changes
+// mid-stream, heartbeats and graceful stop.
+#include <gtest/gtest.h>
+
+#include <mutex>
+
+#include "net_test_util.h"
+
+namespace gmr::test {
+namespace {
+
+using client::ReceivedFrame;
+
+struct Sink {
+  std::mutex mutex;
+  std::vector<ReceivedFrame> frames;
+  Latch<pb::SubscriptionEnded> ended;
+  Latch<bool> reached;  // set when `until` says so
+  std::function<bool(const ReceivedFrame&)> until;
+
+  client::FrameCallback on_frame() {
+    return [this](const ReceivedFrame& f) {
+      std::lock_guard lock(mutex);
+      frames.push_back(f);
+      if (until && until(f)) reached.set(true);
+    };
+  }
+  client::EndCallback on_end() {
+    return [this](const pb::SubscriptionEnded& e) { ended.set(e); };
+  }
+  std::vector<ReceivedFrame> copy() {
+    std::lock_guard lock(mutex);
+    return frames;
+  }
+};
+
+TEST(Streaming, LoopWithMaxFramesWrapsAndStops) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("jump");
+  ASSERT_TRUE(v.ok());
+  Sink sink;
+  client::SubscribeOptions o;
+  o.start_frame = 10;
+  o.end_frame = 20;
+  o.loop = true;
+  o.max_frames = 35;
+  o.rate_hz = 1000;
+  o.speed = 1000 * v->frame_time;  // one frame per tick
+  auto sub = c->subscribe(v->id, o, sink.on_frame(), sink.on_end());
+  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  auto end = sink.ended.wait();
+  ASSERT_TRUE(end.has_value());
+  EXPECT_EQ(end->reason(), "max_frames reached");
+  EXPECT_EQ(end->frames_sent(), 35u);
+  const auto frames = sink.copy();
+  ASSERT_EQ(frames.size(), 35u);
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    EXPECT_EQ(frames[k].frame_index, 10 + k % 10) << k;
+    EXPECT_EQ(frames[k].sequence, k);
+  }
+}
+
+TEST(Streaming, HoldRepeatsAndSkipRepeatsDecimates) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  // Output at 4x the motion's rate: hold sends each frame 4 times.
+  Sink hold;
+  client::SubscribeOptions o;
+  o.end_frame = 10;
+  o.speed = 10;
+  o.rate_hz = 4 * 10 / v->frame_time;
+  ASSERT_TRUE(c->subscribe(v->id, o, hold.on_frame(), hold.on_end()).ok());
+  ASSERT_TRUE(hold.ended.wait().has_value());
+  const auto h = hold.copy();
+  ASSERT_EQ(h.size(), 40u);
+  for (std::size_t k = 0; k < h.size(); ++k) EXPECT_EQ(h[k].frame_index, k / 4);
+  Sink skip;
+  o.skip_repeats = true;
+  ASSERT_TRUE(c->subscribe(v->id, o, skip.on_frame(), skip.on_end()).ok());
+  ASSERT_TRUE(skip.ended.wait().has_value());
+  const auto k = skip.copy();
+  ASSERT_EQ(k.size(), 10u);
+  for (std::size_t i = 0; i < k.size(); ++i) EXPECT_EQ(k[i].frame_index, i);
+  // Output at a quarter of the rate: every 4th frame.
+  Sink dec;
+  o.skip_repeats = false;
+  o.end_frame = 40;
+  o.rate_hz = 10 / v->frame_time / 4;
+  ASSERT_TRUE(c->subscribe(v->id, o, dec.on_frame(), dec.on_end()).ok());
+  ASSERT_TRUE(dec.ended.wait().has_value());
+  const auto d = dec.copy();
+  ASSERT_EQ(d.size(), 10u);
+  for (std::size_t i = 0; i < d.size(); ++i) EXPECT_EQ(d[i].frame_index, 4 * i);
+}
+
+TEST(Streaming, PauseResumeAndSeek) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Sink sink;
+  sink.until = [](const ReceivedFrame& f) { return f.frame_index >= 5; };
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 200;
+  auto sub = c->subscribe(v->id, o, sink.on_frame(), sink.on_end());
+  ASSERT_TRUE(sub.ok());
+  ASSERT_TRUE(sink.reached.wait().has_value());
+  ASSERT_TRUE(c->pause(sub->id).ok());
+  // After the pause ack no new frame is produced: the seek below is the
+  // first thing that moves the stream.
+  const std::size_t before = sink.copy().size();
+  ASSERT_TRUE(c->seek(sub->id, 100).ok());
+  ASSERT_TRUE(c->stats().ok());  // a round trip: anything sent before it has arrived
+  EXPECT_EQ(sink.copy().size(), before);
+  {
+    std::lock_guard lock(sink.mutex);
+    sink.until = [](const ReceivedFrame& f) { return f.frame_index >= 100; };
+  }
+  sink.reached.reset();
+  ASSERT_TRUE(c->resume(sub->id).ok());
+  ASSERT_TRUE(sink.reached.wait().has_value());
+  const auto frames = sink.copy();
+  EXPECT_EQ(frames[before].frame_index, 100u);  // resumes where the seek put it
+  for (std::size_t k = 1; k < frames.size(); ++k) EXPECT_EQ(frames[k].sequence, frames[k - 1].sequence + 1);
+  EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+  EXPECT_FALSE(c->pause(sub->id).ok());
+}
+
+TEST(Streaming, SharedStreamsComputeAndEncodeOncePerTick) {
+  TestServer s;
+  auto a = s.connect();
+  auto b = s.connect();
+  ASSERT_TRUE(a && b);
+  auto va = a->create_view("turn");
+  auto vb = b->create_view("turn");
+  ASSERT_TRUE(va.ok() && vb.ok());
+  client::SubscribeOptions o;
+  o.shared = true;
+  o.loop = true;
+  o.rate_hz = 500;
+  Sink sa, sb;
+  sa.until = [](const ReceivedFrame& f) { return f.sequence >= 10; };
+  auto suba = a->subscribe(va->id, o, sa.on_frame(), sa.on_end());
+  ASSERT_TRUE(suba.ok());
+  ASSERT_TRUE(sa.reached.wait().has_value());  // running
+  sb.until = [](const ReceivedFrame& f) { return f.sequence >= 60; };
+  auto subb = b->subscribe(vb->id, o, sb.on_frame(), sb.on_end());
+  ASSERT_TRUE(subb.ok());
+  EXPECT_TRUE(subb->joined_running);
+  EXPECT_EQ(subb->stream_id, suba->stream_id);
+  ASSERT_TRUE(sb.reached.wait().has_value());
+  ASSERT_TRUE(a->unsubscribe(suba->id).ok());
+  ASSERT_TRUE(b->unsubscribe(subb->id).ok());
+  const auto st = s.server.stats();
+  const auto fa = sa.copy();
+  const auto fb = sb.copy();
+  // Both received the same frames of one sequence, each view id their own.
+  EXPECT_EQ(fb.front().view_id, vb->id);
+  for (const auto& f : fb) {
+    const auto it = std::find_if(fa.begin(), fa.end(), [&](const auto& x) { return x.sequence == f.sequence; });
+    if (it == fa.end()) continue;
+    EXPECT_EQ(it->frame_index, f.frame_index);
+    EXPECT_EQ(it->positions, f.positions);
+    EXPECT_EQ(it->server_send_time_ns, f.server_send_time_ns);
+  }
+  // One FK and one encoding per tick, not per subscriber.
+  EXPECT_LE(st.frames_encoded, fa.back().sequence + 2);
+  EXPECT_EQ(st.frames_computed, st.frames_encoded);
+}
+
+TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {
+  server::ServerConfig cfg;
+  cfg.socket_send_buffer = 8192;  // fill the kernel quickly
+  TestServer s(cfg);
+  // The slow client: subscribes to a heavy stream, then never reads.
+  RawConnection slow(s.port(), 4096);
+  slow.handshake();
+  auto m = request(2);
+  m.mutable_create_view()->set_motion("walk");
+  slow.send(m);
+  auto view = slow.reply();
+  ASSERT_TRUE(view && view->has_view());
+  auto sub = request(3);
+  sub.mutable_subscribe()->set_view_id(view->view().view_id());
+  sub.mutable_subscribe()->set_loop(true);
+  sub.mutable_subscribe()->set_rate_hz(2000);
+  sub.mutable_subscribe()->set_orientations(true);
+  sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
+  slow.send(sub);
+
+  // A normal client meanwhile gets every frame of its own stream, in order.
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Sink sink;
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 500;
+  o.max_frames = 500;
+  ASSERT_TRUE(c->subscribe(v->id, o, sink.on_frame(), sink.on_end()).ok());
+  auto end = sink.ended.wait();
+  ASSERT_TRUE(end.has_value());
+  EXPECT_EQ(end->frames_dropped(), 0u);
+  const auto frames = sink.copy();
+  ASSERT_EQ(frames.size(), 500u);
+  for (std::size_t k = 0; k < frames.size(); ++k) EXPECT_EQ(frames[k].sequence, k);
+
+  // By now the slow client was offered ~2000 frames of ~3 KB: far more than
+  // its buffers hold. Its queue is one frame, and the rest were dropped.
+  const auto st = s.server.stats();
+  ASSERT_EQ(st.sessions.size(), 2u);
+  const auto& slow_stats = st.sessions[0].id < st.sessions[1].id ? st.sessions[0] : st.sessions[1];
+  EXPECT_GT(slow_stats.frames_dropped, 0u);
+  EXPECT_LT(slow_stats.max_queued_bytes, 64u * 1024) << "the queue of a client that never reads must stay bounded";
+  const auto& good_stats = st.sessions[0].id < st.sessions[1].id ? st.sessions[1] : st.sessions[0];
+  EXPECT_EQ(good_stats.frames_dropped, 0u);
+}
+
+TEST(Streaming, AStructureChangeMidStreamBumpsTheSkeletonVersion) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Sink sink;
+  sink.until = [](const ReceivedFrame& f) { return f.sequence >= 3; };
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 300;
+  o.joints = {"head", "l_hand"};
+  auto sub = c->subscribe(v->id, o, sink.on_frame(), sink.on_end());
+  ASSERT_TRUE(sub.ok());
+  ASSERT_TRUE(sink.reached.wait().has_value());
+  auto shifted = c->shift_root(v->id, "l_hand");
+  ASSERT_TRUE(shifted.ok());
+  EXPECT_NE(shifted->skeleton_version, v->skeleton_version);
+  {
+    std::lock_guard lock(sink.mutex);
+    const auto version = shifted->skeleton_version;
+    sink.until = [version](const ReceivedFrame& f) { return f.skeleton_version == version; };
+    sink.reached.reset();
+  }
+  ASSERT_TRUE(sink.reached.wait().has_value());
+  // Joint names of the subset survive the change; positions stay world positions.
+  auto q = c->query(v->id, 0, 1, false, {"head", "l_hand"});
+  ASSERT_TRUE(q.ok());
+  EXPECT_EQ(q->skeleton_version, shifted->skeleton_version);
+  // Stripping nothing keeps the subscription; a viewer can be set mid-stream.
+  EXPECT_TRUE(c->set_coordinates(v->id, "head").ok());
+  EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+}
+
+TEST(Streaming, HeartbeatsKeepAQuietClientConnected) {
+  server::ServerConfig cfg;
+  cfg.idle_timeout = std::chrono::milliseconds(300);
+  cfg.heartbeat_interval = std::chrono::milliseconds(100);
+  TestServer s(cfg);
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  // A stream of 1.5 s (5 idle timeouts) during which the client sends no request.
+  Sink sink;
+  client::SubscribeOptions o;
+  o.end_frame = 90;
+  ASSERT_TRUE(c->subscribe(v->id, o, sink.on_frame(), sink.on_end()).ok());
+  ASSERT_TRUE(sink.ended.wait().has_value());
+  EXPECT_EQ(sink.copy().size(), 90u);
+  EXPECT_TRUE(c->connected());
+  EXPECT_TRUE(c->list_motions().ok());
+  // A raw connection that says nothing is closed.
+  RawConnection quiet(s.port());
+  quiet.handshake();
+  EXPECT_TRUE(quiet.wait_closed(std::chrono::seconds(10)));
+}
+
+TEST(Streaming, GracefulStopEndsClientsAndReturns) {
+  auto s = std::make_unique<TestServer>();
+  auto c = s->connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Sink sink;
+  sink.until = [](const ReceivedFrame& f) { return f.sequence >= 2; };
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 100;
+  ASSERT_TRUE(c->subscribe(v->id, o, sink.on_frame(), sink.on_end()).ok());
+  ASSERT_TRUE(sink.reached.wait().has_value());
+  s->server.stop();
+  EXPECT_EQ(s->server.stats().connections, 0u);
+  auto r = c->list_motions();
+  EXPECT_FALSE(r.ok());
+  EXPECT_FALSE(c->connected());
+}
+
+}  // namespace
+}  // namespace gmr::test

@@ -1,0 +1,290 @@
+// The fast float FK path against the double reference (compute_positions), on
+// generated skeletons that exercise every plan case: any channel order, position
+// channels on non-roots, joints without rotation, several roots, both conventions.
+#include "gmr/fast/fast_fk.h"
+
+#include <gtest/gtest.h>
+
+#include <hwy/targets.h>
+
+#include <Eigen/Core>
+#include <random>
+#include <vector>
+
+#include "fast_test_util.h"
+#include "gmr/kinematics/forward_kinematics.h"
+
+namespace gmr::fast {
+namespace {
+
+using test::fast_positions;
+using test::random_motion;
+using test::reference_positions;
+
+TEST(MatchesReference, GeneratedMotions) {
+  for (int seed = 0; seed < 40; ++seed) {
+    for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
+      const Motion m = random_motion(static_cast<unsigned>(seed), conv, 37 + seed);
+      auto cm = CompiledMotion::compile(m);
+      ASSERT_TRUE(cm.ok()) << cm.error().to_string();
+      const double size = skeleton_size(m);
+      SCOPED_TRACE("seed " + std::to_string(seed));
+      EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 0, m.frame_count), reference_positions(m), 1e-5 * size);
+    }
+  }
+}
+
+TEST(LaneTails, EveryRangeOfAShortMotion) {
+  // Frame counts and ranges that are not multiples of 4, 8 or 16 lanes, and
+  // ranges that start in the middle of a lane block.
+  const Motion m = random_motion(7, Convention::kPostRotation, 35);
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  const auto all = reference_positions(m);
+  const std::size_t n = m.skeleton.size();
+  for (std::size_t b = 0; b <= m.frame_count; ++b) {
+    for (std::size_t e = b; e <= m.frame_count; e += 3) {
+      const auto got = fast_positions(*cm, b, e);
+      const std::vector<Eigen::Vector3d> want(all.begin() + static_cast<long>(b * n), all.begin() + static_cast<long>(e * n));
+      SCOPED_TRACE("range " + std::to_string(b) + ":" + std::to_string(e));
+      EXPECT_POSITIONS_NEAR(m.skeleton, got, want, 1e-5 * skeleton_size(m));
+      EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, b, e, Layout::kJointMajor), want, 1e-5 * skeleton_size(m));
+    }
+  }
+}
+
+TEST(SingleFrame, EqualsRange) {
+  for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
+    const Motion m = random_motion(11, conv, 21);
+    auto cm = CompiledMotion::compile(m);
+    ASSERT_TRUE(cm.ok());
+    const std::size_t n = m.skeleton.size();
+    std::vector<float> ws(fk_workspace_size(*cm));
+    std::vector<float> range(m.frame_count * n * 3), range_ori(m.frame_count * n * 9);
+    FkRangeJob job{.motion = &*cm, .begin = 0, .end = m.frame_count, .out_positions = range,
+                   .out_orientations = range_ori, .workspace = ws};
+    ASSERT_TRUE(job.run());
+    std::vector<float> one(n * 3), one_ori(n * 9), scalar(n * 3);
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      FkFrameJob fj{.motion = &*cm, .frame = f, .out_positions = one, .out_orientations = one_ori, .workspace = ws};
+      ASSERT_TRUE(fj.run());
+      ASSERT_TRUE(scalar_float_frame(*cm, f, scalar, ws));
+      for (std::size_t k = 0; k < n * 3; ++k) {
+        EXPECT_NEAR(one[k], range[f * n * 3 + k], 1e-4f) << "frame " << f << " value " << k;
+        EXPECT_NEAR(scalar[k], range[f * n * 3 + k], 1e-4f) << "frame " << f << " value " << k;
+      }
+      for (std::size_t k = 0; k < n * 9; ++k) EXPECT_NEAR(one_ori[k], range_ori[f * n * 9 + k], 1e-5f);
+    }
+  }
+}
+
+TEST(Orientations, MatchReference) {
+  for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
+    const Motion m = random_motion(3, conv, 19);
+    auto cm = CompiledMotion::compile(m);
+    ASSERT_TRUE(cm.ok());
+    const std::size_t n = m.skeleton.size();
+    std::vector<float> ws(fk_workspace_size(*cm)), pos(m.frame_count * n * 3), ori(m.frame_count * n * 9);
+    for (Layout layout : {Layout::kFrameMajor, Layout::kJointMajor}) {
+      FkRangeJob job{.motion = &*cm, .begin = 0, .end = m.frame_count, .layout = layout, .out_positions = pos,
+                     .out_orientations = ori, .workspace = ws};
+      ASSERT_TRUE(job.run());
+      std::vector<Eigen::Vector3d> p(n);
+      std::vector<Eigen::Matrix3d> w(n);
+      for (std::size_t f = 0; f < m.frame_count; ++f) {
+        compute_frame(m, f, p, w);
+        for (std::size_t j = 0; j < n; ++j) {
+          for (int r = 0; r < 3; ++r) {
+            for (int c = 0; c < 3; ++c) {
+              const std::size_t e = static_cast<std::size_t>(3 * r + c);
+              const float got = layout == Layout::kFrameMajor ? ori[(f * n + j) * 9 + e] : ori[(j * 9 + e) * m.frame_count + f];
+              ASSERT_NEAR(got, w[j](r, c), 1e-5) << "frame " << f << " joint " << j;
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(JointMajor, MatchesFrameMajorWithStride) {
+  const Motion m = random_motion(5, Convention::kPreRotation, 45);
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  const std::size_t n = m.skeleton.size();
+  const std::size_t b = 3, e = 40, stride = 50;
+  std::vector<float> ws(fk_workspace_size(*cm)), fm((e - b) * n * 3), jm(stride * n * 3, -7.0f);
+  ASSERT_TRUE((FkRangeJob{.motion = &*cm, .begin = b, .end = e, .out_positions = fm, .workspace = ws}.run()));
+  ASSERT_TRUE((FkRangeJob{.motion = &*cm, .begin = b, .end = e, .layout = Layout::kJointMajor,
+                          .joint_major_stride = stride, .out_positions = jm, .workspace = ws}.run()));
+  for (std::size_t f = 0; f < e - b; ++f) {
+    for (std::size_t k = 0; k < n * 3; ++k) ASSERT_EQ(fm[f * n * 3 + k], jm[k * stride + f]);
+  }
+  for (std::size_t k = 0; k < n * 3; ++k) {  // padding between components is left alone
+    for (std::size_t f = e - b; f < stride; ++f) ASSERT_EQ(jm[k * stride + f], -7.0f);
+  }
+}
+
+TEST(Empty, MotionWithoutFramesOrJoints) {
+  Motion m = random_motion(1, Convention::kPostRotation, 0);
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  EXPECT_EQ(cm->frame_count(), 0u);
+  std::vector<float> ws(fk_workspace_size(*cm));
+  EXPECT_TRUE((FkRangeJob{.motion = &*cm, .begin = 0, .end = 0, .workspace = ws}.run()));
+  std::vector<float> pos(m.skeleton.size() * 3);
+  EXPECT_FALSE((FkFrameJob{.motion = &*cm, .frame = 0, .out_positions = pos, .workspace = ws}.run()));
+
+  auto empty = CompiledMotion::compile(Motion{});
+  ASSERT_TRUE(empty.ok());
+  EXPECT_EQ(empty->joint_count(), 0u);
+  std::vector<float> ws2(fk_workspace_size(*empty));
+  EXPECT_TRUE((FkRangeJob{.motion = &*empty, .workspace = ws2}.run()));
+}
+
+TEST(JobValidity, RangeJob) {
+  const Motion m = random_motion(2, Convention::kPostRotation, 20);
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  const std::size_t n = m.skeleton.size();
+  std::vector<float> ws(fk_workspace_size(*cm)), pos(20 * n * 3), ori(20 * n * 9);
+  const FkRangeJob valid{.motion = &*cm, .begin = 0, .end = 20, .out_positions = pos, .out_orientations = ori,
+                         .workspace = ws};
+  EXPECT_TRUE(valid.validate()) << valid.check().error().to_string();
+  FkRangeJob job = valid;
+  job.motion = nullptr;
+  EXPECT_FALSE(job.run());
+  job = valid;
+  job.end = 21;
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.begin = 5;
+  job.end = 4;
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.out_positions = std::span<float>(pos).first(pos.size() - 1);
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.out_orientations = std::span<float>(ori).first(ori.size() - 1);
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.workspace = std::span<float>(ws).first(ws.size() - 1);
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.layout = Layout::kJointMajor;
+  job.joint_major_stride = 19;
+  EXPECT_FALSE(job.validate());
+  job.joint_major_stride = 20;
+  EXPECT_TRUE(job.validate());
+  job.joint_major_stride = 21;  // needs 21 * n * 3 floats
+  EXPECT_FALSE(job.validate());
+}
+
+TEST(JobValidity, FrameJob) {
+  const Motion m = random_motion(2, Convention::kPreRotation, 20);
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  const std::size_t n = m.skeleton.size();
+  std::vector<float> ws(fk_workspace_size(*cm)), pos(n * 3), ori(n * 9);
+  const FkFrameJob valid{.motion = &*cm, .frame = 19, .out_positions = pos, .out_orientations = ori, .workspace = ws};
+  EXPECT_TRUE(valid.validate());
+  FkFrameJob job = valid;
+  job.frame = 20;
+  EXPECT_FALSE(job.run());
+  job = valid;
+  job.motion = nullptr;
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.out_positions = std::span<float>(pos).first(n * 3 - 1);
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.out_orientations = std::span<float>(ori).first(n * 9 - 1);
+  EXPECT_FALSE(job.validate());
+  job = valid;
+  job.workspace = {};
+  EXPECT_FALSE(job.validate());
+  EXPECT_FALSE(scalar_float_frame(*cm, 20, pos, ws));
+}
+
+TEST(Compile, RejectsInvalidMotion) {
+  Motion m = random_motion(4, Convention::kPostRotation, 10);
+  m.values.pop_back();
+  EXPECT_FALSE(CompiledMotion::compile(m).ok());
+  m = random_motion(4, Convention::kPostRotation, 10);
+  m.values[3] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(CompiledMotion::compile(m).ok());
+}
+
+TEST(Compile, LargeAnglesKeepPrecision) {
+  // 7200.5 degrees is 0.5 degrees: reduced in double before rounding to float.
+  Motion m = random_motion(9, Convention::kPostRotation, 30);
+  for (std::size_t i = 0; i < m.values.size(); ++i) {
+    if (i % 5 == 0) m.values[i] += 7200.0 * ((i % 3) == 0 ? -1 : 1);
+  }
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 0, m.frame_count), reference_positions(m),
+                        1e-5 * skeleton_size(m));
+}
+
+TEST(AllRoots, StoredPositionsAreTheOutput) {
+  // Every joint a root with position channels: the compiled form stores the
+  // answer and the range job is a copy of it.
+  Motion m = random_motion(6, Convention::kPreRotation, 33, /*all_roots=*/true);
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  ASSERT_TRUE(cm->all_roots());
+  const auto ref = reference_positions(m);
+  const auto view = cm->stored_positions();
+  ASSERT_EQ(view.size(), ref.size() * 3);
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(view[i * 3 + static_cast<std::size_t>(a)], static_cast<float>(ref[i][a]));
+  }
+  EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 0, m.frame_count), ref, 1e-6 * skeleton_size(m));
+  EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 5, 17, Layout::kJointMajor),
+                        std::vector<Eigen::Vector3d>(ref.begin() + 5 * static_cast<long>(m.skeleton.size()),
+                                                     ref.begin() + 17 * static_cast<long>(m.skeleton.size())),
+                        1e-6 * skeleton_size(m));
+}
+
+TEST(Dispatch, EveryCompiledTargetMatchesReference) {
+  // The dispatcher normally picks the widest target; force each one this CPU
+  // runs (scalar, SSE4, AVX2, AVX-512, ...) so all of them are tested.
+  std::vector<std::string> seen;
+  for (std::int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    seen.emplace_back(simd_target_name());
+    SCOPED_TRACE(seen.back());
+    for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
+      const Motion m = random_motion(13, conv, 53);
+      auto cm = CompiledMotion::compile(m);
+      ASSERT_TRUE(cm.ok());
+      EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 1, m.frame_count),
+                            std::vector<Eigen::Vector3d>(compute_positions(m, 1, m.frame_count)), 1e-5 * skeleton_size(m));
+      // The one-frame kernel too (the scalar target falls back to the scalar chain).
+      const std::size_t n = m.skeleton.size();
+      std::vector<float> ws(fk_workspace_size(*cm)), one(n * 3), ori(n * 9);
+      std::vector<Eigen::Vector3d> got(m.frame_count * n);
+      for (std::size_t f = 0; f < m.frame_count; ++f) {
+        ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = one, .out_orientations = ori,
+                                .workspace = ws}.run()));
+        for (std::size_t j = 0; j < n; ++j) got[f * n + j] = Eigen::Vector3d(one[3 * j], one[3 * j + 1], one[3 * j + 2]);
+      }
+      EXPECT_POSITIONS_NEAR(m.skeleton, got, compute_positions(m), 1e-5 * skeleton_size(m));
+    }
+  }
+  hwy::SetSupportedTargetsForTest(0);
+  EXPECT_FALSE(seen.empty());
+  std::string all;
+  for (const auto& s : seen) all += s + " ";
+  RecordProperty("targets", all);
+}
+
+TEST(Dispatch, NamesATarget) {
+  EXPECT_NE(std::string(simd_target_name()), "");
+  const std::size_t lanes = simd_lanes();
+  EXPECT_TRUE(lanes == 1 || lanes == 4 || lanes == 8 || lanes == 16) << lanes;
+}
+
+}  // namespace
+}  // namespace gmr::fast

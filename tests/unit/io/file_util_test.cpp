@@ -1,0 +1,120 @@
+#include "gmr/io/file_util.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <charconv>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+
+#include "gmr/io/bvh.h"
+
+namespace gmr {
+namespace {
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+// A fresh directory under the system temp dir, removed at the end of the test.
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    path = fs::temp_directory_path() /
+           ("gmr_io_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+  std::size_t entries() const { return static_cast<std::size_t>(std::distance(fs::directory_iterator(path), {})); }
+};
+
+TEST(ReadFile, MissingFileNamesThePath) {
+  auto r = read_file("/nonexistent/dir/x.bvh");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().file, "/nonexistent/dir/x.bvh");
+  EXPECT_THAT(r.error().to_string(), HasSubstr("/nonexistent/dir/x.bvh: cannot open file"));
+}
+
+TEST(ReadFile, DirectoryIsAnError) {
+  TempDir d;
+  auto r = read_file(d.path);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.error().message, HasSubstr("directory"));
+}
+
+TEST(WriteFileAtomic, WritesAndReplaces) {
+  TempDir d;
+  const fs::path p = d.path / "out.bvh";
+  ASSERT_TRUE(write_file_atomic(p, "first").ok());
+  EXPECT_EQ(read_file(p).value(), "first");
+  std::string big(3 << 20, 'x');
+  big[12345] = '\0';
+  ASSERT_TRUE(write_file_atomic(p, big).ok());
+  EXPECT_EQ(read_file(p).value(), big);
+  ASSERT_TRUE(write_file_atomic(p, "").ok());
+  EXPECT_EQ(read_file(p).value(), "");
+  EXPECT_EQ(d.entries(), 1u);  // no temporary left behind
+}
+
+TEST(WriteFileAtomic, FailureLeavesTheOldFileAndNoTemporary) {
+  TempDir d;
+  // The target is a directory holding a file: the write must fail, keep both.
+  const fs::path target = d.path / "target.gmr";
+  fs::create_directories(target);
+  ASSERT_TRUE(write_file_atomic(target / "old.gmr", "old contents").ok());
+  const Status s = write_file_atomic(target, "new contents");
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().file, target.string());
+  EXPECT_EQ(read_file(target / "old.gmr").value(), "old contents");
+  EXPECT_EQ(d.entries(), 1u);
+
+  // A missing directory: an error naming the path, nothing created.
+  const Status m = write_file_atomic(d.path / "missing" / "x.bvh", "data");
+  ASSERT_FALSE(m.ok());
+  EXPECT_THAT(m.error().to_string(), HasSubstr((d.path / "missing" / "x.bvh").string()));
+  EXPECT_FALSE(fs::exists(d.path / "missing"));
+}
+
+TEST(WriteFileAtomic, WriterErrorKeepsTheOldFile) {
+  TempDir d;
+  const fs::path p = d.path / "keep.bvh";
+  ASSERT_TRUE(write_file_atomic(p, "old").ok());
+  Motion pre;  // empty: nothing to write
+  const Status s = write_bvh(pre, p);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().file, p.string());
+  EXPECT_EQ(read_file(p).value(), "old");
+  EXPECT_EQ(d.entries(), 1u);
+}
+
+TEST(WriteFileAtomic, KeepsPermissionsOfTheReplacedFile) {
+  TempDir d;
+  const fs::path p = d.path / "mode.bvh";
+  ASSERT_TRUE(write_file_atomic(p, "a").ok());
+  fs::permissions(p, fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
+  ASSERT_TRUE(write_file_atomic(p, "b").ok());
+  EXPECT_EQ(fs::status(p).permissions(), fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
+}
+
+TEST(FormatDouble, ShortestRoundTrip) {
+  EXPECT_EQ(format_double(0.1), "0.1");
+  EXPECT_EQ(format_double(-6.101614), "-6.101614");
+  EXPECT_EQ(format_double(1e-7), "1e-07");
+  EXPECT_EQ(format_double(0.1 + 0.2), "0.30000000000000004");
+  EXPECT_EQ(format_double(100), "100");
+  std::mt19937_64 rng(42);
+  std::uniform_real_distribution<double> u(-1e3, 1e3);
+  for (int i = 0; i < 10000; ++i) {
+    const double v = i % 2 ? u(rng) : std::ldexp(u(rng), static_cast<int>(rng() % 600) - 300);
+    const std::string s = format_double(v);
+    double back = 0;
+    std::from_chars(s.data(), s.data() + s.size(), back);
+    ASSERT_EQ(back, v) << s;
+  }
+}
+
+}  // namespace
+}  // namespace gmr

@@ -1,0 +1,140 @@
+#include "gmr/io/motion_file.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "gmr/io/file_util.h"
+#include "gmr/kinematics/forward_kinematics.h"
+#include "io_test_util.h"
+#include "test_data.h"
+
+namespace gmr {
+namespace {
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    path = fs::temp_directory_path() /
+           ("gmr_mf_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { fs::remove_all(path); }
+};
+
+constexpr std::string_view kBvh =
+    "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\n"
+    "MOTION\nFrames: 1\nFrame Time: 0.5\n1 2 3\n";
+
+TEST(LoadMotion, ByExtensionCaseInsensitive) {
+  TempDir d;
+  ASSERT_TRUE(write_file_atomic(d.path / "a.BVH", kBvh).ok());
+  auto m = load_motion(d.path / "a.BVH");
+  ASSERT_TRUE(m.ok()) << m.error().to_string();
+  EXPECT_EQ(m->convention, Convention::kPostRotation);
+  ASSERT_TRUE(write_file_atomic(d.path / "a.gmr", "GMR 1\n" + std::string(kBvh)).ok());
+  auto g = load_motion(d.path / "a.gmr");
+  ASSERT_TRUE(g.ok()) << g.error().to_string();
+  EXPECT_EQ(g->convention, Convention::kPreRotation);
+}
+
+TEST(LoadMotion, UnknownExtensionsAndGmrb) {
+  auto r = load_motion("x.txt");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().file, "x.txt");
+  EXPECT_THAT(r.error().message, HasSubstr("'.txt'"));
+  EXPECT_THAT(load_motion("noext").error().message, HasSubstr("without extension"));
+  auto missing = load_motion("/nonexistent/a.bvh");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_THAT(missing.error().to_string(), HasSubstr("/nonexistent/a.bvh"));
+}
+
+TEST(LoadMotion, AmcNeedsExactlyOneAsf) {
+  TempDir d;
+  ASSERT_TRUE(write_file_atomic(d.path / "t.amc", ":FULLY-SPECIFIED\n").ok());
+  auto none = load_motion(d.path / "t.amc");
+  ASSERT_FALSE(none.ok());
+  EXPECT_THAT(none.error().message, HasSubstr("no .asf skeleton"));
+  EXPECT_THAT(none.error().message, HasSubstr("--asf"));
+  ASSERT_TRUE(write_file_atomic(d.path / "a.asf", "").ok());
+  ASSERT_TRUE(write_file_atomic(d.path / "b.ASF", "").ok());
+  auto several = load_motion(d.path / "t.amc");
+  ASSERT_FALSE(several.ok());
+  EXPECT_THAT(several.error().message, HasSubstr("several .asf skeletons"));
+  EXPECT_THAT(several.error().message, HasSubstr("a.asf, b.ASF"));
+}
+
+TEST(SaveMotion, UnknownExtension) {
+  Motion m;
+  const Status s = save_motion(m, "out.xyz");
+  ASSERT_FALSE(s.ok());
+  EXPECT_THAT(s.error().to_string(), HasSubstr("out.xyz: cannot write '.xyz' files"));
+}
+
+TEST(SaveMotion, SameConventionWritesDirectly) {
+  TempDir d;
+  ASSERT_TRUE(write_file_atomic(d.path / "a.bvh", kBvh).ok());
+  const Motion m = load_motion(d.path / "a.bvh").value();
+  ASSERT_TRUE(save_motion(m, d.path / "b.bvh").ok());
+  EXPECT_EQ(load_motion(d.path / "b.bvh")->values, m.values);
+}
+
+// Positions of `b`'s joints rearranged to `a`'s joint order (by name), so the
+// two can be compared joint for joint; `b` may have extra joints.
+std::vector<Eigen::Vector3d> positions_by_name(const Motion& a, const Motion& b) {
+  const auto pb = compute_positions(b);
+  std::vector<int> map;
+  for (const Joint& j : a.skeleton.joints()) {
+    map.push_back(b.skeleton.find(j.name));
+    EXPECT_GE(map.back(), 0) << "joint " << j.name << " missing after the round trip";
+    if (map.back() < 0) map.back() = 0;
+  }
+  std::vector<Eigen::Vector3d> out;
+  out.reserve(a.frame_count * map.size());
+  for (std::size_t f = 0; f < b.frame_count; ++f)
+    for (int k : map) out.push_back(pb[f * b.skeleton.size() + static_cast<std::size_t>(k)]);
+  return out;
+}
+
+// Issue 2's end-to-end check through files: BVH -> .gmr file -> read ->
+// .bvh file -> read keeps every joint's position in every frame, for every
+// BVH of the corpus (within 1e-6 of the skeleton's size). Debug and
+// sanitizer builds take evenly spaced frames of each file.
+TEST(SaveMotionRealFiles, BvhToGmrFileToBvhFileKeepsPositions) {
+  GMR_REQUIRE_DATA();
+  TempDir d;
+  for (const auto& path : test::data_files("bvh", ".bvh")) {
+    SCOPED_TRACE(path.string());
+    const Motion bvh = test::sample_frames(load_motion(path).value());
+    const double tol = 1e-6 * skeleton_size(bvh);
+    const auto p0 = compute_positions(bvh);
+
+    const fs::path gmr_path = d.path / "m.gmr";
+    const Status s1 = save_motion(bvh, gmr_path);
+    ASSERT_TRUE(s1.ok()) << s1.error().to_string();
+    auto gmr = load_motion(gmr_path);
+    ASSERT_TRUE(gmr.ok()) << gmr.error().to_string();
+    EXPECT_EQ(gmr->convention, Convention::kPreRotation);
+    EXPECT_EQ(gmr->frame_count, bvh.frame_count);
+    EXPECT_EQ(gmr->frame_time, bvh.frame_time);
+    EXPECT_POSITIONS_NEAR(bvh.skeleton, p0, positions_by_name(bvh, *gmr), tol);
+
+    const fs::path bvh_path = d.path / "m.bvh";
+    const Status s2 = save_motion(*gmr, bvh_path);
+    ASSERT_TRUE(s2.ok()) << s2.error().to_string();
+    auto back = load_motion(bvh_path);
+    ASSERT_TRUE(back.ok()) << back.error().to_string();
+    EXPECT_EQ(back->convention, Convention::kPostRotation);
+    EXPECT_POSITIONS_NEAR(bvh.skeleton, p0, positions_by_name(bvh, *back), tol);
+  }
+}
+
+}  // namespace
+}  // namespace gmr

@@ -1,0 +1,245 @@
+// The OPS area on real data: every BVH of ../shared/data/bvh, every frame.
+//
+// Tolerances are relative to skeleton_size(): 1e-6 for the conversions and the
+// file round trip (issue 2), 1e-9 for the operations (issue 3).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <numeric>
+#include <random>
+#include <unistd.h>
+
+#include "gmr/convert/convert.h"
+#include "gmr/io/bvh.h"
+#include "gmr/io/gmr_file.h"
+#include "gmr/kinematics/fk_stats.h"
+#include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/ops/ops.h"
+#include "ops_test_util.h"
+#include "test_data.h"
+
+namespace gmr {
+namespace {
+
+namespace fs = std::filesystem;
+using test::positions_by_name;
+using test::same_local_data;
+
+struct Loaded {
+  fs::path path;
+  Motion post;
+  Motion pre;
+  std::vector<Eigen::Vector3d> reference;  // post-rotation positions, frame-major, post's joint order
+  double size = 0.0;
+};
+
+// Loads every BVH once for the whole program (the suite reads each file once).
+const std::vector<Loaded>& corpus() {
+  static const std::vector<Loaded> all = [] {
+    std::vector<Loaded> out;
+    for (const fs::path& p : test::data_files("bvh", ".bvh")) {
+      auto m = read_bvh(p);
+      if (!m) {
+        ADD_FAILURE() << "cannot read " << p << ": " << m.error().to_string();
+        continue;
+      }
+      Loaded l;
+      l.path = p;
+      l.post = std::move(m).value();
+      auto pre = to_pre_rotation(l.post);
+      if (!pre) {
+        ADD_FAILURE() << p << ": " << pre.error().to_string();
+        continue;
+      }
+      l.pre = std::move(pre).value();
+      l.reference = compute_positions(l.post);
+      l.size = skeleton_size(l.post);
+      out.push_back(std::move(l));
+    }
+    return out;
+  }();
+  return all;
+}
+
+std::string label(const Loaded& l) { return l.path.filename().string(); }
+
+double error_vs_reference(const Loaded& l, const Motion& m) {
+  const auto p = positions_by_name(m, l.post.skeleton);
+  if (p.size() != l.reference.size()) return 1e300;
+  return test::compare_positions(l.reference, p, l.post.skeleton.size()).max_error;
+}
+
+std::vector<int> indices_of(const Motion& m, const std::vector<std::string>& names) {
+  std::vector<int> out;
+  for (const auto& n : names) out.push_back(m.skeleton.find(n));
+  return out;
+}
+
+TEST(Issue2, EveryBvhConvertsToGmrWithSamePositions) {
+  GMR_REQUIRE_DATA();
+  ASSERT_FALSE(corpus().empty());
+  for (const Loaded& l : corpus()) {
+    SCOPED_TRACE(label(l));
+    EXPECT_LE(error_vs_reference(l, l.pre), 1e-6 * l.size);
+    // GMR -> BVH gives back the same structure (no inserted joints) and positions.
+    const Motion back = to_post_rotation(l.pre).value();
+    ASSERT_EQ(back.skeleton.size(), l.post.skeleton.size());
+    for (int j = 0; j < static_cast<int>(back.skeleton.size()); ++j) {
+      EXPECT_EQ(back.skeleton.joint(j).name, l.post.skeleton.joint(j).name);
+      EXPECT_EQ(back.skeleton.joint(j).parent, l.post.skeleton.joint(j).parent);
+      EXPECT_EQ(back.skeleton.joint(j).offset, l.post.skeleton.joint(j).offset);
+    }
+    EXPECT_LE(error_vs_reference(l, back), 1e-6 * l.size);
+  }
+}
+
+TEST(Issue2, EveryBvhSurvivesGmrFileAndBvhFile) {
+  GMR_REQUIRE_DATA();
+  const fs::path dir = fs::temp_directory_path() / ("gmr_ops_data_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  for (const Loaded& l : corpus()) {
+    SCOPED_TRACE(label(l));
+    const fs::path g = dir / "m.gmr", b = dir / "m.bvh";
+    ASSERT_TRUE(write_gmr(l.pre, g).ok());
+    auto read_back = read_gmr(g);
+    ASSERT_TRUE(read_back.ok()) << read_back.error().to_string();
+    const Motion post = to_post_rotation(*read_back).value();
+    ASSERT_TRUE(write_bvh(post, b).ok());
+    auto again = read_bvh(b);
+    ASSERT_TRUE(again.ok()) << again.error().to_string();
+    EXPECT_LE(error_vs_reference(l, *again), 1e-6 * l.size);
+  }
+  fs::remove_all(dir);
+}
+
+TEST(Issue3, RandomOperationSequencesKeepEveryPosition) {
+  GMR_REQUIRE_DATA();
+  std::uint32_t seed = 2012;
+  for (const Loaded& l : corpus()) {
+    SCOPED_TRACE(label(l));
+    std::mt19937 rng(seed++);
+    const double tol = 1e-9 * l.size;
+    const int n = static_cast<int>(l.pre.skeleton.size());
+    // Two sequences of four operations per file keep the suite's run time sane
+    // (files have up to 4511 frames); every frame of every step is checked.
+    for (int sequence = 0; sequence < 2; ++sequence) {
+      Motion m = l.pre;
+      for (int step = 0; step < 4; ++step) {
+        const int op = static_cast<int>(rng() % 4);
+        const int j = static_cast<int>(rng() % static_cast<unsigned>(n));
+        std::string what;
+        if (op == 0) {
+          what = "shift to " + l.pre.skeleton.joint(j).name;
+          m = shift_root(m, m.skeleton.find(l.pre.skeleton.joint(j).name)).value();
+        } else if (op == 1) {
+          const int k = m.skeleton.find(l.pre.skeleton.joint(j).name);
+          if (m.skeleton.is_root(k)) continue;
+          what = "split at " + l.pre.skeleton.joint(j).name;
+          m = split_tree(m, k).value();
+        } else if (op == 2) {
+          std::vector<int> linked;
+          for (int r : m.skeleton.roots()) {
+            if (m.skeleton.joint(r).soft_parent != kNoParent) linked.push_back(r);
+          }
+          if (linked.empty()) continue;
+          const int r = linked[rng() % linked.size()];
+          what = "join " + m.skeleton.joint(r).name;
+          JoinReport report;
+          auto joined = join_tree(m, r, &report);
+          ASSERT_TRUE(joined.ok()) << what << ": " << joined.error().to_string();
+          m = std::move(joined).value();
+        } else {
+          // A random target set (sometimes every joint), always with one root per skeleton.
+          std::vector<std::string> names;
+          const bool all = rng() % 4 == 0;
+          for (int k = 0; k < n; ++k) {
+            if (all || rng() % 5 == 0 || k == j) names.push_back(l.pre.skeleton.joint(k).name);
+          }
+          what = "set " + std::to_string(names.size()) + " roots";
+          auto r = set_roots(m, indices_of(m, names));
+          ASSERT_TRUE(r.ok()) << what << ": " << r.error().to_string();
+          m = std::move(r).value();
+          EXPECT_EQ(m.skeleton.roots().size(), names.size());
+        }
+        ASSERT_TRUE(Skeleton::create(m.skeleton.joints()).ok());
+        EXPECT_LE(error_vs_reference(l, m), tol) << "sequence " << sequence << " step " << step << ": " << what;
+      }
+    }
+  }
+}
+
+TEST(Issue3, FullyTranslationalConfigurationReadsPositions) {
+  GMR_REQUIRE_DATA();
+  for (const Loaded& l : corpus()) {
+    SCOPED_TRACE(label(l));
+    std::vector<int> all(l.pre.skeleton.size());
+    std::iota(all.begin(), all.end(), 0);
+    const Motion t = set_roots(l.pre, all).value();
+    ASSERT_EQ(t.skeleton.roots().size(), t.skeleton.size());
+    reset_fk_rotation_evaluations();
+    EXPECT_LE(error_vs_reference(l, t), 1e-9 * l.size);
+    EXPECT_EQ(fk_rotation_evaluations(), 0u);
+    // And back to the original root: the original local data.
+    const std::vector<int> root{t.skeleton.find(l.pre.skeleton.joint(0).name)};
+    EXPECT_TRUE(same_local_data(l.pre, set_roots(t, root).value(), 1e-9, 1e-9 * l.size));
+  }
+}
+
+TEST(Issue3, SplitJoinAndShiftThereAndBackRestoreLocalData) {
+  GMR_REQUIRE_DATA();
+  std::uint32_t seed = 77;
+  for (const Loaded& l : corpus()) {
+    SCOPED_TRACE(label(l));
+    std::mt19937 rng(seed++);
+    const int n = static_cast<int>(l.pre.skeleton.size());
+    if (n < 2) continue;
+    const int j = 1 + static_cast<int>(rng() % static_cast<unsigned>(n - 1));  // not the root
+    const std::string name = l.pre.skeleton.joint(j).name;
+    const Motion split = split_tree(l.pre, j).value();
+    JoinReport report;
+    const Motion joined = join_tree(split, split.skeleton.find(name), &report).value();
+    // Rigid (static offset again) unless the joint's own position channels vary.
+    bool varies = false;
+    for (std::size_t f = 1; f < l.pre.frame_count && !varies; ++f) {
+      varies = (l.pre.local_offset(f, j) - l.pre.local_offset(0, j)).norm() > 1e-9 * l.size;
+    }
+    EXPECT_EQ(report.translation_channels, varies) << name << " spread " << report.offset_spread;
+    EXPECT_TRUE(same_local_data(l.pre, joined, 1e-9, 1e-9 * l.size)) << "split/join at " << name;
+
+    const Motion there = shift_root(l.pre, j).value();
+    const Motion back = shift_root(there, there.skeleton.find(l.pre.skeleton.joint(0).name)).value();
+    EXPECT_TRUE(same_local_data(l.pre, back, 1e-9, 1e-9 * l.size)) << "shift to " << name << " and back";
+  }
+}
+
+TEST(Issue3, DummyRemovalOnCmuStyleFiles) {
+  GMR_REQUIRE_DATA();
+  int cmu_files = 0;
+  for (const Loaded& l : corpus()) {
+    if (l.pre.skeleton.find("LHipJoint") < 0) continue;  // CMU-style skeletons
+    SCOPED_TRACE(label(l));
+    ++cmu_files;
+    std::vector<RemovedJoint> removed;
+    const Motion s = strip_dummies(l.pre, &removed).value();
+    std::vector<std::string> names;
+    for (const auto& r : removed) names.push_back(r.name);
+    EXPECT_NE(std::find(names.begin(), names.end(), "LHipJoint"), names.end());
+    EXPECT_NE(std::find(names.begin(), names.end(), "RHipJoint"), names.end());
+    // Exactly the zero-length joints with children went; every other joint stays
+    // where it was in every frame.
+    for (int j = 0; j < static_cast<int>(l.pre.skeleton.size()); ++j) {
+      const Joint& joint = l.pre.skeleton.joint(j);
+      const bool dummy = joint.parent != kNoParent && joint.offset == Eigen::Vector3d::Zero() &&
+                         !joint.has_translation() && !l.pre.skeleton.children(j).empty();
+      EXPECT_EQ(s.skeleton.find(joint.name) < 0, dummy) << joint.name;
+    }
+    const auto p = positions_by_name(s, s.skeleton);
+    const auto q = positions_by_name(l.pre, s.skeleton);
+    EXPECT_LE(test::compare_positions(p, q, s.skeleton.size()).max_error, 1e-9 * l.size);
+  }
+  EXPECT_GE(cmu_files, 5);
+}
+
+}  // namespace
+}  // namespace gmr
