@@ -37,6 +37,9 @@ int main(int argc, char** argv) {
   app.add_option("--max-views", cfg.max_views_per_connection, "Views per connection")->capture_default_str();
   app.add_option("--max-subscriptions", cfg.max_subscriptions_per_connection, "Subscriptions per connection")
       ->capture_default_str();
+  app.add_option("--frames-per-subscription", cfg.frames_per_subscription,
+                 "Frames queued per subscription before the oldest is dropped (latest wins)")
+      ->capture_default_str();
   app.add_option("--idle-timeout-ms", idle_ms, "Close a connection silent for this long")->capture_default_str();
   app.add_option("--heartbeat-ms", heartbeat_ms, "Send a heartbeat after this long without writing")->capture_default_str();
   app.add_option("--write-timeout-ms", write_ms, "Close a connection whose write stalls this long")->capture_default_str();
@@ -55,7 +58,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   if (cfg.max_message_bytes < 4096 || cfg.max_connections == 0 || cfg.max_views_per_connection == 0 ||
-      cfg.max_subscriptions_per_connection == 0) {
+      cfg.max_subscriptions_per_connection == 0 || cfg.frames_per_subscription == 0) {
     std::fprintf(stderr, "gmr-server: --max-message-bytes must be at least 4096 and the other limits at least 1\n");
     return 1;
   }

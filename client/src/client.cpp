@@ -7,6 +7,7 @@
 #include <future>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "gmr/wire/convert.h"
@@ -55,6 +56,9 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   udp::endpoint server_udp;
   net::steady_timer heartbeat{io};
   std::thread thread;
+  // Keeps run() going until close(); then the loop ends once every handler has
+  // completed (never io.stop(): a handler left queued would keep Impl alive).
+  std::optional<net::executor_work_guard<net::io_context::executor_type>> guard;
   pb::HelloReply hello;
 
   std::atomic<bool> open{false};
@@ -325,10 +329,8 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   net::async_connect(d.socket, endpoints, [&connected](const boost::system::error_code& e, const tcp::endpoint&) {
     connected.set_value(e);
   });
-  d.thread = std::thread([impl = c->impl_] {
-    auto guard = net::make_work_guard(impl->io);
-    impl->io.run();
-  });
+  d.guard.emplace(d.io.get_executor());
+  d.thread = std::thread([impl = c->impl_] { impl->io.run(); });
   const std::string where = options.host + ":" + std::to_string(options.port);
   if (connected_future.wait_for(options.timeout) != std::future_status::ready) {
     net::post(d.io, [impl = c->impl_] { boost::system::error_code e; impl->socket.close(e); });
@@ -373,7 +375,7 @@ void Client::close() {
   if (!impl_) return;
   net::post(impl_->io, [impl = impl_] {
     impl->fail("closed by the client");
-    impl->io.stop();
+    impl->guard.reset();
   });
   if (impl_->thread.joinable()) {
     if (impl_->thread.get_id() == std::this_thread::get_id()) {

@@ -36,7 +36,8 @@ std::vector<server::LibraryEntry> test_library() {
 }
 
 TestServer::TestServer(server::ServerConfig cfg, std::vector<server::LibraryEntry> library)
-    : server((cfg.port = 0, cfg.udp_port = 0, cfg.bind_address = "127.0.0.1", cfg), std::move(library)) {
+    : server((cfg.port = 0, cfg.udp_port = 0, cfg.bind_address = "127.0.0.1", cfg.max_catch_up = std::chrono::hours(1), cfg),
+             std::move(library)) {
   // Warnings and errors only: the tests provoke many closed connections.
   spdlog::set_level(spdlog::level::warn);
   server.start();

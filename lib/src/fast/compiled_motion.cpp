@@ -163,6 +163,8 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
   }
   out.rotation_offsets_.resize((out.rotation_offsets_.size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment, 0);
 
+  out.build_frame_program();
+
   if (out.all_roots_) {
     out.stored_positions_.resize(motion.frame_count * joints * 3);
     for (std::size_t f = 0; f < motion.frame_count; ++f) {
@@ -174,6 +176,90 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
     }
   }
   return out;
+}
+
+void CompiledMotion::build_frame_program() {
+  FrameProgram& prog = program_;
+  const std::size_t joints = plans_.size();
+  const auto key_of = [](const JointPlan& p) {
+    return static_cast<int>(p.rotation_count) * 64 + p.axes[0] * 16 + (p.rotation_count > 1 ? p.axes[1] : 0) * 4 +
+           (p.rotation_count > 2 ? p.axes[2] : 0);
+  };
+  // Groups of joints with the same axis order, in order of first appearance.
+  std::vector<int> keys;
+  std::vector<std::vector<std::size_t>> members;
+  for (std::size_t j = 0; j < joints; ++j) {
+    const JointPlan& p = plans_[j];
+    if (!p.owns_slot) continue;
+    const int key = key_of(p);
+    std::size_t g = 0;
+    while (g < keys.size() && keys[g] != key) ++g;
+    if (g == keys.size()) {
+      keys.push_back(key);
+      members.emplace_back();
+    }
+    members[g].push_back(j);
+  }
+  std::vector<std::int32_t> local_of(joints, -1);
+  std::size_t next = 0;
+  std::size_t used = 0;
+  for (std::size_t g = 0; g < keys.size(); ++g) {
+    const JointPlan& p0 = plans_[members[g].front()];
+    FrameProgram::Group group;
+    group.count = static_cast<std::uint8_t>(p0.rotation_count);
+    for (int r = 0; r < 3; ++r) group.axes[r] = r < p0.rotation_count ? p0.axes[r] : 0;
+    group.first = static_cast<std::uint32_t>(next);
+    group.size = static_cast<std::uint32_t>((members[g].size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment);
+    for (std::size_t i = 0; i < members[g].size(); ++i) local_of[members[g][i]] = static_cast<std::int32_t>(next + i);
+    used = next + members[g].size();
+    next += group.size;
+    prog.groups.push_back(group);
+  }
+  // The identity R: the last group's padding when it has some, else one more block.
+  if (used == next) next += kFrameAlignment;
+  prog.identity_local = next - 1;
+  prog.local_count = next;
+  prog.gather.assign(3 * next, 0);
+  const auto world_off = [](std::int32_t slot) { return (slot + 1) * 12; };  // kIdentitySlot -> 0
+  const std::int32_t scratch = world_off(static_cast<std::int32_t>(slot_count_));
+  const bool pre = convention_ == Convention::kPreRotation;
+  for (std::size_t j = 0; j < joints; ++j) {
+    const JointPlan& p = plans_[j];
+    FrameProgram::Step step;
+    step.from = world_off(p.parent_slot);
+    step.parent = p.parent == kNoParent ? 0 : (p.parent + 1) * 4;
+    step.pos = p.parent == kNoParent ? static_cast<std::int32_t>(joints + 1) * 4 : static_cast<std::int32_t>(j + 1) * 4;
+    if (p.parent == kNoParent) prog.roots.push_back(static_cast<std::int32_t>(j));
+    if (p.owns_slot) {
+      const auto i = static_cast<std::size_t>(local_of[j]);
+      for (int r = 0; r < p.rotation_count; ++r) {
+        prog.gather[static_cast<std::size_t>(r) * next + i] = p.rotation_stream[r] * static_cast<std::int32_t>(frame_stride_);
+      }
+      step.out = world_off(p.world_slot);
+      step.local = local_of[j];
+    } else {
+      step.out = scratch;
+      step.local = static_cast<std::int32_t>(prog.identity_local);
+      // A twin: pre-rotation positions use its twin's W_j = W_twin * I.
+      if (pre) step.from = world_off(p.world_slot);
+    }
+    prog.steps.push_back(step);
+  }
+  if (!all_roots_) {
+    prog.offsets.assign(joints * 4, 0.0f);
+    for (std::size_t j = 0; j < joints; ++j) {
+      const JointPlan& p = plans_[j];
+      for (int a = 0; a < 3; ++a) {
+        const auto dst = static_cast<std::int32_t>(j * 4) + a;
+        if (p.offset_stream[a] == kNoStream) {
+          prog.offsets[static_cast<std::size_t>(dst)] = p.offset[a];
+        } else {
+          prog.patches.push_back({dst, p.offset_stream[a]});
+        }
+      }
+    }
+  }
+  prog.workspace_floats = 15 * next + 12 * (slot_count_ + 2) + 4 * joints + 4 * (joints + 2);
 }
 
 std::size_t CompiledMotion::bytes_per_frame() const {

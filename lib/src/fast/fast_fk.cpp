@@ -121,7 +121,7 @@ Status check_frame_args(const CompiledMotion* m, std::size_t frame, std::span<fl
 }  // namespace
 
 std::size_t fk_workspace_size(const CompiledMotion& motion) {
-  return 16 + std::max(range_scratch(motion), frame_scratch(motion));
+  return 16 + std::max({range_scratch(motion), frame_scratch(motion), motion.frame_program().workspace_floats});
 }
 
 Status FkRangeJob::check() const {

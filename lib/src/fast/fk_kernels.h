@@ -30,8 +30,9 @@ struct FrameArgs {
   std::size_t padded_angles = 0;  // rotation channels rounded up to kFrameAlignment
 };
 
-// One frame with 4-float column vectors; false when the CPU's best target has
-// no 128-bit vectors (then the caller runs its scalar chain).
+// One frame by the motion's FrameProgram (4-float column vectors); false when
+// the CPU's best target has no 128-bit vectors (then the caller runs its
+// scalar chain).
 bool frame_kernel(const FrameArgs& args);
 
 // Runs the best kernel for this CPU over [begin, end).

@@ -346,7 +346,7 @@ Result<std::string> format_gmrb(const Motion& motion) {
   out += skel;
   out.resize(data_offset, '\0');
   if constexpr (std::endian::native == std::endian::little) {
-    out.append(reinterpret_cast<const char*>(motion.values.data()), motion.values.size() * sizeof(double));
+    if (!motion.values.empty()) out.append(reinterpret_cast<const char*>(motion.values.data()), motion.values.size() * sizeof(double));
   } else {
     for (double v : motion.values) put(out, v);
   }

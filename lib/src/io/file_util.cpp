@@ -11,6 +11,8 @@
 #include <cstring>
 #include <limits>
 
+#include "number_format.h"
+
 namespace gmr {
 namespace fs = std::filesystem;
 
@@ -118,9 +120,8 @@ Status write_file_atomic(const fs::path& path, std::string_view bytes) {
 }
 
 std::string format_double(double v) {
-  char buf[64];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, r.ptr);
+  char buf[32];
+  return std::string(buf, detail::format_shortest(buf, v));
 }
 
 }  // namespace gmr

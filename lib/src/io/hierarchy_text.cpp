@@ -1,5 +1,7 @@
 #include "hierarchy_text.h"
 
+#include "number_format.h"
+
 #include <algorithm>
 #include <array>
 #include <charconv>
@@ -630,8 +632,7 @@ Result<Motion> Parser::read_motion() {
 
 void append_double(std::string& out, double v) {
   char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  out.append(buf, r.ptr);
+  out.append(buf, format_shortest(buf, v));
 }
 
 void indent(std::string& out, int depth) { out.append(static_cast<std::size_t>(depth), '\t'); }
@@ -771,14 +772,14 @@ Result<std::string> format_hierarchy_text(const Motion& motion, Dialect dialect)
     for (std::size_t c = 0; c < sk.joint(j).channels.size(); ++c) columns.push_back(off + c);
   }
   // One row at a time into a local buffer (a shortest double is at most 24
-  // characters), then one append: the row loop is the writer's hot path.
-  std::vector<char> line(columns.size() * 25 + 1);
+  // characters; format_shortest wants 32 bytes), then one append: the row
+  // loop is the writer's hot path.
+  std::vector<char> line(columns.size() * 25 + 32);
   for (std::size_t f = 0; f < motion.frame_count; ++f) {
     const auto row = motion.frame(f);
     char* p = line.data();
-    char* const end = line.data() + line.size();
     for (std::size_t c = 0; c < columns.size(); ++c) {
-      p = std::to_chars(p, end, row[columns[c]]).ptr;
+      p = format_shortest(p, row[columns[c]]);
       *p++ = ' ';
     }
     if (p != line.data()) --p;  // no trailing space

@@ -3,6 +3,8 @@
 #include <charconv>
 #include <string>
 
+#include "number_format.h"
+
 namespace gmr {
 namespace {
 
@@ -21,8 +23,7 @@ std::string csv_field(std::string_view s) {
 void append_number(std::string& out, double v) {
   if (v == 0.0) v = 0.0;  // "-0" and "0" are the same position: print one form
   char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  out.append(buf, r.ptr);
+  out.append(buf, detail::format_shortest(buf, v));
 }
 
 }  // namespace

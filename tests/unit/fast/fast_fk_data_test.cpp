@@ -46,14 +46,30 @@ void expect_fast_matches(const Motion& m, const Skeleton& want_skeleton, const s
     const auto got = by_names(m.skeleton, fast_positions(*cm, 0, m.frame_count, layout), want_skeleton);
     EXPECT_POSITIONS_NEAR(want_skeleton, got, want, tolerance);
   }
+  // The one-frame kernel (its own per-motion program), positions only and
+  // with orientations (which computes every world rotation).
+  const std::size_t n = cm->joint_count();
+  std::vector<float> ws(fk_workspace_size(*cm)), one(n * 3), ori(n * 9);
+  for (bool with_orientations : {false, true}) {
+    std::vector<Eigen::Vector3d> frames(m.frame_count * n);
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      const FkFrameJob job{.motion = &*cm, .frame = f, .out_positions = one,
+                           .out_orientations = with_orientations ? std::span<float>(ori) : std::span<float>(),
+                           .workspace = ws};
+      ASSERT_TRUE(job.run());
+      for (std::size_t j = 0; j < n; ++j) frames[f * n + j] = Eigen::Vector3d(one[3 * j], one[3 * j + 1], one[3 * j + 2]);
+    }
+    SCOPED_TRACE(with_orientations ? "FkFrameJob with orientations" : "FkFrameJob");
+    EXPECT_POSITIONS_NEAR(want_skeleton, by_names(m.skeleton, frames, want_skeleton), want, tolerance);
+  }
 }
 
-class EveryBvh : public ::testing::Test {
+class FastEveryBvh : public ::testing::Test {
  protected:
   void SetUp() override { GMR_REQUIRE_DATA(); }
 };
 
-TEST_F(EveryBvh, FastMatchesReferenceAsReadAndAsGmr) {
+TEST_F(FastEveryBvh, FastMatchesReferenceAsReadAndAsGmr) {
   const auto files = test::data_files("bvh", ".bvh");
   ASSERT_FALSE(files.empty());
   std::mt19937 rng(20120101);
@@ -105,7 +121,7 @@ TEST_F(EveryBvh, FastMatchesReferenceAsReadAndAsGmr) {
   }
 }
 
-TEST_F(EveryBvh, GmrTwinsShareOneRotation) {
+TEST_F(FastEveryBvh, GmrTwinsShareOneRotation) {
   // The BVH -> GMR conversion copies a joint's rotation into each of its
   // children; the compiled form computes each copy once, so the one-root GMR
   // needs no more rotations than the BVH.
@@ -122,7 +138,7 @@ TEST_F(EveryBvh, GmrTwinsShareOneRotation) {
   EXPECT_GT(shared, 0u);
 }
 
-TEST_F(EveryBvh, SingleFrameEqualsRangeOnCmu) {
+TEST_F(FastEveryBvh, SingleFrameEqualsRangeOnCmu) {
   auto bvh = read_bvh(test::data_file("bvh/cmu/01_01.bvh"));
   ASSERT_TRUE(bvh.ok()) << bvh.error().to_string();
   auto gmr = to_pre_rotation(*bvh);

@@ -21,7 +21,7 @@ using test::fast_positions;
 using test::random_motion;
 using test::reference_positions;
 
-TEST(MatchesReference, GeneratedMotions) {
+TEST(FastMatchesReference, GeneratedMotions) {
   for (int seed = 0; seed < 40; ++seed) {
     for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
       const Motion m = random_motion(static_cast<unsigned>(seed), conv, 37 + seed);
@@ -34,7 +34,7 @@ TEST(MatchesReference, GeneratedMotions) {
   }
 }
 
-TEST(LaneTails, EveryRangeOfAShortMotion) {
+TEST(FastLaneTails, EveryRangeOfAShortMotion) {
   // Frame counts and ranges that are not multiples of 4, 8 or 16 lanes, and
   // ranges that start in the middle of a lane block.
   const Motion m = random_motion(7, Convention::kPostRotation, 35);
@@ -53,7 +53,7 @@ TEST(LaneTails, EveryRangeOfAShortMotion) {
   }
 }
 
-TEST(SingleFrame, EqualsRange) {
+TEST(FastSingleFrame, EqualsRange) {
   for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
     const Motion m = random_motion(11, conv, 21);
     auto cm = CompiledMotion::compile(m);
@@ -78,7 +78,71 @@ TEST(SingleFrame, EqualsRange) {
   }
 }
 
-TEST(Orientations, MatchReference) {
+TEST(FastSingleFrame, TwinsJointsWithoutRotationAndPositionChannels) {
+  // Siblings with identical rotation channels (twins: one shared rotation),
+  // joints without rotation channels, and position channels on a non-root,
+  // in both conventions: FkFrameJob's per-motion program against compute_frame.
+  using enum ChannelType;
+  auto joint = [](const char* name, int parent, Eigen::Vector3d offset, std::vector<ChannelType> channels) {
+    Joint j;
+    j.name = name;
+    j.parent = parent;
+    j.offset = offset;
+    j.channels = std::move(channels);
+    return j;
+  };
+  std::vector<Joint> joints;
+  joints.push_back(joint("root", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
+  joints.push_back(joint("a", 0, {0, 5, 0}, {kZrotation, kXrotation, kYrotation}));
+  joints.push_back(joint("b", 0, {3, 0, 1}, {kZrotation, kXrotation, kYrotation}));  // twin of a
+  joints.push_back(joint("c", 2, {0, 0, 4}, {kXrotation}));
+  joints.push_back(joint("d", 2, {2, 0, 0}, {}));
+  joints.push_back(joint("e", 1, {0, 0, 0}, {kYposition, kZrotation, kYrotation}));
+  joints.push_back(joint("f", 5, {0, 0, 0}, {}));  // zero offset, no channels
+  joints.push_back(joint("g", 6, {1, 1, 1}, {kXrotation, kZrotation}));
+  auto skeleton = Skeleton::create(std::move(joints));
+  ASSERT_TRUE(skeleton.ok()) << skeleton.error().to_string();
+  Motion m;
+  m.skeleton = std::move(*skeleton);
+  m.frame_time = 1.0 / 30.0;
+  m.frame_count = 9;
+  m.values.resize(m.frame_count * m.stride());
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<double> value(-200.0, 200.0);
+  for (double& v : m.values) v = value(rng);
+  const std::size_t a0 = static_cast<std::size_t>(m.skeleton.channel_offset(1));
+  const std::size_t b0 = static_cast<std::size_t>(m.skeleton.channel_offset(2));
+  for (std::size_t f = 0; f < m.frame_count; ++f) {
+    for (std::size_t i = 0; i < 3; ++i) m.values[f * m.stride() + b0 + i] = m.values[f * m.stride() + a0 + i];
+  }
+  for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
+    m.convention = conv;
+    auto cm = CompiledMotion::compile(m);
+    ASSERT_TRUE(cm.ok()) << cm.error().to_string();
+    EXPECT_EQ(cm->slot_count(), 5u);  // root, a (= b), c, e, g
+    const std::size_t n = m.skeleton.size();
+    std::vector<float> ws(fk_workspace_size(*cm)), pos(n * 3), ori(n * 9);
+    std::vector<Eigen::Vector3d> p(n);
+    std::vector<Eigen::Matrix3d> w(n);
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      compute_frame(m, f, p, w);
+      for (bool with_ori : {false, true}) {
+        ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = pos,
+                                .out_orientations = with_ori ? std::span<float>(ori) : std::span<float>(),
+                                .workspace = ws}.run()));
+        for (std::size_t j = 0; j < n; ++j) {
+          for (int a = 0; a < 3; ++a) EXPECT_NEAR(pos[3 * j + static_cast<std::size_t>(a)], p[j][a], 1e-4) << j;
+          if (!with_ori) continue;
+          for (int r = 0; r < 3; ++r) {
+            for (int c = 0; c < 3; ++c) EXPECT_NEAR(ori[9 * j + static_cast<std::size_t>(3 * r + c)], w[j](r, c), 1e-5) << j;
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(FastOrientations, MatchReference) {
   for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
     const Motion m = random_motion(3, conv, 19);
     auto cm = CompiledMotion::compile(m);
@@ -107,7 +171,7 @@ TEST(Orientations, MatchReference) {
   }
 }
 
-TEST(JointMajor, MatchesFrameMajorWithStride) {
+TEST(FastJointMajor, MatchesFrameMajorWithStride) {
   const Motion m = random_motion(5, Convention::kPreRotation, 45);
   auto cm = CompiledMotion::compile(m);
   ASSERT_TRUE(cm.ok());
@@ -125,7 +189,7 @@ TEST(JointMajor, MatchesFrameMajorWithStride) {
   }
 }
 
-TEST(Empty, MotionWithoutFramesOrJoints) {
+TEST(FastEmpty, MotionWithoutFramesOrJoints) {
   Motion m = random_motion(1, Convention::kPostRotation, 0);
   auto cm = CompiledMotion::compile(m);
   ASSERT_TRUE(cm.ok());
@@ -142,7 +206,7 @@ TEST(Empty, MotionWithoutFramesOrJoints) {
   EXPECT_TRUE((FkRangeJob{.motion = &*empty, .workspace = ws2}.run()));
 }
 
-TEST(JobValidity, RangeJob) {
+TEST(FastJobValidity, RangeJob) {
   const Motion m = random_motion(2, Convention::kPostRotation, 20);
   auto cm = CompiledMotion::compile(m);
   ASSERT_TRUE(cm.ok());
@@ -180,7 +244,7 @@ TEST(JobValidity, RangeJob) {
   EXPECT_FALSE(job.validate());
 }
 
-TEST(JobValidity, FrameJob) {
+TEST(FastJobValidity, FrameJob) {
   const Motion m = random_motion(2, Convention::kPreRotation, 20);
   auto cm = CompiledMotion::compile(m);
   ASSERT_TRUE(cm.ok());
@@ -206,7 +270,7 @@ TEST(JobValidity, FrameJob) {
   EXPECT_FALSE(scalar_float_frame(*cm, 20, pos, ws));
 }
 
-TEST(Compile, RejectsInvalidMotion) {
+TEST(FastCompile, RejectsInvalidMotion) {
   Motion m = random_motion(4, Convention::kPostRotation, 10);
   m.values.pop_back();
   EXPECT_FALSE(CompiledMotion::compile(m).ok());
@@ -215,7 +279,7 @@ TEST(Compile, RejectsInvalidMotion) {
   EXPECT_FALSE(CompiledMotion::compile(m).ok());
 }
 
-TEST(Compile, LargeAnglesKeepPrecision) {
+TEST(FastCompile, LargeAnglesKeepPrecision) {
   // 7200.5 degrees is 0.5 degrees: reduced in double before rounding to float.
   Motion m = random_motion(9, Convention::kPostRotation, 30);
   for (std::size_t i = 0; i < m.values.size(); ++i) {
@@ -227,7 +291,7 @@ TEST(Compile, LargeAnglesKeepPrecision) {
                         1e-5 * skeleton_size(m));
 }
 
-TEST(AllRoots, StoredPositionsAreTheOutput) {
+TEST(FastAllRoots, StoredPositionsAreTheOutput) {
   // Every joint a root with position channels: the compiled form stores the
   // answer and the range job is a copy of it.
   Motion m = random_motion(6, Convention::kPreRotation, 33, /*all_roots=*/true);
@@ -247,7 +311,7 @@ TEST(AllRoots, StoredPositionsAreTheOutput) {
                         1e-6 * skeleton_size(m));
 }
 
-TEST(Dispatch, EveryCompiledTargetMatchesReference) {
+TEST(FastDispatch, EveryCompiledTargetMatchesReference) {
   // The dispatcher normally picks the widest target; force each one this CPU
   // runs (scalar, SSE4, AVX2, AVX-512, ...) so all of them are tested.
   std::vector<std::string> seen;
@@ -280,7 +344,7 @@ TEST(Dispatch, EveryCompiledTargetMatchesReference) {
   RecordProperty("targets", all);
 }
 
-TEST(Dispatch, NamesATarget) {
+TEST(FastDispatch, NamesATarget) {
   EXPECT_NE(std::string(simd_target_name()), "");
   const std::size_t lanes = simd_lanes();
   EXPECT_TRUE(lanes == 1 || lanes == 4 || lanes == 8 || lanes == 16) << lanes;

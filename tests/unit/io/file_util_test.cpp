@@ -6,11 +6,15 @@
 #include <unistd.h>
 
 #include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <limits>
 #include <cstdlib>
 #include <filesystem>
 #include <random>
 
 #include "gmr/io/bvh.h"
+#include "test_data.h"
 
 namespace gmr {
 namespace {
@@ -97,6 +101,45 @@ TEST(WriteFileAtomic, KeepsPermissionsOfTheReplacedFile) {
   fs::permissions(p, fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
   ASSERT_TRUE(write_file_atomic(p, "b").ok());
   EXPECT_EQ(fs::status(p).permissions(), fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
+}
+
+std::string to_chars_text(double v) {
+  char buf[64];
+  return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+}
+
+// format_double has a fast path; it must write what std::to_chars writes.
+TEST(FormatDouble, SameBytesAsToChars) {
+  std::vector<double> values = {0.0, -0.0, 1.0, -1.0, 10, 100, 1200000, 1e15, 999999999999999.0, 1e16, 0.001, 0.0001,
+                                0.000123, 1e-5, 1.5e-6, 1e-6, 0.1, 0.3, 0.30000000000000004, 123456.789, 1.0 / 3.0,
+                                2.5e-7, 12345678901234.5, 1234567890123.45, 0.5, 5e-324, 1.7976931348623157e308,
+                                std::numeric_limits<double>::infinity(), std::nan("")};
+  std::mt19937_64 rng(99);
+  for (int i = 0; i < 200000; ++i) {
+    // Short decimals of every length and scale, as motion files hold them.
+    const int digits = 1 + static_cast<int>(rng() % 16);
+    std::uint64_t m = rng() % 10000000000000000ull;
+    for (int d = digits; d < 16; ++d) m /= 10;
+    const int k = static_cast<int>(rng() % 20);
+    double v = static_cast<double>(m);
+    for (int j = 0; j < k; ++j) v /= 10;
+    values.push_back(rng() % 2 ? v : -v);
+    values.push_back(std::ldexp(static_cast<double>(rng() % (1ull << 53)), static_cast<int>(rng() % 120) - 80));
+    char text[32];
+    std::snprintf(text, sizeof text, "%.*f", static_cast<int>(rng() % 9), std::ldexp(static_cast<double>(rng() % 100000), -10));
+    values.push_back(std::strtod(text, nullptr));
+  }
+  for (double v : values) ASSERT_EQ(format_double(v), to_chars_text(v)) << std::hexfloat << v;
+}
+
+TEST(FormatDouble, SameBytesAsToCharsOnTheCorpus) {
+  GMR_REQUIRE_DATA();
+  for (const auto& path : test::data_files("bvh", ".bvh")) {
+    const Motion m = read_bvh(path).value();
+    for (double v : m.values) ASSERT_EQ(format_double(v), to_chars_text(v)) << path << ": " << std::hexfloat << v;
+    for (const Joint& j : m.skeleton.joints())
+      for (int i = 0; i < 3; ++i) ASSERT_EQ(format_double(j.offset[i]), to_chars_text(j.offset[i])) << path;
+  }
 }
 
 TEST(FormatDouble, ShortestRoundTrip) {

@@ -4,7 +4,11 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+#include <filesystem>
+
 #include "gmr/io/bvh.h"
+#include "gmr/io/file_util.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "io_test_util.h"
 #include "test_data.h"
@@ -101,6 +105,23 @@ TEST(GmrFormat, ReadsTheDocumentedExample) {
   // Neck is a root: world = [R | t], t its position channels.
   EXPECT_TRUE(p[4].isApprox(Eigen::Vector3d(0, 0, 0), 1e-12));
   EXPECT_TRUE(p[5].isApprox(axis_rotation(Axis::kZ, 20) * Eigen::Vector3d(0, 3, 0), 1e-12));
+}
+
+// docs/gmr-format.md shows the same example: keep the two in step.
+TEST(GmrFormat, DocumentationExampleIsThisOne) {
+  const char* src = std::getenv("GMR_SOURCE_DIR");
+  const std::filesystem::path doc = std::filesystem::path(src != nullptr ? src : ".") / "docs" / "gmr-format.md";
+  auto text = read_file(doc);
+  ASSERT_TRUE(text.ok()) << text.error().to_string();
+  const auto begin = text->find("```\nGMR 1\n");
+  ASSERT_NE(begin, std::string::npos);
+  const auto end = text->find("```", begin + 3);
+  ASSERT_NE(end, std::string::npos);
+  const Motion from_doc = parse_ok(std::string_view(*text).substr(begin + 4, end - begin - 4));
+  const Motion here = parse_ok(kExample);
+  EXPECT_EQ(from_doc.values, here.values);
+  EXPECT_EQ(from_doc.frame_time, here.frame_time);
+  EXPECT_EQ(format_gmr(from_doc).value(), format_gmr(here).value());
 }
 
 TEST(GmrFormat, WriteReadIsExact) {

@@ -45,7 +45,7 @@ TEST(LoadMotion, ByExtensionCaseInsensitive) {
   EXPECT_EQ(g->convention, Convention::kPreRotation);
 }
 
-TEST(LoadMotion, UnknownExtensionsAndGmrb) {
+TEST(LoadMotion, UnknownExtensionsAndMissingFiles) {
   auto r = load_motion("x.txt");
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().file, "x.txt");

@@ -61,6 +61,54 @@ struct JointPlan {
   bool zero_offset = false;                      // t_j is statically zero
 };
 
+// The one-frame kernel's program, built once by compile() so that FkFrameJob
+// runs flat, branch-free loops (internal to the fast path; the layout may change).
+//
+// Rotating joints are numbered by "local index" (grouped by axis order, each
+// group padded to kFrameAlignment; local_count in all). Per frame the kernel
+//   1. copies angle r of every local index into a contiguous role-major
+//      array (from gather[r * local_count + i] = stream offset relative to
+//      stream 0; padding reads stream 0), and runs one SIMD sincos over the
+//      3 * local_count angles;
+//   2. per group, computes the local rotations R_j with straight-line code for
+//      the group's axis order, SIMD across joints (entry 3 row + col of local
+//      index i at local[(3 row + col) * local_count + i]);
+//   3. per step (one per joint, in joint order), W_j = W_s R_j and
+//      P_j = P_p + W t_j, with W = W_j (pre-rotation) or W_s (post), all in
+//      registers. No per-joint branches: slot 0 of the world buffer is the identity (the
+//      roots' W_s), roots' positions (P_j = t_j) are written before the steps
+//      and their steps store P_j to a scratch entry, a joint without
+//      rotation channels uses an identity R_j and writes a scratch slot, and a
+//      twin (pre-rotation) starts from its twin's slot.
+struct FrameProgram {
+  struct Group {
+    std::uint8_t count = 0;        // rotation channels: 1..3
+    std::uint8_t axes[3] = {0, 0, 0};
+    std::uint32_t first = 0;       // first local index (multiple of kFrameAlignment)
+    std::uint32_t size = 0;        // local indices, padded to kFrameAlignment
+  };
+  struct Step {
+    std::int32_t from = 0;    // float offset of W_s in the world buffer ((slot + 1) * 12; identity: 0)
+    std::int32_t out = 0;     // float offset W_s R_j is stored to (scratch slot for joints without rotation)
+    std::int32_t local = 0;   // local index of R_j (identity_local: none)
+    std::int32_t parent = 0;  // float offset of P_p in the position buffer ((parent + 1) * 4; roots: 0)
+    std::int32_t pos = 0;     // float offset P_j is stored to ((j + 1) * 4; roots: a scratch entry)
+  };
+  struct Patch {
+    std::int32_t dst = 0;     // float index in the offsets buffer (joint * 4 + axis)
+    std::int32_t stream = 0;  // stream supplying it
+  };
+  std::size_t local_count = 0;
+  std::vector<std::int32_t> gather;    // 3 * local_count stream offsets (stream * frame_stride)
+  std::vector<Group> groups;
+  std::size_t identity_local = 0;      // local index whose R is set to the identity each frame
+  std::vector<Step> steps;             // one per joint
+  std::vector<std::int32_t> roots;     // root joints: P_j = t_j, written before the steps
+  std::vector<float> offsets;          // joints * 4: static t_j (stream components: 0, patched per frame)
+  std::vector<Patch> patches;          // offset components that come from position channels
+  std::size_t workspace_floats = 0;    // scratch the kernel needs (64-byte aligned start)
+};
+
 class CompiledMotion {
  public:
   CompiledMotion() = default;
@@ -90,6 +138,9 @@ class CompiledMotion {
   // kFrameAlignment (a frame's angles are one gather).
   std::span<const std::int32_t> rotation_gather_offsets() const { return rotation_offsets_; }
 
+  // The one-frame kernel's program (see FrameProgram).
+  const FrameProgram& frame_program() const { return program_; }
+
   // True when every joint is a root.
   bool all_roots() const { return all_roots_; }
   // All roots: the positions of every frame, frame-major (frame, joint, xyz),
@@ -102,6 +153,8 @@ class CompiledMotion {
   std::size_t bytes() const;
 
  private:
+  void build_frame_program();
+
   struct AlignedFree {
     void operator()(float* p) const;
   };
@@ -116,6 +169,7 @@ class CompiledMotion {
   std::unique_ptr<float[], AlignedFree> streams_;
   std::vector<float> stored_positions_;
   std::vector<std::int32_t> rotation_offsets_;
+  FrameProgram program_;
 };
 
 }  // namespace gmr::fast

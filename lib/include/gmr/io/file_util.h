@@ -21,7 +21,8 @@ Result<std::string> read_file(const std::filesystem::path& path);
 // symbolic link at `path` is replaced, not written through.
 Status write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
 
-// Shortest decimal text that reads back to exactly `v` (std::to_chars), e.g.
+// Shortest decimal text that reads back to exactly `v`: the same bytes as
+// std::to_chars(first, last, v), only faster for short decimals. E.g.
 // "0.1", "-6.101614", "1e-07", "0.30000000000000004".
 std::string format_double(double v);
 

@@ -29,12 +29,20 @@ struct ServerConfig {
   // reading that connection's requests until they drain (frames are not counted:
   // they are latest-frame-wins, one per subscription).
   std::size_t max_reply_queue_bytes = 2 * static_cast<std::size_t>(wire::kDefaultMaxMessageBytes);
+  // Frames waiting per subscription while a write is in flight; a newer frame
+  // then replaces the oldest (latest wins) and the drop is counted. Small: it
+  // only absorbs I/O-thread jitter, the kernel buffers absorb the rest.
+  std::size_t frames_per_subscription = 4;
   // UDP datagrams handed to the kernel and not yet sent, per connection; above
   // this a frame is dropped and counted.
   std::size_t max_udp_datagrams_in_flight = 512;
   // SO_SNDBUF for accepted sockets; 0 keeps the system default. Tests shrink it
   // so a client that never reads fills it quickly.
   int socket_send_buffer = 0;
+  // How far a stream may fall behind its schedule (a stalled server) and
+  // still catch up frame by frame; beyond it playback jumps to the frame due
+  // now. Tests raise it so that a slow (sanitizer) build still sends every frame.
+  std::chrono::milliseconds max_catch_up{250};
   // How long a graceful stop waits for replies to drain before closing.
   std::chrono::milliseconds shutdown_grace{2000};
 };
