@@ -23,10 +23,11 @@ run: build
 test-unit: build
 	@cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 
-# The readers under AddressSanitizer and UndefinedBehaviorSanitizer.
+# The core, readers, operations and server tests under AddressSanitizer and
+# UndefinedBehaviorSanitizer (Debug: slow paths check fewer frames there).
 test-sanitize: setup
 	@cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Debug -DGMR_SANITIZE=ON \
-	  -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_NET=OFF -DGMR_BUILD_TOOLS=OFF >/dev/null
+	  -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_NET=ON -DGMR_BUILD_TOOLS=OFF >/dev/null
 	@cmake --build $(ASAN_BUILD) -j $(JOBS) --target gmr_sanitize_tests
 	@cd $(ASAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize
 

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   using namespace gmr::server;
   CLI::App app{"gmr-server: streams GMR motions over TCP and UDP"};
   ServerConfig cfg;
+  cfg.port = 7400;  // the port the gmr command, gmr-load and docker/ expect by default
   std::string library_dir;
   std::string log_level = "info";
   std::string port_file;

@@ -1,4 +1,4 @@
-// gmr bench: the performance experiments of issue 5.
+// gmr bench: the performance experiments (the paper's Figure 4, FK timings).
 //
 //   gmr bench fk FILE [--json] [--repeat N]
 //       ns per frame of each FK path on one motion (medians of N timed runs)
@@ -395,7 +395,7 @@ void run_figure4(const Figure4Options& o) {
 }  // namespace
 
 void add_bench_commands(CLI::App& app) {
-  CLI::App* bench = app.add_subcommand("bench", "Performance experiments (issue 5): fk, figure4");
+  CLI::App* bench = app.add_subcommand("bench", "Performance experiments: fk, figure4 (docs/performance.md)");
   bench->require_subcommand(1);
   {
     auto o = std::make_shared<FkOptions>();

@@ -2,8 +2,6 @@
 // and the one-line error for broken files.
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <Eigen/Core>
 #include <cstdio>
@@ -16,47 +14,17 @@
 #include "gmr/io/asf_amc.h"
 #include "gmr/io/file_util.h"
 #include "gmr/kinematics/forward_kinematics.h"
+#include "cli_test_util.h"
 #include "test_data.h"
 
 namespace gmr {
 namespace {
 namespace fs = std::filesystem;
 
-struct Outcome {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
+using Outcome = test::CliOutcome;
+using test::shell_quote;
 
-std::string sh_quote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-class CliAsf : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("gmr_cli_asf_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  Outcome gmr(const std::string& args) {
-    const fs::path out = dir_ / "stdout", err = dir_ / "stderr";
-    const std::string cmd =
-        sh_quote(GMR_CLI_PATH) + " " + args + " >" + sh_quote(out.string()) + " 2>" + sh_quote(err.string());
-    const int raw = std::system(cmd.c_str());
-    Outcome r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = read_file(out).value();
-    r.err = read_file(err).value();
-    return r;
-  }
-  fs::path dir_;
-};
+class CliAsf : public test::CliTest {};
 
 // Positions of a `gmr positions` CSV, in row order.
 std::vector<Eigen::Vector3d> csv_positions(const std::string& csv) {
@@ -77,7 +45,7 @@ const std::string kAmc = "asfamc/09/09_06-run.amc";
 
 TEST_F(CliAsf, InfoAndPositions) {
   GMR_REQUIRE_DATA();
-  const std::string args = sh_quote(test::data_file(kAmc).string()) + " --asf " + sh_quote(test::data_file(kAsf).string());
+  const std::string args = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
   const Outcome info = gmr("info " + args);
   ASSERT_EQ(info.status, 0) << info.err;
   EXPECT_NE(info.out.find("141"), std::string::npos) << info.out;
@@ -97,18 +65,18 @@ TEST_F(CliAsf, InfoAndPositions) {
 
 TEST_F(CliAsf, ConvertToGmrAndToAmc) {
   GMR_REQUIRE_DATA();
-  const std::string in = sh_quote(test::data_file(kAmc).string()) + " --asf " + sh_quote(test::data_file(kAsf).string());
+  const std::string in = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
   const std::string gmr_out = (dir_ / "run.gmr").string();
   const std::string amc_out = (dir_ / "run.amc").string();
-  ASSERT_EQ(gmr("convert " + in + " " + sh_quote(gmr_out)).status, 0);
-  const Outcome to_amc = gmr("convert " + in + " " + sh_quote(amc_out));
+  ASSERT_EQ(gmr("convert " + in + " " + shell_quote(gmr_out)).status, 0);
+  const Outcome to_amc = gmr("convert " + in + " " + shell_quote(amc_out));
   ASSERT_EQ(to_amc.status, 0) << to_amc.err;
   EXPECT_TRUE(fs::exists(dir_ / "run.asf"));  // the skeleton goes beside the motion
 
   const auto ref = csv_positions(gmr("positions " + in).out);
-  const auto from_gmr = csv_positions(gmr("positions " + sh_quote(gmr_out)).out);
+  const auto from_gmr = csv_positions(gmr("positions " + shell_quote(gmr_out)).out);
   const auto from_amc =
-      csv_positions(gmr("positions " + sh_quote(amc_out) + " --asf " + sh_quote((dir_ / "run.asf").string())).out);
+      csv_positions(gmr("positions " + shell_quote(amc_out) + " --asf " + shell_quote((dir_ / "run.asf").string())).out);
   ASSERT_EQ(from_gmr.size(), ref.size());
   ASSERT_EQ(from_amc.size(), ref.size());
   for (std::size_t i = 0; i < ref.size(); ++i) {
@@ -122,10 +90,10 @@ TEST_F(CliAsf, BrokenFilesGiveOneLocatedLine) {
   const std::string amc = test::data_file("malformed/TRUNC_07_05-walk_mid_frame.amc").string();
   const std::string asf = test::data_file("asfamc/07/07-walk.asf").string();
   const std::string bad_asf = test::data_file("malformed/TRUNC_07-walk_in_bonedata.asf").string();
-  const Outcome a = gmr("info " + sh_quote(amc) + " --asf " + sh_quote(asf));
+  const Outcome a = gmr("info " + shell_quote(amc) + " --asf " + shell_quote(asf));
   EXPECT_EQ(a.status, 1);
   EXPECT_EQ(a.err, "gmr: " + amc + ":2345:26: expected 6 values for bone 'root' (order TX TY TZ RX RY RZ), found 3\n");
-  const Outcome b = gmr("positions " + sh_quote(amc) + " --asf " + sh_quote(bad_asf));
+  const Outcome b = gmr("positions " + shell_quote(amc) + " --asf " + shell_quote(bad_asf));
   EXPECT_EQ(b.status, 1);
   EXPECT_EQ(b.err, "gmr: " + bad_asf + ":147:12: expected 1 number after 'length', found 0\n");
   EXPECT_TRUE(b.out.empty());

@@ -2,8 +2,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <Eigen/Core>
 #include <cstdio>
@@ -14,6 +12,7 @@
 #include <string>
 
 #include "gmr/io/file_util.h"
+#include "cli_test_util.h"
 #include "test_data.h"
 
 namespace gmr {
@@ -22,41 +21,10 @@ namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
-struct Outcome {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
+using Outcome = test::CliOutcome;
+using test::shell_quote;
 
-std::string quoted(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-class CliFiles : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("gmr_cli_test_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  // Runs `gmr ARGS`, capturing stdout, stderr and the exit status.
-  Outcome gmr(const std::string& args) {
-    const fs::path out = dir_ / "stdout", err = dir_ / "stderr";
-    const std::string cmd = quoted(GMR_CLI_PATH) + " " + args + " >" + quoted(out.string()) + " 2>" + quoted(err.string());
-    const int raw = std::system(cmd.c_str());
-    Outcome r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = read_file(out).value();
-    r.err = read_file(err).value();
-    return r;
-  }
-  fs::path dir_;
-};
+class CliFiles : public test::CliTest {};
 
 // "frame,joint" -> position, from `gmr positions` output (names without quotes).
 std::map<std::string, Eigen::Vector3d> parse_csv(const std::string& csv) {
@@ -77,7 +45,7 @@ std::size_t lines(const std::string& s) { return static_cast<std::size_t>(std::c
 
 TEST_F(CliFiles, PositionsOfARealFile) {
   GMR_REQUIRE_DATA();
-  const std::string file = quoted(test::data_file("bvh/cmu/02_01.bvh").string());
+  const std::string file = shell_quote(test::data_file("bvh/cmu/02_01.bvh").string());
   const Outcome all = gmr("positions " + file);
   ASSERT_EQ(all.status, 0) << all.err;
   EXPECT_THAT(all.out, StartsWith("frame,joint,x,y,z\n0,Hips,10.4194,16.7048,-30.1003\n"));
@@ -99,13 +67,13 @@ TEST_F(CliFiles, MalformedFileGivesOneLineWithTheLocation) {
   GMR_REQUIRE_DATA();
   const std::string path = test::data_file("malformed/TRUNC_02_01_mid_frame.bvh").string();
   for (const char* cmd : {"positions", "info"}) {
-    const Outcome r = gmr(std::string(cmd) + " " + quoted(path));
+    const Outcome r = gmr(std::string(cmd) + " " + shell_quote(path));
     EXPECT_EQ(r.status, 1) << cmd;
     EXPECT_EQ(lines(r.err), 1u) << r.err;
     EXPECT_THAT(r.err, StartsWith("gmr: " + path + ":317:375: file ends in frame 129")) << r.err;
     EXPECT_TRUE(r.out.empty() || std::string(cmd) == "info");
   }
-  const Outcome fused = gmr("info " + quoted(test::data_file("malformed/TRUNC_02_01_in_hierarchy.bvh").string()));
+  const Outcome fused = gmr("info " + shell_quote(test::data_file("malformed/TRUNC_02_01_in_hierarchy.bvh").string()));
   EXPECT_EQ(fused.status, 1);
   EXPECT_EQ(lines(fused.err), 1u);
   EXPECT_THAT(fused.err, HasSubstr("TRUNC_02_01_in_hierarchy.bvh:"));
@@ -113,7 +81,7 @@ TEST_F(CliFiles, MalformedFileGivesOneLineWithTheLocation) {
 
 TEST_F(CliFiles, WarningsGoToStderrAndTheCommandSucceeds) {
   GMR_REQUIRE_DATA();
-  const Outcome r = gmr("info " + quoted(test::data_file("malformed/Boxing_Toes_frames_off_by_one.bvh").string()));
+  const Outcome r = gmr("info " + shell_quote(test::data_file("malformed/Boxing_Toes_frames_off_by_one.bvh").string()));
   EXPECT_EQ(r.status, 0);
   EXPECT_THAT(r.out, HasSubstr("frames:      3070\n"));
   EXPECT_THAT(r.err, HasSubstr("gmr: warning: "));
@@ -122,7 +90,7 @@ TEST_F(CliFiles, WarningsGoToStderrAndTheCommandSucceeds) {
 
 TEST_F(CliFiles, Info) {
   GMR_REQUIRE_DATA();
-  const Outcome r = gmr("info " + quoted(test::data_file("bvh/cmu/02_01.bvh").string()));
+  const Outcome r = gmr("info " + shell_quote(test::data_file("bvh/cmu/02_01.bvh").string()));
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("joints:      38"));
   EXPECT_THAT(r.out, HasSubstr("roots:       1 (Hips)"));
@@ -135,9 +103,9 @@ TEST_F(CliFiles, Info) {
 
 TEST_F(CliFiles, ConvertBvhToGmrAndBackKeepsPositions) {
   GMR_REQUIRE_DATA();
-  const std::string src = quoted(test::data_file("bvh/cmu/02_01.bvh").string());
-  const std::string gmr_file = quoted((dir_ / "walk.gmr").string());
-  const std::string bvh_file = quoted((dir_ / "walk.bvh").string());
+  const std::string src = shell_quote(test::data_file("bvh/cmu/02_01.bvh").string());
+  const std::string gmr_file = shell_quote((dir_ / "walk.gmr").string());
+  const std::string bvh_file = shell_quote((dir_ / "walk.bvh").string());
   ASSERT_EQ(gmr("convert " + src + " " + gmr_file).status, 0);
   ASSERT_EQ(gmr("convert " + gmr_file + " " + bvh_file).status, 0);
   EXPECT_THAT(read_file(dir_ / "walk.gmr").value(), StartsWith("GMR 1\nHIERARCHY\n"));
@@ -162,7 +130,7 @@ TEST_F(CliFiles, ConvertBvhToGmrAndBackKeepsPositions) {
 
 TEST_F(CliFiles, BadArgumentsFailWithOneLine) {
   GMR_REQUIRE_DATA();
-  const std::string src = quoted(test::data_file("bvh/cmu/02_01.bvh").string());
+  const std::string src = shell_quote(test::data_file("bvh/cmu/02_01.bvh").string());
   const Outcome range = gmr("positions " + src + " --frames 5");
   EXPECT_EQ(range.status, 1);
   EXPECT_EQ(lines(range.err), 1u);
@@ -170,12 +138,12 @@ TEST_F(CliFiles, BadArgumentsFailWithOneLine) {
   const Outcome past = gmr("positions " + src + " --frames 400:");
   EXPECT_EQ(past.status, 1);
   EXPECT_THAT(past.err, HasSubstr("past the last frame"));
-  const Outcome ext = gmr("convert " + src + " " + quoted((dir_ / "out.xyz").string()));
+  const Outcome ext = gmr("convert " + src + " " + shell_quote((dir_ / "out.xyz").string()));
   EXPECT_EQ(ext.status, 1);
   EXPECT_EQ(lines(ext.err), 1u);
   EXPECT_THAT(ext.err, HasSubstr("cannot write '.xyz' files"));
   EXPECT_FALSE(fs::exists(dir_ / "out.xyz"));
-  const Outcome missing = gmr("info " + quoted((dir_ / "nope.bvh").string()));
+  const Outcome missing = gmr("info " + shell_quote((dir_ / "nope.bvh").string()));
   EXPECT_EQ(missing.status, 1);
   EXPECT_THAT(missing.err, HasSubstr("nope.bvh: cannot open file"));
 }

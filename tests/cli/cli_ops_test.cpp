@@ -3,8 +3,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <Eigen/Core>
 #include <algorithm>
@@ -17,6 +15,7 @@
 
 #include "gmr/io/file_util.h"
 #include "gmr/io/motion_file.h"
+#include "cli_test_util.h"
 #include "test_data.h"
 
 namespace gmr {
@@ -25,52 +24,15 @@ namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
-struct Outcome {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
+using Outcome = test::CliOutcome;
+using test::shell_quote;
 
-std::string quoted(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-class CliOps : public ::testing::Test {
+class CliOps : public test::CliTest {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("gmr_cli_ops_test_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    bvh_ = quoted(test::data_file("bvh/cmu/02_01.bvh").string());
+    CliTest::SetUp();
+    bvh_ = shell_quote(test::data_file("bvh/cmu/02_01.bvh").string());
   }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  Outcome gmr(const std::string& args) {
-    const fs::path out = dir_ / "stdout", err = dir_ / "stderr";
-    const std::string cmd =
-        quoted(GMR_CLI_PATH) + " " + args + " >" + quoted(out.string()) + " 2>" + quoted(err.string());
-    const int raw = std::system(cmd.c_str());
-    Outcome r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = read_file(out).value();
-    r.err = read_file(err).value();
-    return r;
-  }
-  std::string path(const std::string& name) const { return quoted((dir_ / name).string()); }
-
-  // A command that must fail: exit 1, exactly one line on stderr.
-  void expect_one_line_error(const std::string& args, const std::string& needle) {
-    const Outcome r = gmr(args);
-    EXPECT_EQ(r.status, 1) << args;
-    EXPECT_THAT(r.err, StartsWith("gmr: ")) << args;
-    EXPECT_THAT(r.err, HasSubstr(needle)) << args;
-    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-  }
-
-  fs::path dir_;
   std::string bvh_;
 };
 

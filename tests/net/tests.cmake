@@ -1,7 +1,7 @@
 # NET area: the wire library (framing, UDP fragments, frame encoding) and
 # loopback server + client tests (127.0.0.1, port 0, no sleeps).
 if(TARGET gmr_server AND TARGET gmr_client)
-  gmr_add_test(gmr_net_tests
+  gmr_add_test(gmr_net_tests SANITIZE
     net/wire_test.cpp
     net/net_test_util.cpp
     net/server_positions_test.cpp

@@ -223,9 +223,19 @@ void CompiledMotion::build_frame_program() {
   const auto world_off = [](std::int32_t slot) { return (slot + 1) * 12; };  // kIdentitySlot -> 0
   const std::int32_t scratch = world_off(static_cast<std::int32_t>(slot_count_));
   const bool pre = convention_ == Convention::kPreRotation;
+  std::vector<char> has_child(joints, 0);
+  for (const JointPlan& p : plans_) {
+    if (p.parent != kNoParent) has_child[static_cast<std::size_t>(p.parent)] = 1;
+  }
   for (std::size_t j = 0; j < joints; ++j) {
     const JointPlan& p = plans_[j];
+    if (!all_roots_ && !p.owns_slot && p.parent != kNoParent && !has_child[j]) {
+      prog.leaves.push_back({p.zero_offset ? 0 : world_off(pre ? p.world_slot : p.parent_slot), (p.parent + 1) * 4,
+                             static_cast<std::int32_t>(j)});
+      continue;
+    }
     FrameProgram::Step step;
+    step.t = static_cast<std::int32_t>(j * 4);
     step.from = world_off(p.parent_slot);
     step.parent = p.parent == kNoParent ? 0 : (p.parent + 1) * 4;
     step.pos = p.parent == kNoParent ? static_cast<std::int32_t>(joints + 1) * 4 : static_cast<std::int32_t>(j + 1) * 4;

@@ -347,7 +347,7 @@ HWY_INLINE void RunSteps(const FrameProgram& prog, std::size_t nl, const float* 
     }
     if constexpr (kPositions) {
       // W t_j first, then one add: the chain from parent to child is one add.
-      const float* t = offsets + 4 * j;
+      const float* t = offsets + st.t;
       V4 wt = hn::Mul(kPre ? w[0] : c0, hn::Set(d, t[0]));
       wt = hn::MulAdd(kPre ? w[1] : c1, hn::Set(d, t[1]), wt);
       wt = hn::MulAdd(kPre ? w[2] : c2, hn::Set(d, t[2]), wt);
@@ -413,6 +413,16 @@ bool FrameKernel(const FrameArgs& a) {
     RunSteps<true, true>(prog, nl, local, world, offsets, pos);
   } else {
     RunSteps<false, true>(prog, nl, local, world, offsets, pos);
+  }
+  if (positions) {
+    for (const FrameProgram::Leaf& leaf : prog.leaves) {
+      const float* w = world + leaf.world;
+      const float* t = offsets + 4 * leaf.joint;
+      V4 wt = hn::Mul(hn::Load(d, w), hn::Set(d, t[0]));
+      wt = hn::MulAdd(hn::Load(d, w + 4), hn::Set(d, t[1]), wt);
+      wt = hn::MulAdd(hn::Load(d, w + 8), hn::Set(d, t[2]), wt);
+      hn::Store(hn::Add(hn::Load(d, pos + leaf.parent), wt), d, pos + 4 * (leaf.joint + 1));
+    }
   }
   if (positions && joints > 0) {
     // Pack 4-float entries into 3-float ones: each 4-float store's last float

@@ -93,6 +93,14 @@ struct FrameProgram {
     std::int32_t local = 0;   // local index of R_j (identity_local: none)
     std::int32_t parent = 0;  // float offset of P_p in the position buffer ((parent + 1) * 4; roots: 0)
     std::int32_t pos = 0;     // float offset P_j is stored to ((j + 1) * 4; roots: a scratch entry)
+    std::int32_t t = 0;       // float offset of t_j in the offsets buffer (j * 4)
+  };
+  // A leaf without rotation channels (an end site): only P_j = P_p + W t_j,
+  // with W (already computed) read back; run after the steps.
+  struct Leaf {
+    std::int32_t world = 0;   // float offset of W
+    std::int32_t parent = 0;  // float offset of P_p
+    std::int32_t joint = 0;
   };
   struct Patch {
     std::int32_t dst = 0;     // float index in the offsets buffer (joint * 4 + axis)
@@ -102,7 +110,8 @@ struct FrameProgram {
   std::vector<std::int32_t> gather;    // 3 * local_count stream offsets (stream * frame_stride)
   std::vector<Group> groups;
   std::size_t identity_local = 0;      // local index whose R is set to the identity each frame
-  std::vector<Step> steps;             // one per joint
+  std::vector<Step> steps;             // one per joint, except leaves
+  std::vector<Leaf> leaves;            // non-root joints without rotation channels or children (empty if all roots)
   std::vector<std::int32_t> roots;     // root joints: P_j = t_j, written before the steps
   std::vector<float> offsets;          // joints * 4: static t_j (stream components: 0, patched per frame)
   std::vector<Patch> patches;          // offset components that come from position channels

@@ -1,0 +1,53 @@
+#include "cli_test_util.h"
+
+#include <gmock/gmock.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdlib>
+
+#include "gmr/io/file_util.h"
+
+namespace gmr::test {
+namespace fs = std::filesystem;
+
+std::string shell_quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+void CliTest::SetUp() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  dir_ = fs::temp_directory_path() /
+         ("gmr_cli_" + std::to_string(::getpid()) + "_" + info->test_suite_name() + "_" + info->name());
+  fs::remove_all(dir_);
+  fs::create_directories(dir_);
+}
+
+void CliTest::TearDown() { fs::remove_all(dir_); }
+
+CliOutcome CliTest::gmr(const std::string& args) {
+  const fs::path out = dir_ / "stdout", err = dir_ / "stderr";
+  const std::string cmd = shell_quote(GMR_CLI_PATH) + " " + args + " >" + shell_quote(out.string()) + " 2>" +
+                          shell_quote(err.string());
+  const int raw = std::system(cmd.c_str());
+  CliOutcome r;
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  r.out = read_file(out).value();
+  r.err = read_file(err).value();
+  return r;
+}
+
+std::string CliTest::path(const std::string& name) const { return shell_quote((dir_ / name).string()); }
+
+void CliTest::expect_one_line_error(const std::string& args, const std::string& needle) {
+  const CliOutcome r = gmr(args);
+  EXPECT_EQ(r.status, 1) << args;
+  EXPECT_THAT(r.err, ::testing::StartsWith("gmr: ")) << args;
+  EXPECT_THAT(r.err, ::testing::HasSubstr(needle)) << args;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+}
+
+}  // namespace gmr::test

@@ -1,0 +1,37 @@
+// Running the built `gmr` command from a test: a fresh temporary folder per
+// test, and the command's exit status, stdout and stderr.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+namespace gmr::test {
+
+struct CliOutcome {
+  int status = -1;  // exit status; -1 when the command did not exit normally
+  std::string out;
+  std::string err;
+};
+
+// `s` in single quotes for /bin/sh.
+std::string shell_quote(const std::string& s);
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override;     // creates dir_, empty
+  void TearDown() override;  // removes dir_
+
+  // Runs `gmr ARGS` (ARGS is shell text: quote paths with shell_quote).
+  CliOutcome gmr(const std::string& args);
+  // The quoted path of `name` inside dir_.
+  std::string path(const std::string& name) const;
+  // A command that must fail: exit 1 and exactly one line on stderr,
+  // starting "gmr: " and containing `needle`.
+  void expect_one_line_error(const std::string& args, const std::string& needle);
+
+  std::filesystem::path dir_;
+};
+
+}  // namespace gmr::test
