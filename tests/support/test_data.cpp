@@ -41,8 +41,6 @@ std::vector<fs::path> data_files(const std::string& sub, const std::string& ext)
 
 fs::path data_file(const std::string& relative) { return data_dir() / relative; }
 
-fs::path fixture(const std::string& relative) { return source_dir() / "tests" / "data" / relative; }
-
 PositionDiff compare_positions(std::span<const Eigen::Vector3d> a, std::span<const Eigen::Vector3d> b,
                                std::size_t joints) {
   PositionDiff d;

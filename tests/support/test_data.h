@@ -27,8 +27,6 @@ bool in_ci();
 std::vector<std::filesystem::path> data_files(const std::string& sub, const std::string& ext);
 // Absolute path of a file in the corpus.
 std::filesystem::path data_file(const std::string& relative);
-// Path of a fixture under tests/data.
-std::filesystem::path fixture(const std::string& relative);
 
 // Largest distance between corresponding positions, and where it happened.
 struct PositionDiff {

@@ -1,5 +1,7 @@
 #include "hierarchy_text.h"
 
+#include "gmr/io/file_util.h"
+
 #include "number_format.h"
 
 #include <algorithm>
@@ -787,6 +789,22 @@ Result<std::string> format_hierarchy_text(const Motion& motion, Dialect dialect)
     out.append(line.data(), static_cast<std::size_t>(p - line.data()));
   }
   return out;
+}
+
+Result<Motion> read_hierarchy_file(const std::filesystem::path& path, Dialect dialect, Warnings* out_warnings) {
+  auto text = read_file(path);
+  if (!text) return text.error();
+  return parse_hierarchy_text(*text, path.string(), dialect, out_warnings);
+}
+
+Status write_hierarchy_file(const Motion& motion, Dialect dialect, const std::filesystem::path& path) {
+  auto text = format_hierarchy_text(motion, dialect);
+  if (!text) {
+    Error e = text.error();
+    if (e.file.empty()) e.file = path.string();
+    return e;
+  }
+  return write_file_atomic(path, *text);
 }
 
 }  // namespace gmr::detail

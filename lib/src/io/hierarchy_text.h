@@ -4,6 +4,8 @@
 // SOFTLINK (GMR only) and the convention the values are in.
 #pragma once
 
+#include <filesystem>
+
 #include <string>
 #include <string_view>
 #include <vector>
@@ -23,6 +25,13 @@ Result<Motion> parse_hierarchy_text(std::string_view text, std::string_view file
                                     Warnings* out_warnings);
 
 Result<std::string> format_hierarchy_text(const Motion& motion, Dialect dialect);
+
+// Reads `path` and parses it; errors name the file.
+Result<Motion> read_hierarchy_file(const std::filesystem::path& path, Dialect dialect, Warnings* out_warnings);
+
+// Formats first, then writes atomically: a motion that cannot be written
+// leaves the old file alone. Errors without a file name get `path`.
+Status write_hierarchy_file(const Motion& motion, Dialect dialect, const std::filesystem::path& path);
 
 // Joint indices in the order a file writes them: each root (in index order)
 // followed by its subtree, depth first, children in index order.
