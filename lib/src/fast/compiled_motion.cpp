@@ -10,6 +10,7 @@
 namespace gmr::fast {
 
 void CompiledMotion::AlignedFree::operator()(float* p) const { ::operator delete[](p, std::align_val_t{64}); }
+void FrameProgram::AngleFree::operator()(float* p) const { ::operator delete[](p, std::align_val_t{64}); }
 
 namespace {
 
@@ -269,6 +270,17 @@ void CompiledMotion::build_frame_program() {
       }
     }
   }
+  // Frame-major copy of the angles in gather order (padding entries hold
+  // what the gather reads for them: stream 0 of the frame).
+  const std::size_t per_frame = 3 * next;
+  if (frame_count_ > 0 && stream_count_ > 0) {
+    prog.angles.reset(static_cast<float*>(::operator new[](frame_count_ * per_frame * sizeof(float), std::align_val_t{64})));
+    const float* base = streams_.get();
+    for (std::size_t f = 0; f < frame_count_; ++f) {
+      float* dst = prog.angles.get() + f * per_frame;
+      for (std::size_t i = 0; i < per_frame; ++i) dst[i] = base[static_cast<std::size_t>(prog.gather[i]) + f];
+    }
+  }
   prog.workspace_floats = 15 * next + 12 * (slot_count_ + 2) + 4 * joints + 4 * (joints + 2);
 }
 
@@ -277,7 +289,7 @@ std::size_t CompiledMotion::bytes_per_frame() const {
 }
 
 std::size_t CompiledMotion::bytes() const {
-  return (stream_count_ * frame_stride_ + stored_positions_.size()) * sizeof(float) +
+  return (stream_count_ * frame_stride_ + stored_positions_.size() + (program_.angles ? frame_count_ * 3 * program_.local_count : 0)) * sizeof(float) +
          plans_.size() * sizeof(JointPlan);
 }
 

@@ -108,6 +108,14 @@ struct FrameProgram {
   };
   std::size_t local_count = 0;
   std::vector<std::int32_t> gather;    // 3 * local_count stream offsets (stream * frame_stride)
+  // The same angles stored frame-major at compile time: frame f's 3 *
+  // local_count angles (gather order, padding included) start at
+  // angles.get() + f * 3 * local_count, 64-byte aligned, so the kernel reads
+  // them with contiguous vector loads instead of the gather.
+  struct AngleFree {
+    void operator()(float* p) const;
+  };
+  std::unique_ptr<float[], AngleFree> angles;
   std::vector<Group> groups;
   std::size_t identity_local = 0;      // local index whose R is set to the identity each frame
   std::vector<Step> steps;             // one per joint, except leaves
@@ -156,8 +164,13 @@ class CompiledMotion {
   // identical to what FkRangeJob writes. Empty otherwise.
   std::span<const float> stored_positions() const { return stored_positions_; }
 
-  // Bytes held per frame (streams and stored positions, padding excluded).
+  // Bytes held per frame (streams and stored positions, padding excluded;
+  // not counting the one-frame kernel's frame-major angle copy,
+  // frame_program_bytes_per_frame()).
   std::size_t bytes_per_frame() const;
+  // Bytes per frame of the FrameProgram's frame-major angle copy
+  // (3 * local_count floats, padding included).
+  std::size_t frame_program_bytes_per_frame() const { return 3 * program_.local_count * sizeof(float); }
   // Bytes held in total (padding included).
   std::size_t bytes() const;
 
