@@ -4,6 +4,10 @@
 #include <cmath>
 #include <cctype>
 #include <cstdlib>
+#include <iterator>
+#include <system_error>
+
+#include <unistd.h>
 
 namespace gmr::test {
 namespace fs = std::filesystem;
@@ -40,6 +44,23 @@ std::vector<fs::path> data_files(const std::string& sub, const std::string& ext)
 }
 
 fs::path data_file(const std::string& relative) { return data_dir() / relative; }
+
+TempDir::TempDir() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  path = fs::temp_directory_path() / ("gmr_test_" + std::to_string(::getpid()) + "_" +
+                                      (info ? std::string(info->test_suite_name()) + "_" + info->name() : "none"));
+  fs::remove_all(path);
+  fs::create_directories(path);
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  fs::remove_all(path, ec);
+}
+
+std::size_t TempDir::entries() const {
+  return static_cast<std::size_t>(std::distance(fs::directory_iterator(path), fs::directory_iterator{}));
+}
 
 PositionDiff compare_positions(std::span<const Eigen::Vector3d> a, std::span<const Eigen::Vector3d> b,
                                std::size_t joints) {

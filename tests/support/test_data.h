@@ -28,6 +28,18 @@ std::vector<std::filesystem::path> data_files(const std::string& sub, const std:
 // Absolute path of a file in the corpus.
 std::filesystem::path data_file(const std::string& relative);
 
+// A fresh, empty folder under the system temp folder named after the running
+// test, removed with everything in it when the object goes.
+struct TempDir {
+  std::filesystem::path path;
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  // Number of entries in the folder (to check that nothing was left behind).
+  std::size_t entries() const;
+};
+
 // Largest distance between corresponding positions, and where it happened.
 struct PositionDiff {
   double max_error = 0.0;
