@@ -203,7 +203,6 @@ void CompiledMotion::build_frame_program() {
   }
   std::vector<std::int32_t> local_of(joints, -1);
   std::size_t next = 0;
-  std::size_t used = 0;
   for (std::size_t g = 0; g < keys.size(); ++g) {
     const JointPlan& p0 = plans_[members[g].front()];
     FrameProgram::Group group;
@@ -212,17 +211,12 @@ void CompiledMotion::build_frame_program() {
     group.first = static_cast<std::uint32_t>(next);
     group.size = static_cast<std::uint32_t>((members[g].size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment);
     for (std::size_t i = 0; i < members[g].size(); ++i) local_of[members[g][i]] = static_cast<std::int32_t>(next + i);
-    used = next + members[g].size();
     next += group.size;
     prog.groups.push_back(group);
   }
-  // The identity R: the last group's padding when it has some, else one more block.
-  if (used == next) next += kFrameAlignment;
-  prog.identity_local = next - 1;
   prog.local_count = next;
   prog.gather.assign(3 * next, 0);
   const auto world_off = [](std::int32_t slot) { return (slot + 1) * 12; };  // kIdentitySlot -> 0
-  const std::int32_t scratch = world_off(static_cast<std::int32_t>(slot_count_));
   const bool pre = convention_ == Convention::kPreRotation;
   std::vector<char> has_child(joints, 0);
   for (const JointPlan& p : plans_) {
@@ -230,30 +224,38 @@ void CompiledMotion::build_frame_program() {
   }
   for (std::size_t j = 0; j < joints; ++j) {
     const JointPlan& p = plans_[j];
-    if (!all_roots_ && !p.owns_slot && p.parent != kNoParent && !has_child[j]) {
-      prog.leaves.push_back({p.zero_offset ? 0 : world_off(pre ? p.world_slot : p.parent_slot), (p.parent + 1) * 4,
-                             static_cast<std::int32_t>(j)});
+    const auto jj = static_cast<std::int32_t>(j);
+    if (p.parent == kNoParent) prog.roots.push_back(jj);
+    if (!p.owns_slot) {
+      if (p.parent == kNoParent || all_roots_) continue;  // W = identity (or its twin's), P = t: nothing to run
+      // W_j is its twin's or its parent's (pre-rotation), W_p (post); both are
+      // computed by an earlier step, or are the identity.
+      const FrameProgram::PosOp op{p.zero_offset ? 0 : world_off(pre ? p.world_slot : p.parent_slot), (p.parent + 1) * 4,
+                                   (jj + 1) * 4, jj * 4};
+      if (!has_child[j]) {
+        prog.leaves.push_back(op);
+      } else {
+        prog.ops.push_back(op);
+        if (prog.steps.empty()) {
+          prog.prologue = static_cast<std::uint32_t>(prog.ops.size());
+        } else {
+          prog.steps.back().ops_end = static_cast<std::uint32_t>(prog.ops.size());
+        }
+      }
       continue;
     }
     FrameProgram::Step step;
-    step.t = static_cast<std::int32_t>(j * 4);
+    step.t = jj * 4;
     step.from = world_off(p.parent_slot);
     step.parent = p.parent == kNoParent ? 0 : (p.parent + 1) * 4;
-    step.pos = p.parent == kNoParent ? static_cast<std::int32_t>(joints + 1) * 4 : static_cast<std::int32_t>(j + 1) * 4;
-    if (p.parent == kNoParent) prog.roots.push_back(static_cast<std::int32_t>(j));
-    if (p.owns_slot) {
-      const auto i = static_cast<std::size_t>(local_of[j]);
-      for (int r = 0; r < p.rotation_count; ++r) {
-        prog.gather[static_cast<std::size_t>(r) * next + i] = p.rotation_stream[r] * static_cast<std::int32_t>(frame_stride_);
-      }
-      step.out = world_off(p.world_slot);
-      step.local = local_of[j];
-    } else {
-      step.out = scratch;
-      step.local = static_cast<std::int32_t>(prog.identity_local);
-      // A twin: pre-rotation positions use its twin's W_j = W_twin * I.
-      if (pre) step.from = world_off(p.world_slot);
+    step.pos = p.parent == kNoParent ? static_cast<std::int32_t>(joints + 1) * 4 : (jj + 1) * 4;
+    const auto i = static_cast<std::size_t>(local_of[j]);
+    for (int r = 0; r < p.rotation_count; ++r) {
+      prog.gather[static_cast<std::size_t>(r) * next + i] = p.rotation_stream[r] * static_cast<std::int32_t>(frame_stride_);
     }
+    step.out = world_off(p.world_slot);
+    step.local = local_of[j];
+    step.ops_begin = step.ops_end = static_cast<std::uint32_t>(prog.ops.size());
     prog.steps.push_back(step);
   }
   if (!all_roots_) {
@@ -281,7 +283,7 @@ void CompiledMotion::build_frame_program() {
       for (std::size_t i = 0; i < per_frame; ++i) dst[i] = base[static_cast<std::size_t>(prog.gather[i]) + f];
     }
   }
-  prog.workspace_floats = 15 * next + 12 * (slot_count_ + 2) + 4 * joints + 4 * (joints + 2);
+  prog.workspace_floats = 15 * next + 12 * (slot_count_ + 1) + 4 * joints + 4 * (joints + 2);
 }
 
 std::size_t CompiledMotion::bytes_per_frame() const {

@@ -34,11 +34,16 @@ constexpr float kC3 = static_cast<float>(-1.388731625493765e-3 * kRad * kRad * k
 constexpr float kC4 = static_cast<float>(2.443315711809948e-5 * kRad * kRad * kRad * kRad * kRad * kRad * kRad * kRad);
 
 // sin and cos of x degrees. x = 90 k + r with |r| <= 45 (exact for |x| below
-// 2^24 / 90; compiled angles are in [-180, 180]); the quadrant k mod 4 swaps
+// 2^22 / 90; compiled angles are in [-180, 180]); the quadrant k mod 4 swaps
 // and negates the polynomials' values. Absolute error below 1.5e-7.
 HWY_INLINE void SinCosDeg(D d, V x, V& out_s, V& out_c) {
   const hn::RebindToSigned<D> di;
-  const V k = hn::Round(hn::Mul(x, hn::Set(d, 1.0f / 90.0f)));
+  // k = round(x / 90) by the 1.5 * 2^23 trick: adding it leaves k in the low
+  // bits of the sum's mantissa (two's complement, so k < 0 works), which
+  // gives the quadrant without a rounding or conversion instruction.
+  const V magic = hn::Set(d, 12582912.0f);
+  const V t = hn::MulAdd(x, hn::Set(d, 1.0f / 90.0f), magic);
+  const V k = hn::Sub(t, magic);
   const V r = hn::NegMulAdd(k, hn::Set(d, 90.0f), x);
   const V z = hn::Mul(r, r);
   V ps = hn::MulAdd(hn::Set(d, kS3), z, hn::Set(d, kS2));
@@ -49,7 +54,7 @@ HWY_INLINE void SinCosDeg(D d, V x, V& out_s, V& out_c) {
   pc = hn::MulAdd(pc, z, hn::Set(d, kC2));
   pc = hn::MulAdd(pc, z, hn::Set(d, kC1));
   pc = hn::MulAdd(pc, z, hn::Set(d, 1.0f));
-  const auto q = hn::ConvertTo(di, k);
+  const auto q = hn::BitCast(di, t);
   const auto one = hn::Set(di, 1);
   const auto two = hn::Set(di, 2);
   const auto swap = hn::RebindMask(d, hn::Eq(hn::And(q, one), one));
@@ -321,16 +326,31 @@ LocalGroupFn LocalGroupFor(const FrameProgram::Group& g) {
   }
 }
 
+// P_j = P_p + W t_j for one position-only op (W read back from the world buffer).
+HWY_INLINE void RunPosOp(const FrameProgram::PosOp& op, const float* world, const float* offsets, float* pos) {
+  const D4 d;
+  const float* w = world + op.world;
+  const float* t = offsets + op.t;
+  V4 wt = hn::Mul(hn::Load(d, w), hn::Set(d, t[0]));
+  wt = hn::MulAdd(hn::Load(d, w + 4), hn::Set(d, t[1]), wt);
+  wt = hn::MulAdd(hn::Load(d, w + 8), hn::Set(d, t[2]), wt);
+  hn::Store(hn::Add(hn::Load(d, pos + op.parent), wt), d, pos + op.pos);
+}
+
 // The per-joint steps (see FrameProgram): W_out = W_from R_j, then
 // P_j = P_p + W t_j with W = W_out (pre-rotation) or W_from (post-rotation),
-// both still in registers. Column c of W_from R_j = sum over k of column k of
-// W_from times R_j[k][c].
+// both still in registers, then the step's position-only ops. Column c of
+// W_from R_j = sum over k of column k of W_from times R_j[k][c].
 template <bool kPre, bool kPositions>
 HWY_INLINE void RunSteps(const FrameProgram& prog, std::size_t nl, const float* local, float* world,
                          const float* offsets, float* pos) {
   const D4 d;
   const FrameProgram::Step* steps = prog.steps.data();
+  const FrameProgram::PosOp* ops = prog.ops.data();
   const std::size_t count = prog.steps.size();
+  if constexpr (kPositions) {
+    for (std::uint32_t k = 0; k < prog.prologue; ++k) RunPosOp(ops[k], world, offsets, pos);
+  }
   for (std::size_t j = 0; j < count; ++j) {
     const FrameProgram::Step& st = steps[j];
     const float* wp = world + st.from;
@@ -352,13 +372,15 @@ HWY_INLINE void RunSteps(const FrameProgram& prog, std::size_t nl, const float* 
       wt = hn::MulAdd(kPre ? w[1] : c1, hn::Set(d, t[1]), wt);
       wt = hn::MulAdd(kPre ? w[2] : c2, hn::Set(d, t[2]), wt);
       hn::Store(hn::Add(hn::Load(d, pos + st.parent), wt), d, pos + st.pos);
+      for (std::uint32_t k = st.ops_begin; k < st.ops_end; ++k) RunPosOp(ops[k], world, offsets, pos);
     }
   }
 }
 
 // One frame by the motion's FrameProgram (see compiled_motion.h): the
 // frame's angles and one SIMD sincos pass, local rotations SIMD across joints,
-// then one flat loop over the joints without per-joint branches.
+// then one flat loop over the rotating joints (each with its trailing
+// position-only ops) and one over the end sites.
 bool FrameKernel(const FrameArgs& a) {
   const CompiledMotion& m = *a.motion;
   const FrameProgram& prog = m.frame_program();
@@ -370,36 +392,25 @@ bool FrameKernel(const FrameArgs& a) {
   float* const sines = a.workspace;
   float* const cosines = sines + 3 * nl;
   float* const local = cosines + 3 * nl;
-  float* const world = local + 9 * nl;                       // (slot_count + 2) * 12: identity, slots, scratch
-  float* const offsets = world + 12 * (m.slot_count() + 2);  // joints * 4
+  float* const world = local + 9 * nl;                       // (slot_count + 1) * 12: identity, slots
+  float* const offsets = world + 12 * (m.slot_count() + 1);  // joints * 4
   float* const pos = offsets + 4 * joints;                   // (joints + 2) * 4: zero, joints, scratch
   {
     // The frame's angles, role-major, are stored frame-major at compile time
     // (FrameProgram::angles): one SIMD sincos pass reads them contiguously.
     const D d;
-    if (!prog.angles) {  // no angles at all (padding only): nothing to read
-      std::fill(sines, sines + 3 * nl, 0.0f);
-      for (std::size_t i = 0; i < 3 * nl; i += hn::Lanes(d)) {
-        V s, c;
-        SinCosDeg(d, hn::Load(d, sines + i), s, c);
-        hn::Store(s, d, sines + i);
-        hn::Store(c, d, cosines + i);
-      }
-    } else {
-      const float* angles = prog.angles.get() + f * 3 * nl;
-      for (std::size_t i = 0; i < 3 * nl; i += hn::Lanes(d)) {
-        V s, c;
-        SinCosDeg(d, hn::Load(d, angles + i), s, c);
-        hn::Store(s, d, sines + i);
-        hn::Store(c, d, cosines + i);
-      }
+    const float* angles = nl == 0 ? nullptr : prog.angles.get() + f * 3 * nl;
+    for (std::size_t i = 0; i < 3 * nl; i += hn::Lanes(d)) {
+      V s, c;
+      SinCosDeg(d, hn::Load(d, angles + i), s, c);
+      hn::Store(s, d, sines + i);
+      hn::Store(c, d, cosines + i);
     }
   }
   for (const FrameProgram::Group& g : prog.groups) LocalGroupFor(g)(sines, cosines, local, g.first, g.size, nl);
 
   const D4 d;
   for (int k = 0; k < 3; ++k) hn::Store(hn::Load(d, kIdentityColumns + 4 * k), d, world + 4 * k);
-  for (std::size_t e = 0; e < 9; ++e) local[e * nl + prog.identity_local] = e % 4 == 0 ? 1.0f : 0.0f;
   if (positions) {
     std::memcpy(offsets, prog.offsets.data(), joints * 4 * sizeof(float));
     for (const FrameProgram::Patch& p : prog.patches) {
@@ -418,14 +429,7 @@ bool FrameKernel(const FrameArgs& a) {
     RunSteps<false, true>(prog, nl, local, world, offsets, pos);
   }
   if (positions) {
-    for (const FrameProgram::Leaf& leaf : prog.leaves) {
-      const float* w = world + leaf.world;
-      const float* t = offsets + 4 * leaf.joint;
-      V4 wt = hn::Mul(hn::Load(d, w), hn::Set(d, t[0]));
-      wt = hn::MulAdd(hn::Load(d, w + 4), hn::Set(d, t[1]), wt);
-      wt = hn::MulAdd(hn::Load(d, w + 8), hn::Set(d, t[2]), wt);
-      hn::Store(hn::Add(hn::Load(d, pos + leaf.parent), wt), d, pos + 4 * (leaf.joint + 1));
-    }
+    for (const FrameProgram::PosOp& leaf : prog.leaves) RunPosOp(leaf, world, offsets, pos);
   }
   if (positions && joints > 0) {
     // Pack 4-float entries into 3-float ones: each 4-float store's last float

@@ -8,6 +8,10 @@
 #include <hwy/targets.h>
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
 #include <random>
 #include <vector>
 
@@ -140,6 +144,115 @@ TEST(FastSingleFrame, TwinsJointsWithoutRotationAndPositionChannels) {
       }
     }
   }
+}
+
+TEST(FastSingleFrame, RootsAndChainsWithoutRotationChannels) {
+  // Roots without rotation channels (the GMR form's usual root), a joint
+  // without channels between a root and a rotating joint (its position runs
+  // before any rotation is computed), and a twin with a child, in both
+  // conventions: FkFrameJob against compute_frame.
+  using enum ChannelType;
+  auto joint = [](const char* name, int parent, Eigen::Vector3d offset, std::vector<ChannelType> channels) {
+    Joint j;
+    j.name = name;
+    j.parent = parent;
+    j.offset = offset;
+    j.channels = std::move(channels);
+    return j;
+  };
+  std::vector<Joint> joints;
+  joints.push_back(joint("r1", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition}));
+  joints.push_back(joint("x", 0, {0, 4, 1}, {}));
+  joints.push_back(joint("y", 1, {2, 0, 0}, {kZrotation, kXrotation}));
+  joints.push_back(joint("z", 2, {0, 3, 0}, {}));
+  joints.push_back(joint("w", 1, {1, 1, 0}, {}));
+  joints.push_back(joint("r2", kNoParent, {-5, 0, 2}, {}));
+  joints.push_back(joint("a", 5, {0, 2, 0}, {kYrotation, kXrotation, kZrotation}));
+  joints.push_back(joint("b", 5, {1, 0, 3}, {kYrotation, kXrotation, kZrotation}));  // twin of a
+  joints.push_back(joint("c", 7, {0, 0, 2}, {kXrotation}));
+  joints.push_back(joint("d", 8, {1, 2, 3}, {}));
+  auto skeleton = Skeleton::create(std::move(joints));
+  ASSERT_TRUE(skeleton.ok()) << skeleton.error().to_string();
+  Motion m;
+  m.skeleton = std::move(*skeleton);
+  m.frame_time = 1.0 / 30.0;
+  m.frame_count = 7;
+  m.values.resize(m.frame_count * m.stride());
+  std::mt19937 rng(78);
+  std::uniform_real_distribution<double> value(-200.0, 200.0);
+  for (double& v : m.values) v = value(rng);
+  const std::size_t a0 = static_cast<std::size_t>(m.skeleton.channel_offset(6));
+  const std::size_t b0 = static_cast<std::size_t>(m.skeleton.channel_offset(7));
+  for (std::size_t f = 0; f < m.frame_count; ++f) {
+    for (std::size_t i = 0; i < 3; ++i) m.values[f * m.stride() + b0 + i] = m.values[f * m.stride() + a0 + i];
+  }
+  for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
+    m.convention = conv;
+    auto cm = CompiledMotion::compile(m);
+    ASSERT_TRUE(cm.ok()) << cm.error().to_string();
+    EXPECT_EQ(cm->slot_count(), 3u);  // y, a (= b), c
+    EXPECT_EQ(cm->frame_program().prologue, 1u);  // x runs before any step
+    const std::size_t n = m.skeleton.size();
+    std::vector<float> ws(fk_workspace_size(*cm)), pos(n * 3), ori(n * 9);
+    std::vector<Eigen::Vector3d> p(n);
+    std::vector<Eigen::Matrix3d> w(n);
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      compute_frame(m, f, p, w);
+      ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = pos, .out_orientations = ori,
+                              .workspace = ws}.run()));
+      for (std::size_t j = 0; j < n; ++j) {
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(pos[3 * j + static_cast<std::size_t>(a)], p[j][a], 1e-4) << j;
+        for (int r = 0; r < 3; ++r) {
+          for (int c = 0; c < 3; ++c) EXPECT_NEAR(ori[9 * j + static_cast<std::size_t>(3 * r + c)], w[j](r, c), 1e-5) << j;
+        }
+      }
+    }
+  }
+}
+
+TEST(FastSinCos, EveryAngleIsWithinFloatPrecisionOnEveryTarget) {
+  // One joint rotating about Z from -720 to 720 degrees in steps of 1/64
+  // (quadrant boundaries included), its child at (1, 0, 0): the child's
+  // position is (cos, sin, 0) of the angle, so the positions measure the
+  // kernels' sine and cosine directly, in the range and the one-frame kernel.
+  using enum ChannelType;
+  std::vector<Joint> joints(2);
+  joints[0].name = "spin";
+  joints[0].channels = {kZrotation};
+  joints[1].name = "tip";
+  joints[1].parent = 0;
+  joints[1].offset = Eigen::Vector3d(1, 0, 0);
+  Motion m;
+  m.skeleton = Skeleton::create(std::move(joints)).value();
+  m.frame_time = 1.0 / 30.0;
+  m.frame_count = 2 * 720 * 64 + 1;
+  m.values.resize(m.frame_count);
+  for (std::size_t f = 0; f < m.frame_count; ++f) m.values[f] = -720.0 + static_cast<double>(f) / 64.0;
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok());
+  std::vector<std::string> seen;
+  for (std::int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    seen.emplace_back(simd_target_name());
+    SCOPED_TRACE(seen.back());
+    const auto range = fast_positions(*cm, 0, m.frame_count);
+    std::vector<float> ws(fk_workspace_size(*cm)), one(6);
+    double worst = 0;
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      const double rad = m.values[f] * 3.14159265358979323846 / 180.0;
+      ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = one, .workspace = ws}.run()));
+      const Eigen::Vector3d want(std::cos(rad), std::sin(rad), 0);
+      worst = std::max({worst, (range[2 * f + 1] - want).cwiseAbs().maxCoeff(),
+                        (Eigen::Vector3d(one[3], one[4], one[5]) - want).cwiseAbs().maxCoeff()});
+    }
+    // Float rounding of the angle itself (2^-17 degrees near 180) is 2e-8
+    // radians; the polynomials add about one float ulp.
+    EXPECT_LT(worst, 3e-7);
+    char text[32];
+    std::snprintf(text, sizeof text, "%.3g", worst);
+    RecordProperty("worst_" + seen.back(), text);
+  }
+  hwy::SetSupportedTargetsForTest(0);
 }
 
 TEST(FastOrientations, MatchReference) {

@@ -110,7 +110,9 @@ TEST(SplitJoin, RestoresLocalDataAndReportsRigidOffset) {
       // Rigid unless the joint had per-frame position channels of its own.
       const bool moves = m.skeleton.joint(j).has_translation();
       EXPECT_EQ(report.translation_channels, moves);
-      if (!moves) EXPECT_LE(report.offset_spread, 1e-9 * skeleton_size(m));
+      if (!moves) {
+        EXPECT_LE(report.offset_spread, 1e-9 * skeleton_size(m));
+      }
       EXPECT_TRUE(same_local_data(m, joined, 1e-12, 1e-12 * skeleton_size(m))) << "seed " << seed << " joint " << j;
     }
   }

@@ -73,13 +73,20 @@ struct JointPlan {
 //   2. per group, computes the local rotations R_j with straight-line code for
 //      the group's axis order, SIMD across joints (entry 3 row + col of local
 //      index i at local[(3 row + col) * local_count + i]);
-//   3. per step (one per joint, in joint order), W_j = W_s R_j and
-//      P_j = P_p + W t_j, with W = W_j (pre-rotation) or W_s (post), all in
-//      registers. No per-joint branches: slot 0 of the world buffer is the identity (the
-//      roots' W_s), roots' positions (P_j = t_j) are written before the steps
-//      and their steps store P_j to a scratch entry, a joint without
-//      rotation channels uses an identity R_j and writes a scratch slot, and a
-//      twin (pre-rotation) starts from its twin's slot.
+//   3. per step (one per joint with its own rotation, in joint order),
+//      W_j = W_s R_j and P_j = P_p + W t_j, with W = W_j (pre-rotation) or
+//      W_s (post), all in registers, then the step's position-only ops (below).
+//      Slot 0 of the world buffer is the identity (the roots' W_s); roots'
+//      positions (P_j = t_j) are written before the steps and a rotating
+//      root's step stores P_j to a scratch entry.
+//   4. position-only ops P_j = P_p + W t_j, W read back from the world
+//      buffer, for joints without rotation channels of their own: a twin (it
+//      shares its sibling's W), or a joint that takes its parent's W. Ops
+//      whose inputs are ready before any step run first (the first
+//      `prologue` ops); the others follow the step that makes their inputs
+//      ready, so the program keeps joint order. Leaves without rotation
+//      channels (end sites) run last. Roots without rotation channels need
+//      nothing (W = identity, P = t).
 struct FrameProgram {
   struct Group {
     std::uint8_t count = 0;        // rotation channels: 1..3
@@ -88,19 +95,21 @@ struct FrameProgram {
     std::uint32_t size = 0;        // local indices, padded to kFrameAlignment
   };
   struct Step {
-    std::int32_t from = 0;    // float offset of W_s in the world buffer ((slot + 1) * 12; identity: 0)
-    std::int32_t out = 0;     // float offset W_s R_j is stored to (scratch slot for joints without rotation)
-    std::int32_t local = 0;   // local index of R_j (identity_local: none)
-    std::int32_t parent = 0;  // float offset of P_p in the position buffer ((parent + 1) * 4; roots: 0)
-    std::int32_t pos = 0;     // float offset P_j is stored to ((j + 1) * 4; roots: a scratch entry)
-    std::int32_t t = 0;       // float offset of t_j in the offsets buffer (j * 4)
+    std::int32_t from = 0;       // float offset of W_s in the world buffer ((slot + 1) * 12; identity: 0)
+    std::int32_t out = 0;        // float offset W_s R_j is stored to
+    std::int32_t local = 0;      // local index of R_j
+    std::int32_t parent = 0;     // float offset of P_p in the position buffer ((parent + 1) * 4; roots: 0)
+    std::int32_t pos = 0;        // float offset P_j is stored to ((j + 1) * 4; roots: a scratch entry)
+    std::int32_t t = 0;          // float offset of t_j in the offsets buffer (j * 4)
+    std::uint32_t ops_begin = 0;  // position-only ops run after this step: ops[ops_begin, ops_end)
+    std::uint32_t ops_end = 0;
   };
-  // A leaf without rotation channels (an end site): only P_j = P_p + W t_j,
-  // with W (already computed) read back; run after the steps.
-  struct Leaf {
+  // P_j = P_p + W t_j with W (already computed) read back from the world buffer.
+  struct PosOp {
     std::int32_t world = 0;   // float offset of W
     std::int32_t parent = 0;  // float offset of P_p
-    std::int32_t joint = 0;
+    std::int32_t pos = 0;     // float offset P_j is stored to ((j + 1) * 4)
+    std::int32_t t = 0;       // float offset of t_j (j * 4)
   };
   struct Patch {
     std::int32_t dst = 0;     // float index in the offsets buffer (joint * 4 + axis)
@@ -117,9 +126,10 @@ struct FrameProgram {
   };
   std::unique_ptr<float[], AngleFree> angles;
   std::vector<Group> groups;
-  std::size_t identity_local = 0;      // local index whose R is set to the identity each frame
-  std::vector<Step> steps;             // one per joint, except leaves
-  std::vector<Leaf> leaves;            // non-root joints without rotation channels or children (empty if all roots)
+  std::vector<Step> steps;             // one per joint with rotation channels of its own
+  std::vector<PosOp> ops;              // position-only ops: the first `prologue` before the steps, the rest after theirs
+  std::uint32_t prologue = 0;
+  std::vector<PosOp> leaves;           // non-root joints without rotation channels or children (empty if all roots)
   std::vector<std::int32_t> roots;     // root joints: P_j = t_j, written before the steps
   std::vector<float> offsets;          // joints * 4: static t_j (stream components: 0, patched per frame)
   std::vector<Patch> patches;          // offset components that come from position channels
