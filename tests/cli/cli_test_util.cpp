@@ -2,7 +2,6 @@
 
 #include <gmock/gmock.h>
 #include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -17,16 +16,6 @@ std::string shell_quote(const std::string& s) {
   for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return q + "'";
 }
-
-void CliTest::SetUp() {
-  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  dir_ = fs::temp_directory_path() /
-         ("gmr_cli_" + std::to_string(::getpid()) + "_" + info->test_suite_name() + "_" + info->name());
-  fs::remove_all(dir_);
-  fs::create_directories(dir_);
-}
-
-void CliTest::TearDown() { fs::remove_all(dir_); }
 
 CliOutcome CliTest::gmr(const std::string& args) {
   const fs::path out = dir_ / "stdout", err = dir_ / "stderr";

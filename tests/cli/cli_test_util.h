@@ -1,11 +1,13 @@
 // Running the built `gmr` command from a test: a fresh temporary folder per
-// test, and the command's exit status, stdout and stderr.
+// test (test::TempDir), and the command's exit status, stdout and stderr.
 #pragma once
 
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <string>
+
+#include "test_data.h"
 
 namespace gmr::test {
 
@@ -20,9 +22,6 @@ std::string shell_quote(const std::string& s);
 
 class CliTest : public ::testing::Test {
  protected:
-  void SetUp() override;     // creates dir_, empty
-  void TearDown() override;  // removes dir_
-
   // Runs `gmr ARGS` (ARGS is shell text: quote paths with shell_quote).
   CliOutcome gmr(const std::string& args);
   // The quoted path of `name` inside dir_.
@@ -31,7 +30,8 @@ class CliTest : public ::testing::Test {
   // starting "gmr: " and containing `needle`.
   void expect_one_line_error(const std::string& args, const std::string& needle);
 
-  std::filesystem::path dir_;
+  TempDir tmp_;                                // a fresh, empty folder per test, removed after it
+  const std::filesystem::path& dir_ = tmp_.path;
 };
 
 }  // namespace gmr::test
