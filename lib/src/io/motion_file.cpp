@@ -35,7 +35,15 @@ Error unknown_extension(const std::filesystem::path& path, std::string_view verb
 
 namespace {
 
-// The skeleton for an AMC: the one given, else the single .asf in its folder.
+// "07" for "07_05-walk" and "07-walk": the CMU subject number before the first '_' or '-'.
+std::string subject_of(const std::filesystem::path& p) {
+  const std::string stem = p.stem().string();
+  return stem.substr(0, stem.find_first_of("_-"));
+}
+
+// The skeleton for an AMC: the one given, else the single .asf in its folder,
+// else the single one of the same subject (CMU names: 07-walk.asf for
+// 07_05-walk.amc).
 Result<std::filesystem::path> find_asf(const std::filesystem::path& amc, const LoadOptions& options) {
   if (!options.asf.empty()) return options.asf;
   const std::filesystem::path dir = amc.parent_path().empty() ? std::filesystem::path(".") : amc.parent_path();
@@ -52,12 +60,18 @@ Result<std::filesystem::path> find_asf(const std::filesystem::path& amc, const L
   }
   if (found.size() == 1) return found.front();
   std::sort(found.begin(), found.end());
+  std::vector<std::filesystem::path> same_subject;
+  for (const auto& f : found) {
+    if (subject_of(f) == subject_of(amc)) same_subject.push_back(f);
+  }
+  if (same_subject.size() == 1) return same_subject.front();
   if (found.empty()) {
     e.message = "no .asf skeleton in " + dir.string() + ": name one with --asf";
   } else {
     e.message = "several .asf skeletons in " + dir.string() + " (";
     for (std::size_t i = 0; i < found.size(); ++i) e.message += (i ? ", " : "") + found[i].filename().string();
-    e.message += "): name one with --asf";
+    e.message += same_subject.empty() ? "), none for subject '" + subject_of(amc) + "': name one with --asf"
+                                      : ") for subject '" + subject_of(amc) + "': name one with --asf";
   }
   return e;
 }

@@ -59,6 +59,29 @@ TEST(LoadMotion, AmcNeedsExactlyOneAsf) {
   ASSERT_FALSE(several.ok());
   EXPECT_THAT(several.error().message, HasSubstr("several .asf skeletons"));
   EXPECT_THAT(several.error().message, HasSubstr("a.asf, b.ASF"));
+  EXPECT_THAT(several.error().message, HasSubstr("none for subject 't'"));
+}
+
+TEST(LoadMotion, AmcPicksTheAsfOfItsSubjectAmongSeveral) {
+  GMR_REQUIRE_DATA();
+  // CMU names: 07_05-walk.amc goes with 07-walk.asf; a folder may hold the
+  // skeletons of several subjects.
+  TempDir d;
+  fs::copy_file(test::data_file("asfamc/07/07-walk.asf"), d.path / "07-walk.asf");
+  fs::copy_file(test::data_file("asfamc/07/07_05-walk.amc"), d.path / "07_05-walk.amc");
+  fs::copy_file(test::data_file("asfamc/09/09-run.asf"), d.path / "09-run.asf");
+  const auto m = load_motion(d.path / "07_05-walk.amc");
+  ASSERT_TRUE(m.ok()) << m.error().to_string();
+  const auto want = load_motion(d.path / "07_05-walk.amc", LoadOptions{.asf = d.path / "07-walk.asf"});
+  ASSERT_TRUE(want.ok());
+  EXPECT_EQ(m->values, want->values);
+  EXPECT_EQ(m->skeleton.size(), want->skeleton.size());
+  // Two skeletons of the same subject: still a question only the user can answer.
+  fs::copy_file(d.path / "07-walk.asf", d.path / "07-other.asf");
+  const auto two = load_motion(d.path / "07_05-walk.amc");
+  ASSERT_FALSE(two.ok());
+  EXPECT_THAT(two.error().message, HasSubstr("07-other.asf, 07-walk.asf, 09-run.asf) for subject '07'"));
+  EXPECT_THAT(two.error().message, HasSubstr("--asf"));
 }
 
 TEST(SaveMotion, UnknownExtension) {

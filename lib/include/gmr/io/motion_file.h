@@ -2,7 +2,9 @@
 //
 //   .bvh  BVH (post-rotation)             .gmr  GMR text (pre-rotation)
 //   .amc  Acclaim motion; its skeleton (.asf) from LoadOptions, else the single
-//         .asf in the .amc's folder (error if there is none or several)
+//         .asf in the .amc's folder, else the single one there whose name starts
+//         with the same subject ("07-walk.asf" for "07_05-walk.amc": the text
+//         before the first '_' or '-'); an error if there is none or several
 //   .gmrb GMR binary (see docs/performance.md), when built in
 // Extensions are matched case-insensitively; any other is an error.
 #pragma once
@@ -15,7 +17,7 @@
 namespace gmr {
 
 struct LoadOptions {
-  std::filesystem::path asf;  // skeleton for .amc input; empty: look for a single .asf in the same folder
+  std::filesystem::path asf;  // skeleton for .amc input; empty: look for it in the same folder (above)
 };
 
 // The motion as the file holds it: BVH stays post-rotation, GMR is
