@@ -41,16 +41,7 @@ void expect_identical(const Motion& a, const Motion& b) {
   }
 }
 
-// A temporary folder removed at the end of the test.
-struct TempDir {
-  fs::path path = fs::temp_directory_path() / ("gmr_gmrb_test_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
-                                               "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
-  TempDir() { fs::create_directories(path); }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
+using test::TempDir;
 
 Motion small_motion() {
   Motion m = random_motion(21, Convention::kPreRotation, 5);
@@ -197,6 +188,34 @@ TEST(GmrbCorrupt, SkeletonAndValuesAreChecked) {
   expect_error(patched(good, count_at + 1, std::uint8_t{6}), "unknown channel code");
   const std::size_t data_at = good.size() - m.values.size() * 8;
   expect_error(patched(good, data_at + 8 * 3, std::numeric_limits<double>::quiet_NaN()), "value 3 of frame 0 is not finite");
+}
+
+TEST(GmrbCorrupt, NonFiniteValuesAreFoundInAnyBlockAndExtremeFiniteValuesPass) {
+  // 2000 frames of a 14-joint motion: the check runs in blocks of 4096
+  // values, and the bad values below land in the first, the second, a middle
+  // and the last block.
+  Motion m = random_motion(4, Convention::kPostRotation, 2000);
+  const std::size_t n = m.values.size();
+  ASSERT_GT(n, 2 * 4096u);
+  m.values[0] = std::numeric_limits<double>::max();
+  m.values[1] = -std::numeric_limits<double>::max();
+  m.values[2] = std::numeric_limits<double>::denorm_min();
+  m.values[3] = -0.0;
+  m.values[n - 1] = -std::numeric_limits<double>::max();
+  const std::string good = format_gmrb(m).value();
+  auto ok = parse_gmrb(good, "x.gmrb");
+  ASSERT_TRUE(ok.ok()) << ok.error().to_string();
+  expect_identical(m, *ok);
+  const std::size_t data_at = good.size() - n * 8;
+  for (const std::size_t i : {std::size_t{5}, std::size_t{4096}, n / 2 + 3, n - 1}) {
+    for (const double bad : {std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
+                             std::numeric_limits<double>::quiet_NaN()}) {
+      SCOPED_TRACE(i);
+      const std::string want = "value " + std::to_string(i % m.stride()) + " of frame " + std::to_string(i / m.stride()) +
+                               " is not finite";
+      expect_error(patched(good, data_at + 8 * i, bad), want);
+    }
+  }
 }
 
 TEST(GmrbErrors, MissingFileAndWrongInput) {
