@@ -7,6 +7,7 @@
 //   reference_double    gmr::compute_frame (Eigen, double): the reference path
 //   scalar_float        one frame at a time, float, std::sin/std::cos
 //   fast/bvh            SIMD across frames, Euler channels (post-rotation)
+//   fast/bvh_in_l2      the same on 256-frame ranges that stay in L2
 //   fast/gmr_roots:k    the GMR form with k roots (k = 1 .. all)
 //   fast/gmr_all_roots  every joint a root: a copy of the stored positions
 //   gmr_all_roots_view  the zero-copy view (no work at all)
@@ -81,6 +82,33 @@ void run_range(benchmark::State& state, const Motion& m, Layout layout) {
 
 void BM_FastBvh(benchmark::State& state) { run_range(state, bvh(), static_cast<Layout>(state.range(0))); }
 BENCHMARK(BM_FastBvh)->Name("fast/bvh")->ArgName("joint_major")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// The kernel's own cost: four 256-frame ranges of the motion, visited in turn,
+// so inputs (4 x 256 frames x 360 B) and outputs (4 x 256 x 456 B) stay in
+// L2; the whole-motion benchmark above adds the L3 traffic of 2.2 MB.
+void BM_FastBvhInL2(benchmark::State& state) {
+  constexpr std::size_t kRange = 256;
+  constexpr std::size_t kRanges = 4;
+  const auto layout = static_cast<Layout>(state.range(0));
+  auto cm = CompiledMotion::compile(bvh()).value();
+  if (cm.frame_count() < kRange * kRanges) die("01_01 is shorter than the ranges");
+  std::vector<float> ws(fast::fk_workspace_size(cm)), pos(kRange * kRanges * cm.joint_count() * 3);
+  std::vector<FkRangeJob> jobs;
+  for (std::size_t r = 0; r < kRanges; ++r) {
+    jobs.push_back(FkRangeJob{.motion = &cm, .begin = r * kRange, .end = (r + 1) * kRange, .layout = layout,
+                              .out_positions = std::span<float>(pos).subspan(r * kRange * cm.joint_count() * 3,
+                                                                            kRange * cm.joint_count() * 3),
+                              .workspace = ws});
+  }
+  for (auto _ : state) {
+    for (const FkRangeJob& job : jobs) job.run();
+    benchmark::DoNotOptimize(pos.data());
+    benchmark::ClobberMemory();
+  }
+  set_counters(state, kRange * kRanges, cm.bytes_per_frame());
+  state.SetLabel(std::string(fast::simd_target_name()) + (layout == Layout::kFrameMajor ? " frame-major" : " joint-major"));
+}
+BENCHMARK(BM_FastBvhInL2)->Name("fast/bvh_in_l2")->ArgName("joint_major")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 // k roots: 1 (the conversion's own), a few, many, and every joint.
 void BM_FastGmrRoots(benchmark::State& state) {
