@@ -82,67 +82,80 @@ TEST(FastSingleFrame, EqualsRange) {
   }
 }
 
+Joint make_joint(const char* name, int parent, Eigen::Vector3d offset, std::vector<ChannelType> channels) {
+  Joint j;
+  j.name = name;
+  j.parent = parent;
+  j.offset = offset;
+  j.channels = std::move(channels);
+  return j;
+}
+
+// A motion of `frames` random values in [-200, 200] on these joints; joint
+// `twin` gets the same three rotation channel values as joint `of` (both list
+// exactly three rotation channels first).
+Motion motion_with_twins(std::vector<Joint> joints, std::size_t frames, unsigned seed, int twin, int of) {
+  Motion m;
+  m.skeleton = Skeleton::create(std::move(joints)).value();
+  m.frame_time = 1.0 / 30.0;
+  m.frame_count = frames;
+  m.values.resize(m.frame_count * m.stride());
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> value(-200.0, 200.0);
+  for (double& v : m.values) v = value(rng);
+  const auto a0 = static_cast<std::size_t>(m.skeleton.channel_offset(of));
+  const auto b0 = static_cast<std::size_t>(m.skeleton.channel_offset(twin));
+  for (std::size_t f = 0; f < m.frame_count; ++f) {
+    for (std::size_t i = 0; i < 3; ++i) m.values[f * m.stride() + b0 + i] = m.values[f * m.stride() + a0 + i];
+  }
+  return m;
+}
+
+// FkFrameJob (positions alone, and with orientations) against compute_frame
+// on every frame.
+void expect_frame_job_matches_reference(const Motion& m, const CompiledMotion& cm) {
+  const std::size_t n = m.skeleton.size();
+  std::vector<float> ws(fk_workspace_size(cm)), pos(n * 3), ori(n * 9);
+  std::vector<Eigen::Vector3d> p(n);
+  std::vector<Eigen::Matrix3d> w(n);
+  for (std::size_t f = 0; f < m.frame_count; ++f) {
+    compute_frame(m, f, p, w);
+    for (bool with_ori : {false, true}) {
+      ASSERT_TRUE((FkFrameJob{.motion = &cm, .frame = f, .out_positions = pos,
+                              .out_orientations = with_ori ? std::span<float>(ori) : std::span<float>(),
+                              .workspace = ws}.run()));
+      for (std::size_t j = 0; j < n; ++j) {
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(pos[3 * j + static_cast<std::size_t>(a)], p[j][a], 1e-4) << j;
+        if (!with_ori) continue;
+        for (int r = 0; r < 3; ++r) {
+          for (int c = 0; c < 3; ++c) EXPECT_NEAR(ori[9 * j + static_cast<std::size_t>(3 * r + c)], w[j](r, c), 1e-5) << j;
+        }
+      }
+    }
+  }
+}
+
 TEST(FastSingleFrame, TwinsJointsWithoutRotationAndPositionChannels) {
   // Siblings with identical rotation channels (twins: one shared rotation),
   // joints without rotation channels, and position channels on a non-root,
   // in both conventions: FkFrameJob's per-motion program against compute_frame.
   using enum ChannelType;
-  auto joint = [](const char* name, int parent, Eigen::Vector3d offset, std::vector<ChannelType> channels) {
-    Joint j;
-    j.name = name;
-    j.parent = parent;
-    j.offset = offset;
-    j.channels = std::move(channels);
-    return j;
-  };
   std::vector<Joint> joints;
-  joints.push_back(joint("root", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
-  joints.push_back(joint("a", 0, {0, 5, 0}, {kZrotation, kXrotation, kYrotation}));
-  joints.push_back(joint("b", 0, {3, 0, 1}, {kZrotation, kXrotation, kYrotation}));  // twin of a
-  joints.push_back(joint("c", 2, {0, 0, 4}, {kXrotation}));
-  joints.push_back(joint("d", 2, {2, 0, 0}, {}));
-  joints.push_back(joint("e", 1, {0, 0, 0}, {kYposition, kZrotation, kYrotation}));
-  joints.push_back(joint("f", 5, {0, 0, 0}, {}));  // zero offset, no channels
-  joints.push_back(joint("g", 6, {1, 1, 1}, {kXrotation, kZrotation}));
-  auto skeleton = Skeleton::create(std::move(joints));
-  ASSERT_TRUE(skeleton.ok()) << skeleton.error().to_string();
-  Motion m;
-  m.skeleton = std::move(*skeleton);
-  m.frame_time = 1.0 / 30.0;
-  m.frame_count = 9;
-  m.values.resize(m.frame_count * m.stride());
-  std::mt19937 rng(77);
-  std::uniform_real_distribution<double> value(-200.0, 200.0);
-  for (double& v : m.values) v = value(rng);
-  const std::size_t a0 = static_cast<std::size_t>(m.skeleton.channel_offset(1));
-  const std::size_t b0 = static_cast<std::size_t>(m.skeleton.channel_offset(2));
-  for (std::size_t f = 0; f < m.frame_count; ++f) {
-    for (std::size_t i = 0; i < 3; ++i) m.values[f * m.stride() + b0 + i] = m.values[f * m.stride() + a0 + i];
-  }
+  joints.push_back(make_joint("root", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
+  joints.push_back(make_joint("a", 0, {0, 5, 0}, {kZrotation, kXrotation, kYrotation}));
+  joints.push_back(make_joint("b", 0, {3, 0, 1}, {kZrotation, kXrotation, kYrotation}));  // twin of a
+  joints.push_back(make_joint("c", 2, {0, 0, 4}, {kXrotation}));
+  joints.push_back(make_joint("d", 2, {2, 0, 0}, {}));
+  joints.push_back(make_joint("e", 1, {0, 0, 0}, {kYposition, kZrotation, kYrotation}));
+  joints.push_back(make_joint("f", 5, {0, 0, 0}, {}));  // zero offset, no channels
+  joints.push_back(make_joint("g", 6, {1, 1, 1}, {kXrotation, kZrotation}));
+  Motion m = motion_with_twins(std::move(joints), 9, 77, /*twin=*/2, /*of=*/1);
   for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
     m.convention = conv;
     auto cm = CompiledMotion::compile(m);
     ASSERT_TRUE(cm.ok()) << cm.error().to_string();
     EXPECT_EQ(cm->slot_count(), 5u);  // root, a (= b), c, e, g
-    const std::size_t n = m.skeleton.size();
-    std::vector<float> ws(fk_workspace_size(*cm)), pos(n * 3), ori(n * 9);
-    std::vector<Eigen::Vector3d> p(n);
-    std::vector<Eigen::Matrix3d> w(n);
-    for (std::size_t f = 0; f < m.frame_count; ++f) {
-      compute_frame(m, f, p, w);
-      for (bool with_ori : {false, true}) {
-        ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = pos,
-                                .out_orientations = with_ori ? std::span<float>(ori) : std::span<float>(),
-                                .workspace = ws}.run()));
-        for (std::size_t j = 0; j < n; ++j) {
-          for (int a = 0; a < 3; ++a) EXPECT_NEAR(pos[3 * j + static_cast<std::size_t>(a)], p[j][a], 1e-4) << j;
-          if (!with_ori) continue;
-          for (int r = 0; r < 3; ++r) {
-            for (int c = 0; c < 3; ++c) EXPECT_NEAR(ori[9 * j + static_cast<std::size_t>(3 * r + c)], w[j](r, c), 1e-5) << j;
-          }
-        }
-      }
-    }
+    expect_frame_job_matches_reference(m, *cm);
   }
 }
 
@@ -150,63 +163,27 @@ TEST(FastSingleFrame, RootsAndChainsWithoutRotationChannels) {
   // Roots without rotation channels (the GMR form's usual root), a joint
   // without channels between a root and a rotating joint (its position runs
   // before any rotation is computed), and a twin with a child, in both
-  // conventions: FkFrameJob against compute_frame.
+  // conventions.
   using enum ChannelType;
-  auto joint = [](const char* name, int parent, Eigen::Vector3d offset, std::vector<ChannelType> channels) {
-    Joint j;
-    j.name = name;
-    j.parent = parent;
-    j.offset = offset;
-    j.channels = std::move(channels);
-    return j;
-  };
   std::vector<Joint> joints;
-  joints.push_back(joint("r1", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition}));
-  joints.push_back(joint("x", 0, {0, 4, 1}, {}));
-  joints.push_back(joint("y", 1, {2, 0, 0}, {kZrotation, kXrotation}));
-  joints.push_back(joint("z", 2, {0, 3, 0}, {}));
-  joints.push_back(joint("w", 1, {1, 1, 0}, {}));
-  joints.push_back(joint("r2", kNoParent, {-5, 0, 2}, {}));
-  joints.push_back(joint("a", 5, {0, 2, 0}, {kYrotation, kXrotation, kZrotation}));
-  joints.push_back(joint("b", 5, {1, 0, 3}, {kYrotation, kXrotation, kZrotation}));  // twin of a
-  joints.push_back(joint("c", 7, {0, 0, 2}, {kXrotation}));
-  joints.push_back(joint("d", 8, {1, 2, 3}, {}));
-  auto skeleton = Skeleton::create(std::move(joints));
-  ASSERT_TRUE(skeleton.ok()) << skeleton.error().to_string();
-  Motion m;
-  m.skeleton = std::move(*skeleton);
-  m.frame_time = 1.0 / 30.0;
-  m.frame_count = 7;
-  m.values.resize(m.frame_count * m.stride());
-  std::mt19937 rng(78);
-  std::uniform_real_distribution<double> value(-200.0, 200.0);
-  for (double& v : m.values) v = value(rng);
-  const std::size_t a0 = static_cast<std::size_t>(m.skeleton.channel_offset(6));
-  const std::size_t b0 = static_cast<std::size_t>(m.skeleton.channel_offset(7));
-  for (std::size_t f = 0; f < m.frame_count; ++f) {
-    for (std::size_t i = 0; i < 3; ++i) m.values[f * m.stride() + b0 + i] = m.values[f * m.stride() + a0 + i];
-  }
+  joints.push_back(make_joint("r1", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition}));
+  joints.push_back(make_joint("x", 0, {0, 4, 1}, {}));
+  joints.push_back(make_joint("y", 1, {2, 0, 0}, {kZrotation, kXrotation}));
+  joints.push_back(make_joint("z", 2, {0, 3, 0}, {}));
+  joints.push_back(make_joint("w", 1, {1, 1, 0}, {}));
+  joints.push_back(make_joint("r2", kNoParent, {-5, 0, 2}, {}));
+  joints.push_back(make_joint("a", 5, {0, 2, 0}, {kYrotation, kXrotation, kZrotation}));
+  joints.push_back(make_joint("b", 5, {1, 0, 3}, {kYrotation, kXrotation, kZrotation}));  // twin of a
+  joints.push_back(make_joint("c", 7, {0, 0, 2}, {kXrotation}));
+  joints.push_back(make_joint("d", 8, {1, 2, 3}, {}));
+  Motion m = motion_with_twins(std::move(joints), 7, 78, /*twin=*/7, /*of=*/6);
   for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
     m.convention = conv;
     auto cm = CompiledMotion::compile(m);
     ASSERT_TRUE(cm.ok()) << cm.error().to_string();
-    EXPECT_EQ(cm->slot_count(), 3u);  // y, a (= b), c
+    EXPECT_EQ(cm->slot_count(), 3u);              // y, a (= b), c
     EXPECT_EQ(cm->frame_program().prologue, 1u);  // x runs before any step
-    const std::size_t n = m.skeleton.size();
-    std::vector<float> ws(fk_workspace_size(*cm)), pos(n * 3), ori(n * 9);
-    std::vector<Eigen::Vector3d> p(n);
-    std::vector<Eigen::Matrix3d> w(n);
-    for (std::size_t f = 0; f < m.frame_count; ++f) {
-      compute_frame(m, f, p, w);
-      ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = pos, .out_orientations = ori,
-                              .workspace = ws}.run()));
-      for (std::size_t j = 0; j < n; ++j) {
-        for (int a = 0; a < 3; ++a) EXPECT_NEAR(pos[3 * j + static_cast<std::size_t>(a)], p[j][a], 1e-4) << j;
-        for (int r = 0; r < 3; ++r) {
-          for (int c = 0; c < 3; ++c) EXPECT_NEAR(ori[9 * j + static_cast<std::size_t>(3 * r + c)], w[j](r, c), 1e-5) << j;
-        }
-      }
-    }
+    expect_frame_job_matches_reference(m, *cm);
   }
 }
 
