@@ -1,0 +1,68 @@
+# ctest script (cmake -P): installs gmr::gmr from the build tree into a fresh
+# prefix under WORK_DIR, then configures, builds and runs the consumer project
+# (consumer/) against that prefix with the same compiler and generator, and
+# checks what it prints. Writes only under WORK_DIR (in the build tree).
+#
+# -D variables: GMR_BINARY_DIR, CONSUMER_DIR, WORK_DIR, GENERATOR,
+# MAKE_PROGRAM, CXX_COMPILER, BUILD_TYPE, INSTALL_LIBDIR, GMR_VERSION, and
+# optionally CXX_FLAGS / LINKER_FLAGS (sanitizer builds: the consumer links an
+# instrumented archive).
+foreach(var GMR_BINARY_DIR CONSUMER_DIR WORK_DIR GENERATOR CXX_COMPILER INSTALL_LIBDIR GMR_VERSION)
+  if(NOT DEFINED ${var} OR "${${var}}" STREQUAL "")
+    message(FATAL_ERROR "package_test.cmake: -D${var}=... is required")
+  endif()
+endforeach()
+
+# run(<what> COMMAND...): runs the command, fails the test with its output if it fails.
+function(run what)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "${what} failed (${rc}):\n${ARGN}\n${out}\n${err}")
+  endif()
+  set(run_output "${out}" PARENT_SCOPE)
+endfunction()
+
+set(prefix ${WORK_DIR}/prefix)
+set(build ${WORK_DIR}/consumer-build)
+file(REMOVE_RECURSE ${WORK_DIR})
+file(MAKE_DIRECTORY ${WORK_DIR})
+
+run("install" ${CMAKE_COMMAND} --install ${GMR_BINARY_DIR} --prefix ${prefix} --component gmr)
+foreach(file ${INSTALL_LIBDIR}/cmake/gmr/gmrConfig.cmake ${INSTALL_LIBDIR}/cmake/gmr/gmrConfigVersion.cmake
+             ${INSTALL_LIBDIR}/cmake/gmr/gmrTargets.cmake ${INSTALL_LIBDIR}/libgmr.a
+             include/gmr/core/error.h include/gmr/fast/fast_fk.h)
+  if(NOT EXISTS ${prefix}/${file})
+    message(FATAL_ERROR "install: ${prefix}/${file} is missing")
+  endif()
+endforeach()
+# Nothing private (lib/src) or from other targets gets installed.
+file(GLOB_RECURSE installed_headers RELATIVE ${prefix}/include ${prefix}/include/*)
+foreach(header ${installed_headers})
+  if(NOT header MATCHES "^gmr/[a-z_]+/[a-z_]+\\.h$" OR header MATCHES "^gmr/(wire|server|client|stream)/")
+    message(FATAL_ERROR "install: unexpected file include/${header}")
+  endif()
+endforeach()
+
+# CMAKE_FIND_USE_PACKAGE_REGISTRY=OFF: only the fresh prefix can provide gmr.
+run("consumer configure" ${CMAKE_COMMAND} -S ${CONSUMER_DIR} -B ${build} -G ${GENERATOR}
+    -DCMAKE_MAKE_PROGRAM=${MAKE_PROGRAM} -DCMAKE_CXX_COMPILER=${CXX_COMPILER} -DCMAKE_BUILD_TYPE=${BUILD_TYPE}
+    -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF
+    "-DCMAKE_CXX_FLAGS=${CXX_FLAGS}" "-DCMAKE_EXE_LINKER_FLAGS=${LINKER_FLAGS}")
+string(REGEX MATCH "consumer: gmr ([0-9.]+) from ([^\n]*)" found "${run_output}")
+if(NOT CMAKE_MATCH_1 STREQUAL GMR_VERSION OR NOT CMAKE_MATCH_2 STREQUAL "${prefix}/${INSTALL_LIBDIR}/cmake/gmr")
+  message(FATAL_ERROR "consumer configure: expected gmr ${GMR_VERSION} from ${prefix}/${INSTALL_LIBDIR}/cmake/gmr, "
+                      "got '${found}'\n${run_output}")
+endif()
+
+set(config_args)
+if(BUILD_TYPE)
+  set(config_args --config ${BUILD_TYPE})
+endif()
+run("consumer build" ${CMAKE_COMMAND} --build ${build} ${config_args})
+run("consumer run" ${build}/gmr_consumer)
+message("${run_output}")
+if(NOT run_output MATCHES "^gmr consumer: [a-z]+, [0-9]+ joints, [0-9]+ frames, frame [0-9]+, SIMD [A-Za-z0-9_]+\n"
+   OR NOT run_output MATCHES "\nfast FK matches the reference")
+  message(FATAL_ERROR "consumer run: unexpected output")
+endif()
+file(REMOVE_RECURSE ${WORK_DIR})
