@@ -25,29 +25,6 @@ struct Job {
   std::string name;
 };
 
-// The .asf for an .amc: the only one in its folder, else the one whose stem
-// starts the .amc's stem ("07-walk.asf" for "07_05-walk.amc" via "07").
-Result<fs::path> asf_for(const fs::path& amc) {
-  std::vector<fs::path> asfs;
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(amc.parent_path(), ec)) {
-    if (e.is_regular_file(ec) && lower(e.path().extension().string()) == ".asf") asfs.push_back(e.path());
-  }
-  if (asfs.size() == 1) return asfs[0];
-  const std::string stem = amc.stem().string();
-  const std::string subject = stem.substr(0, stem.find_first_of("_-"));
-  std::vector<fs::path> match;
-  for (const auto& a : asfs) {
-    const std::string s = a.stem().string();
-    if (s.substr(0, s.find_first_of("_-")) == subject) match.push_back(a);
-  }
-  if (match.size() == 1) return match[0];
-  return Error{amc.string(), 0, 0,
-               asfs.empty() ? "no .asf skeleton in the folder of this .amc"
-                            : "cannot tell which .asf of the folder this .amc uses (" + std::to_string(asfs.size()) +
-                                  " candidates)"};
-}
-
 Result<LibraryEntry> load_one(const Job& job) {
   auto loaded = load_motion(job.path, job.options);
   if (!loaded.ok()) return loaded.error();
@@ -76,16 +53,11 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
   std::sort(files.begin(), files.end());
   for (const auto& f : files) {
     const std::string ext = lower(f.extension().string());
-    Job job{f, {}, fs::relative(f, dir, ec).replace_extension().generic_string()};
-    if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb") {
-      jobs.push_back(std::move(job));
-    } else if (ext == ".amc") {
-      auto asf = asf_for(f);
-      if (!asf.ok()) {
-        out.rejected.push_back({f, asf.error().to_string()});
-        continue;
-      }
-      job.options.asf = *asf;
+    // The name as found under dir (lexically: relative() would resolve a
+    // symbolic link and name its target). An .amc's skeleton is found by
+    // load_motion: the .asf of its folder, or of its subject among several.
+    Job job{f, {}, f.lexically_relative(dir).replace_extension().generic_string()};
+    if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") {
       jobs.push_back(std::move(job));
     } else {
       ++out.skipped;

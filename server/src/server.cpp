@@ -103,6 +103,7 @@ ServerStats Server::Impl::snapshot() const {
     if (auto s = w.lock(); s && !s->targets().empty()) ++st.streams;
   }
   st.frames_computed = frames_computed;
+  st.frames_computed_float = frames_computed_float;
   st.frames_encoded = frames_encoded;
   st.udp_rejected = udp_rejected;
   st.connections_refused = connections_refused;

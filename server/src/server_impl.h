@@ -17,6 +17,7 @@
 #include <unordered_map>
 
 #include "gmr/server/server.h"
+#include "gmr/server/view.h"
 #include "gmr/stream/v1/stream.pb.h"
 
 namespace gmr::server {
@@ -60,8 +61,13 @@ struct Server::Impl {
   std::map<std::uint64_t, std::weak_ptr<Stream>> streams;
   std::uint64_t next_stream_id = 1;
   std::mt19937_64 rng{std::random_device{}()};
+  // Per library entry: the float form its unedited views share, while any
+  // view holds it (compiled on first use by a float32 stream; freed with the
+  // last view, so memory follows what is being streamed).
+  std::vector<std::weak_ptr<const CompiledForm>> compiled_forms;
 
   std::uint64_t frames_computed = 0;
+  std::uint64_t frames_computed_float = 0;  // of those, by the float path (float32 streams)
   std::uint64_t frames_encoded = 0;
   std::uint64_t udp_rejected = 0;
   std::uint64_t connections_refused = 0;
@@ -78,6 +84,16 @@ struct Server::Impl {
     std::erase_if(shared_streams, [](const auto& kv) { return kv.second.expired(); });
   }
   void begin_stop();
+  // The shared float form of library entry `entry` (made when no view holds one).
+  std::shared_ptr<const CompiledForm> compiled_form(std::size_t entry) {
+    if (compiled_forms.size() != library.size()) compiled_forms.resize(library.size());
+    auto c = compiled_forms[entry].lock();
+    if (!c) {
+      c = std::make_shared<const CompiledForm>(library[entry].motion);
+      compiled_forms[entry] = c;
+    }
+    return c;
+  }
   ServerStats snapshot() const;
 };
 

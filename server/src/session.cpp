@@ -442,7 +442,7 @@ pb::ServerMessage Session::dispatch(const pb::ClientMessage& req) {
       require(views_.size() < impl_.cfg.max_views_per_connection, pb::ERROR_CODE_RESOURCE_EXHAUSTED,
               "at most " + std::to_string(impl_.cfg.max_views_per_connection) + " views per connection");
       const std::uint32_t id = next_view_++;
-      auto v = std::make_unique<View>(id, it->first, impl_.library[it->second].motion);
+      auto v = std::make_unique<View>(id, it->first, impl_.library[it->second].motion, impl_.compiled_form(it->second));
       *out.mutable_view() = view_info(*v);
       views_.emplace(id, std::move(v));
       return out;
@@ -543,6 +543,7 @@ pb::ServerMessage Session::dispatch(const pb::ClientMessage& req) {
       impl_.prune_streams();
       st->set_streams(static_cast<std::uint32_t>(impl_.streams.size()));
       st->set_frames_computed(impl_.frames_computed);
+      st->set_frames_computed_float(impl_.frames_computed_float);
       st->set_frames_encoded(impl_.frames_encoded);
       st->set_frames_sent(frames_sent_);
       st->set_frames_dropped(frames_dropped_);

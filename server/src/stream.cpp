@@ -30,8 +30,11 @@ void Stream::on_tick() {
       const std::size_t n = m.skeleton.size();
       all_positions_.resize(n);
       all_orientations_.resize(orientations_ ? n : 0);
-      compute_view_frame(*content_, frame, all_positions_, all_orientations_);
+      // One place decides the path: float32 streams the float path, float64 the double one.
+      const FramePath path =
+          compute_stream_frame(*content_, frame, !float64_, float_buffers_, all_positions_, all_orientations_);
       ++impl_.frames_computed;
+      if (path == FramePath::kFloat) ++impl_.frames_computed_float;
       positions_.clear();
       quaternions_.clear();
       for (int j : joints_) {

@@ -15,7 +15,8 @@
 namespace gmr::server {
 
 // Stream: one schedule, one content; one FK and one encoding per tick, fanned
-// out to every target. Frame k of the schedule is due at base_time + k/rate.
+// out to every target. Float32 streams compute with the float path
+// (compute_stream_frame), float64 ones with the double reference path. Frame k of the schedule is due at base_time + k/rate.
 class Stream : public std::enable_shared_from_this<Stream> {
  public:
   struct Schedule {
@@ -142,6 +143,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   std::vector<Eigen::Matrix3d> all_orientations_;
   std::vector<Eigen::Vector3d> positions_;
   std::vector<Eigen::Quaterniond> quaternions_;
+  FloatFrameBuffers float_buffers_;  // float32 streams: the float path's outputs and workspace
 };
 
 }  // namespace gmr::server

@@ -41,9 +41,29 @@ TEST(Library, LoadsTheSharedDataAndReportsRejectedFiles) {
     EXPECT_FALSE(why.empty()) << f << " was not rejected";
     EXPECT_NE(why.find(f), std::string::npos) << why;
   }
-  // One progress call per file read (an .amc without a usable .asf is rejected before reading).
-  EXPECT_GE(progress_calls, lib->entries.size());
-  EXPECT_LE(progress_calls, lib->entries.size() + lib->rejected.size());
+  // One progress call per motion file read, good or rejected.
+  EXPECT_EQ(progress_calls, lib->entries.size() + lib->rejected.size());
+}
+
+TEST(Library, NamesFilesAsFoundAndPicksEachAmcsSkeleton) {
+  GMR_REQUIRE_DATA();
+  // A folder of symbolic links (how a deployment often points at a shared
+  // corpus) and one folder holding two subjects' skeletons.
+  TempDir d;
+  namespace fs = std::filesystem;
+  fs::create_directories(d.path / "walks");
+  fs::create_symlink(data_file("bvh/cmu/02_01.bvh"), d.path / "walks" / "cmu_walk.bvh");
+  fs::create_directories(d.path / "acclaim");
+  for (const char* f : {"asfamc/07/07-walk.asf", "asfamc/07/07_05-walk.amc", "asfamc/09/09-run.asf", "asfamc/09/09_06-run.amc"}) {
+    fs::create_symlink(data_file(f), d.path / "acclaim" / fs::path(f).filename());
+  }
+  auto lib = server::load_library(d.path, 2);
+  ASSERT_TRUE(lib.ok()) << lib.error().to_string();
+  std::vector<std::string> names;
+  for (const auto& e : lib->entries) names.push_back(e.name);
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"acclaim/07_05-walk", "acclaim/09_06-run", "walks/cmu_walk"}));
+  EXPECT_TRUE(lib->rejected.empty()) << lib->rejected.front().reason;
 }
 
 TEST(Library, AMissingFolderIsAnError) {

@@ -155,4 +155,50 @@ pb::ClientMessage request(std::uint64_t id) {
   return m;
 }
 
+namespace {
+struct Collected {
+  std::mutex mutex;
+  std::vector<client::ReceivedFrame> frames;
+  Latch<pb::SubscriptionEnded> ended;
+};
+}  // namespace
+
+std::vector<client::ReceivedFrame> stream_all(client::Client& c, const client::ViewState& v, bool udp, bool float64,
+                                              bool orientations, double rate_hz, std::uint64_t* out_dropped) {
+  auto col = std::make_shared<Collected>();
+  client::SubscribeOptions o;
+  o.udp = udp;
+  o.float64 = float64;
+  o.orientations = orientations;
+  o.speed = rate_hz * v.frame_time;  // rate = speed / frame_time, one frame per tick
+  auto sub = c.subscribe(
+      v.id, o,
+      [col](const client::ReceivedFrame& f) {
+        std::lock_guard lock(col->mutex);
+        col->frames.push_back(f);
+      },
+      [col](const pb::SubscriptionEnded& e) { col->ended.set(e); });
+  EXPECT_TRUE(sub.ok()) << sub.error().to_string();
+  if (!sub.ok()) return {};
+  auto end = col->ended.wait();
+  EXPECT_TRUE(end.has_value()) << "the stream did not end";
+  if (end) {
+    EXPECT_EQ(end->reason(), "end of motion");
+    if (out_dropped) *out_dropped = end->frames_dropped();
+  }
+  std::lock_guard lock(col->mutex);
+  return col->frames;
+}
+
+void LibraryMotionTest::SetUp() {
+  if (GetParam() != "walk") GMR_REQUIRE_DATA();
+  server_ = std::make_unique<TestServer>();
+  client_ = server_->connect();
+  ASSERT_NE(client_, nullptr);
+  for (const auto& e : test_library()) {
+    if (e.name == GetParam()) source_ = e.motion;
+  }
+  ASSERT_NE(source_, nullptr) << "no motion " << GetParam();
+}
+
 }  // namespace gmr::test

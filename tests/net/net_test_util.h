@@ -96,4 +96,20 @@ class Latch {
 
 pb::ClientMessage request(std::uint64_t id);
 
+// Streams every frame of the view once, one frame per tick at `rate_hz`, and
+// returns the frames in arrival order (out_dropped: the server's drop count).
+std::vector<client::ReceivedFrame> stream_all(client::Client& c, const client::ViewState& v, bool udp, bool float64,
+                                              bool orientations, double rate_hz = 2000.0,
+                                              std::uint64_t* out_dropped = nullptr);
+
+// A test per library motion (the parameter: "walk", or "cmu/02_01", which
+// needs the shared data): a server, a connected client and the motion.
+class LibraryMotionTest : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override;
+  std::unique_ptr<TestServer> server_;
+  std::unique_ptr<client::Client> client_;
+  std::shared_ptr<const Motion> source_;
+};
+
 }  // namespace gmr::test

@@ -119,57 +119,7 @@ std::vector<Eigen::Vector3d> reorder(const Skeleton& view, const std::vector<int
   return out;
 }
 
-struct Collected {
-  std::mutex mutex;
-  std::vector<ReceivedFrame> frames;
-  Latch<pb::SubscriptionEnded> ended;
-};
-
-// Streams every frame of the view once, one frame per tick at `rate_hz`, and
-// returns the frames in arrival order.
-std::vector<ReceivedFrame> stream_all(Client& c, const ViewState& v, bool udp, bool float64, bool orientations,
-                                      double rate_hz = 2000.0, std::uint64_t* out_dropped = nullptr) {
-  auto col = std::make_shared<Collected>();
-  client::SubscribeOptions o;
-  o.udp = udp;
-  o.float64 = float64;
-  o.orientations = orientations;
-  o.speed = rate_hz * v.frame_time;  // rate = speed / frame_time, one frame per tick
-  auto sub = c.subscribe(
-      v.id, o,
-      [col](const ReceivedFrame& f) {
-        std::lock_guard lock(col->mutex);
-        col->frames.push_back(f);
-      },
-      [col](const pb::SubscriptionEnded& e) { col->ended.set(e); });
-  EXPECT_TRUE(sub.ok()) << sub.error().to_string();
-  if (!sub.ok()) return {};
-  auto end = col->ended.wait();
-  EXPECT_TRUE(end.has_value()) << "the stream did not end";
-  if (end) {
-    EXPECT_EQ(end->reason(), "end of motion");
-    if (out_dropped) *out_dropped = end->frames_dropped();
-  }
-  std::lock_guard lock(col->mutex);
-  return col->frames;
-}
-
-class ServerPositions : public ::testing::TestWithParam<std::string> {
- protected:
-  void SetUp() override {
-    if (GetParam() != "walk") GMR_REQUIRE_DATA();
-    server_ = std::make_unique<TestServer>();
-    client_ = server_->connect();
-    ASSERT_NE(client_, nullptr);
-    for (const auto& e : test_library()) {
-      if (e.name == GetParam()) source_ = e.motion;
-    }
-    ASSERT_NE(source_, nullptr) << "no motion " << GetParam();
-  }
-  std::unique_ptr<TestServer> server_;
-  std::unique_ptr<Client> client_;
-  std::shared_ptr<const Motion> source_;
-};
+class ServerPositions : public LibraryMotionTest {};
 
 TEST_P(ServerPositions, QueryEqualsGmrPositionsForEveryView) {
   const Picks p = pick(source_->skeleton);

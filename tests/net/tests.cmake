@@ -5,6 +5,7 @@ if(TARGET gmr_server AND TARGET gmr_client)
     net/wire_test.cpp
     net/net_test_util.cpp
     net/server_positions_test.cpp
+    net/server_float_path_test.cpp
     net/server_bad_input_test.cpp
     net/server_streaming_test.cpp
     net/library_test.cpp

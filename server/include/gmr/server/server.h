@@ -32,6 +32,7 @@ struct ServerStats {
   std::size_t connections = 0;
   std::size_t streams = 0;
   std::uint64_t frames_computed = 0;  // forward-kinematics runs for streams
+  std::uint64_t frames_computed_float = 0;  // of those, by the float path (float32 streams)
   std::uint64_t frames_encoded = 0;   // shared encodings
   std::uint64_t udp_rejected = 0;     // datagrams that were not a valid registration
   std::uint64_t connections_refused = 0;

@@ -5,7 +5,9 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cstddef>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -13,7 +15,38 @@
 #include "gmr/core/error.h"
 #include "gmr/motion/motion.h"
 
+namespace gmr::fast {
+class CompiledMotion;
+}
+
 namespace gmr::server {
+
+// The float form of one motion (gmr::fast::CompiledMotion) for the fast
+// path, compiled on first use and shared by every content showing that
+// motion: the views of a library motion that no edit changed share one, an
+// edit makes a new one. Compiling takes milliseconds and about as much memory
+// as the motion's values, so only motions that a float32 stream plays pay it.
+class CompiledForm {
+ public:
+  explicit CompiledForm(std::shared_ptr<const Motion> motion);
+  ~CompiledForm();
+  CompiledForm(const CompiledForm&) = delete;
+  CompiledForm& operator=(const CompiledForm&) = delete;
+
+  const std::shared_ptr<const Motion>& motion() const { return motion_; }
+  // The compiled motion, or nullptr when it cannot be compiled (then the
+  // double path serves; the reason is logged once). The first call compiles;
+  // thread-safe.
+  const fast::CompiledMotion* get() const;
+  // fk_workspace_size() of the compiled motion (0 before get() or on failure).
+  std::size_t workspace_floats() const { return workspace_floats_; }
+
+ private:
+  std::shared_ptr<const Motion> motion_;
+  mutable std::once_flag once_;
+  mutable std::unique_ptr<const fast::CompiledMotion> compiled_;
+  mutable std::size_t workspace_floats_ = 0;
+};
 
 // What a frame of a view is computed from; immutable once built, shared by
 // the streams that send it.
@@ -21,19 +54,46 @@ struct ViewContent {
   std::shared_ptr<const Motion> motion;  // pre-rotation
   int relative_to = -1;                  // joint index of the viewer; -1: world
   std::uint32_t skeleton_version = 1;
+  // The float form of `motion` (same motion), for float32 streams; null: none
+  // (the double path serves).
+  std::shared_ptr<const CompiledForm> compiled;
 };
 
 // Positions (and orientations, when out_orientations is not empty) of every
 // joint of frame f, in the view's coordinates:
 //   world:     P_j, W_j from forward kinematics
 //   intrinsic: W_v^T (P_j - P_v), W_v^T W_j for viewer v
-// The one place the server computes kinematics: swap the FK here.
+// This is the double (reference) path: queries and float64 streams, within
+// 1e-9 of `gmr positions`. It and compute_stream_frame below are the only
+// places the server computes kinematics.
 void compute_view_frame(const ViewContent& view, std::size_t f, std::span<Eigen::Vector3d> out_positions,
                         std::span<Eigen::Matrix3d> out_orientations);
 
+// Per-stream buffers of the float path, reused every tick (they grow to the
+// largest motion the stream showed and never shrink).
+struct FloatFrameBuffers {
+  std::vector<float> positions;     // joints * 3
+  std::vector<float> orientations;  // joints * 9, row-major
+  std::vector<float> workspace;     // fk_workspace_size()
+};
+
+// Which path computed a frame.
+enum class FramePath { kDouble, kFloat };
+
+// A stream's frame f, the same values as compute_view_frame: float32 streams
+// (float32 = true) run the float path, gmr::fast::FkFrameJob on the content's
+// compiled form (float round-off: within about 1e-6 of the skeleton's size),
+// then the viewpoint in double; float64 streams, and contents whose motion
+// does not compile, run compute_view_frame. The outputs hold every joint.
+FramePath compute_stream_frame(const ViewContent& view, std::size_t f, bool float32, FloatFrameBuffers& buffers,
+                               std::span<Eigen::Vector3d> out_positions, std::span<Eigen::Matrix3d> out_orientations);
+
 class View {
  public:
-  View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion);
+  // `compiled`: the float form of `motion` to share (e.g. with other views of
+  // the same library motion); null: the view makes its own, compiled on first use.
+  View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion,
+       std::shared_ptr<const CompiledForm> compiled = {});
 
   std::uint32_t id() const { return id_; }
   const std::string& motion_name() const { return motion_name_; }
@@ -53,7 +113,8 @@ class View {
   Result<int> joint_index(const std::string& name) const;
 
  private:
-  void replace(std::shared_ptr<const Motion> motion, int relative_to);
+  void replace(std::shared_ptr<const Motion> motion, int relative_to,
+               std::shared_ptr<const CompiledForm> compiled = {});
 
   std::uint32_t id_;
   std::string motion_name_;
