@@ -5,8 +5,10 @@
 #include <string>
 
 #include "cli_util.h"
+#include "cmd_markers.h"
 #include "cmd_ops.h"
 #include "commands.h"
+#include "gmr/io/markers.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
 #include "gmr/kinematics/forward_kinematics.h"
@@ -41,6 +43,7 @@ struct InfoOptions {
 };
 
 void run_info(const InfoOptions& o) {
+  if (is_marker_file(o.file)) return run_marker_info(o.file);  // .c3d, .trc: cmd_markers.cpp
   Warnings warnings;
   const Motion m = load(o.file, o.asf, warnings);
   const Skeleton& sk = m.skeleton;
@@ -100,6 +103,7 @@ struct ConvertOptions {
 };
 
 void run_convert(const ConvertOptions& o) {
+  if (is_marker_file(o.in)) return run_marker_convert(o.in, o.out);  // markers -> .trc: cmd_markers.cpp
   Warnings warnings;
   const Motion m = load(o.in, o.asf, warnings);
   check(save_motion(m, o.out));
@@ -158,15 +162,15 @@ void add_file_commands(CLI::App& app) {
   {
     auto o = std::make_shared<InfoOptions>();
     CLI::App* cmd = app.add_subcommand("info", "Show a motion file's joints, roots, channels, frames and duration");
-    cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
+    cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
     cmd->callback([o] { run_info(*o); });
   }
   {
     auto o = std::make_shared<ConvertOptions>();
     CLI::App* cmd = app.add_subcommand("convert", "Convert a motion file by extension (.bvh <-> .gmr); atomic write");
-    cmd->add_option("IN", o->in, "Input motion file (.bvh, .gmr, .amc)")->required();
-    cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr)")->required();
+    cmd->add_option("IN", o->in, "Input motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
+    cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr); .trc for marker input")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc input (default: the single .asf beside it)");
     cmd->callback([o] { run_convert(*o); });
   }

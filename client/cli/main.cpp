@@ -1,5 +1,5 @@
 // gmr: one command, git-style subcommands. Files: info, convert, positions,
-// roots, shift, split, join, strip-dummies; benchmarks: bench; a server: ls,
+// markers, roots, shift, split, join, strip-dummies; benchmarks: bench; a server: ls,
 // skeleton, query, stream.
 #include <CLI/CLI.hpp>
 #include <cstdio>
@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   gmr::cli::add_bench_commands(app);
   gmr::cli::add_net_commands(app);
   gmr::cli::add_demo_commands(app);
+  gmr::cli::add_marker_commands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -8,6 +8,7 @@ if(TARGET gmr_cli)
     cli/cli_ops_test.cpp
     cli/cli_asf_test.cpp
     cli/cli_bench_test.cpp
+    cli/cli_markers_test.cpp
   )
   target_include_directories(gmr_cli_tests PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/cli)
   target_compile_definitions(gmr_cli_tests PRIVATE GMR_CLI_PATH="$<TARGET_FILE:gmr_cli>")
