@@ -20,6 +20,20 @@ std::size_t padded_frames(std::size_t frames) {
   return (frames + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment + kFrameAlignment;
 }
 
+// True when the joint's rotation channels (indices `channel` within its
+// channels) are multiples of 360 degrees in every frame.
+bool all_identity(const Motion& motion, int joint, const int* channel, int count) {
+  const std::size_t stride = motion.stride();
+  const std::size_t first = static_cast<std::size_t>(motion.skeleton.channel_offset(joint));
+  for (int r = 0; r < count; ++r) {
+    const double* v = motion.values.data() + first + static_cast<std::size_t>(channel[r]);
+    for (std::size_t f = 0; f < motion.frame_count; ++f) {
+      if (std::remainder(v[f * stride], 360.0) != 0.0) return false;
+    }
+  }
+  return true;
+}
+
 }  // namespace
 
 Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
@@ -49,6 +63,12 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
       if (!is_rotation(joint.channels[i])) continue;
       rotation_channel[p.rotation_count] = static_cast<int>(i);
       p.axes[p.rotation_count++] = static_cast<std::uint8_t>(axis_of(joint.channels[i]));
+    }
+    // Rotation channels that are a multiple of 360 degrees in every frame (CMU's
+    // LHipJoint and RHipJoint: always 0) are the identity: no rotation to
+    // compute, exactly what computing it would give (sin 0 = 0, cos 0 = 1).
+    if (p.rotation_count > 0 && all_identity(motion, static_cast<int>(j), rotation_channel, p.rotation_count)) {
+      p.rotation_count = 0;
     }
     // Siblings that rotate identically share one world rotation: converting
     // BVH to GMR gives each child of a joint a copy of its rotation channels,

@@ -187,6 +187,43 @@ TEST(FastSingleFrame, RootsAndChainsWithoutRotationChannels) {
   }
 }
 
+TEST(FastCompile, RotationsThatAreAlwaysWholeTurnsAreNotComputed) {
+  // A joint whose rotation channels are multiples of 360 degrees in every
+  // frame (CMU's LHipJoint and RHipJoint are always 0) rotates by the
+  // identity: it gets no world-rotation slot of its own, and positions and
+  // orientations are still those of the reference.
+  using enum ChannelType;
+  std::vector<Joint> joints;
+  joints.push_back(make_joint("root", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
+  joints.push_back(make_joint("dummy", 0, {0, 5, 0}, {kZrotation, kXrotation, kYrotation}));
+  joints.push_back(make_joint("b", 1, {3, 0, 1}, {kXrotation}));
+  joints.push_back(make_joint("c", 2, {0, 0, 4}, {}));
+  joints.push_back(make_joint("d", 1, {2, 1, 0}, {}));
+  Motion m = motion_with_twins(std::move(joints), 11, 79, /*twin=*/1, /*of=*/1);
+  const auto dummy = static_cast<std::size_t>(m.skeleton.channel_offset(1));
+  for (std::size_t f = 0; f < m.frame_count; ++f) {
+    for (std::size_t i = 0; i < 3; ++i) m.values[f * m.stride() + dummy + i] = 360.0 * static_cast<double>((f + i) % 5) - 720.0;
+  }
+  for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
+    m.convention = conv;
+    auto cm = CompiledMotion::compile(m);
+    ASSERT_TRUE(cm.ok()) << cm.error().to_string();
+    EXPECT_EQ(cm->slot_count(), 2u);  // root and b
+    EXPECT_FALSE(cm->joints()[1].owns_slot);
+    EXPECT_EQ(cm->joints()[1].world_slot, cm->joints()[1].parent_slot);
+    expect_frame_job_matches_reference(m, *cm);
+    EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 0, m.frame_count), reference_positions(m),
+                          1e-5 * skeleton_size(m));
+    // Half a degree in one frame: a real rotation again.
+    Motion turned = m;
+    turned.values[3 * m.stride() + dummy + 1] = 0.5;
+    auto ct = CompiledMotion::compile(turned);
+    ASSERT_TRUE(ct.ok());
+    EXPECT_EQ(ct->slot_count(), 3u);
+    expect_frame_job_matches_reference(turned, *ct);
+  }
+}
+
 TEST(FastSinCos, EveryAngleIsWithinFloatPrecisionOnEveryTarget) {
   // One joint rotating about Z from -720 to 720 degrees in steps of 1/64
   // (quadrant boundaries included), its child at (1, 0, 0): the child's

@@ -49,7 +49,7 @@ inline constexpr std::int32_t kIdentitySlot = -1;
 // What forward kinematics needs to know about one joint.
 struct JointPlan {
   std::int32_t parent = kNoParent;
-  std::int32_t rotation_count = 0;               // 0..3 rotation channels computed (0: shares a twin's)
+  std::int32_t rotation_count = 0;               // 0..3 rotation channels computed (0: none, always identity, or a twin's)
   std::uint8_t axes[3] = {0, 0, 0};              // Axis of each rotation channel, listed order
   std::int32_t rotation_stream[3] = {kNoStream, kNoStream, kNoStream};
   std::int32_t offset_stream[3] = {kNoStream, kNoStream, kNoStream};  // per axis: stream or static
