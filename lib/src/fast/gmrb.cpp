@@ -45,12 +45,6 @@ T from_le(T v) {
 
 std::size_t round_up(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
 
-Error at(std::string_view file, std::size_t offset, std::string message) {
-  Error e;
-  e.file = std::string(file);
-  e.message = "at byte " + std::to_string(offset) + ": " + std::move(message);
-  return e;
-}
 
 // Reads fixed-size fields from a byte range, failing past its end.
 class Reader {
@@ -93,9 +87,9 @@ struct Header {
 // there, exactly, before anything is allocated.
 Result<Header> parse_header(std::string_view head, std::uint64_t file_size, std::string_view label) {
   if (head.size() < kHeaderSize) {
-    return at(label, head.size(), "file too short for a .gmrb header (" + std::to_string(head.size()) + " of 64 bytes)");
+    return byte_error(label, head.size(), "file too short for a .gmrb header (" + std::to_string(head.size()) + " of 64 bytes)");
   }
-  if (std::memcmp(head.data(), kMagic, sizeof kMagic) != 0) return at(label, 0, "not a .gmrb file (bad magic)");
+  if (std::memcmp(head.data(), kMagic, sizeof kMagic) != 0) return byte_error(label, 0, "not a .gmrb file (bad magic)");
   Reader r(head.substr(8, kHeaderSize - 8), 8);
   std::uint32_t version = 0, bom = 0, header_size = 0, convention = 0;
   Header h;
@@ -109,42 +103,42 @@ Result<Header> parse_header(std::string_view head, std::uint64_t file_size, std:
   r.get(h.frame_time);
   r.get(h.skeleton_bytes);
   if (version != kGmrbVersion) {
-    return at(label, 8, "unsupported .gmrb version " + std::to_string(version) + " (this build reads version " +
+    return byte_error(label, 8, "unsupported .gmrb version " + std::to_string(version) + " (this build reads version " +
                             std::to_string(kGmrbVersion) + ")");
   }
-  if (bom != kByteOrderMark) return at(label, 12, "bad byte-order mark (expected 0x01020304 little-endian)");
-  if (header_size != kHeaderSize) return at(label, 16, "header size " + std::to_string(header_size) + ", expected 64");
-  if (convention > 1) return at(label, 20, "convention " + std::to_string(convention) + ", expected 0 (GMR) or 1 (BVH)");
+  if (bom != kByteOrderMark) return byte_error(label, 12, "bad byte-order mark (expected 0x01020304 little-endian)");
+  if (header_size != kHeaderSize) return byte_error(label, 16, "header size " + std::to_string(header_size) + ", expected 64");
+  if (convention > 1) return byte_error(label, 20, "convention " + std::to_string(convention) + ", expected 0 (GMR) or 1 (BVH)");
   h.convention = convention == 0 ? Convention::kPreRotation : Convention::kPostRotation;
-  if (!std::isfinite(h.frame_time) || h.frame_time < 0) return at(label, 48, "frame time must be finite and >= 0");
+  if (!std::isfinite(h.frame_time) || h.frame_time < 0) return byte_error(label, 48, "frame time must be finite and >= 0");
   const std::uint64_t after_header = file_size - kHeaderSize;
   if (h.skeleton_bytes > after_header) {
-    return at(label, 56, "skeleton of " + std::to_string(h.skeleton_bytes) + " bytes, but only " +
+    return byte_error(label, 56, "skeleton of " + std::to_string(h.skeleton_bytes) + " bytes, but only " +
                              std::to_string(after_header) + " bytes follow the header");
   }
   if (h.joints > h.skeleton_bytes / kMinJointRecord) {
-    return at(label, 24, std::to_string(h.joints) + " joints cannot fit in a skeleton of " +
+    return byte_error(label, 24, std::to_string(h.joints) + " joints cannot fit in a skeleton of " +
                              std::to_string(h.skeleton_bytes) + " bytes");
   }
   if (h.channels > h.joints * 6) {
-    return at(label, 32, std::to_string(h.channels) + " channels for " + std::to_string(h.joints) +
+    return byte_error(label, 32, std::to_string(h.channels) + " channels for " + std::to_string(h.joints) +
                              " joints (at most 6 each)");
   }
   h.data_offset = round_up(kHeaderSize + h.skeleton_bytes, kDataAlignment);
   const std::uint64_t data_bytes = file_size >= h.data_offset ? file_size - h.data_offset : 0;
   if (file_size < h.data_offset) {
-    return at(label, file_size, "file ends before the channel data (expected it at byte " +
+    return byte_error(label, file_size, "file ends before the channel data (expected it at byte " +
                                     std::to_string(h.data_offset) + ")");
   }
   // frames * channels * 8 == data_bytes, without overflow.
   if (h.channels == 0 ? data_bytes != 0
                       : (data_bytes % (h.channels * 8) != 0 || data_bytes / (h.channels * 8) != h.frames)) {
     const std::uint64_t have = h.channels == 0 ? 0 : data_bytes / (h.channels * 8);
-    return at(label, 40, "header announces " + std::to_string(h.frames) + " frames of " + std::to_string(h.channels) +
+    return byte_error(label, 40, "header announces " + std::to_string(h.frames) + " frames of " + std::to_string(h.channels) +
                              " channels, but the file holds " + std::to_string(data_bytes) + " data bytes (" +
                              std::to_string(have) + " whole frames): truncated or corrupt");
   }
-  if (h.channels == 0 && h.frames > (std::uint64_t{1} << 40)) return at(label, 40, "implausible frame count");
+  if (h.channels == 0 && h.frames > (std::uint64_t{1} << 40)) return byte_error(label, 40, "implausible frame count");
   return h;
 }
 
@@ -156,13 +150,13 @@ Result<Skeleton> parse_skeleton(std::string_view bytes, const Header& h, std::st
   for (std::uint64_t j = 0; j < h.joints; ++j) {
     const std::size_t start = r.offset();
     const auto truncated = [&] {
-      return at(label, r.offset(), "skeleton section ends inside joint " + std::to_string(j));
+      return byte_error(label, r.offset(), "skeleton section ends inside joint " + std::to_string(j));
     };
     Joint joint;
     std::uint32_t name_length = 0;
     if (!r.get(name_length)) return truncated();
     if (name_length == 0 || name_length > kMaxNameLength) {
-      return at(label, start, "joint " + std::to_string(j) + " name length " + std::to_string(name_length) +
+      return byte_error(label, start, "joint " + std::to_string(j) + " name length " + std::to_string(name_length) +
                                   " (expected 1 to 4096)");
     }
     if (!r.get_string(name_length, joint.name)) return truncated();
@@ -173,30 +167,30 @@ Result<Skeleton> parse_skeleton(std::string_view bytes, const Header& h, std::st
     for (int a = 0; a < 3; ++a) {
       double v = 0;
       if (!r.get(v)) return truncated();
-      if (!std::isfinite(v)) return at(label, r.offset() - 8, "joint " + joint.name + " offset is not finite");
+      if (!std::isfinite(v)) return byte_error(label, r.offset() - 8, "joint " + joint.name + " offset is not finite");
       joint.offset[a] = v;
     }
     std::uint8_t count = 0;
     if (!r.get(count)) return truncated();
-    if (count > 6) return at(label, r.offset() - 1, "joint " + joint.name + " has " + std::to_string(count) + " channels (at most 6)");
+    if (count > 6) return byte_error(label, r.offset() - 1, "joint " + joint.name + " has " + std::to_string(count) + " channels (at most 6)");
     for (std::uint8_t i = 0; i < count; ++i) {
       std::uint8_t c = 0;
       if (!r.get(c)) return truncated();
-      if (c > 5) return at(label, r.offset() - 1, "joint " + joint.name + ": unknown channel code " + std::to_string(c));
+      if (c > 5) return byte_error(label, r.offset() - 1, "joint " + joint.name + ": unknown channel code " + std::to_string(c));
       joint.channels.push_back(static_cast<ChannelType>(c));
     }
     channels += count;
     joints.push_back(std::move(joint));
   }
   if (r.left() != 0) {
-    return at(label, r.offset(), std::to_string(r.left()) + " unused bytes at the end of the skeleton section");
+    return byte_error(label, r.offset(), std::to_string(r.left()) + " unused bytes at the end of the skeleton section");
   }
   if (channels != h.channels) {
-    return at(label, 32, "header announces " + std::to_string(h.channels) + " channels per frame, the joints list " +
+    return byte_error(label, 32, "header announces " + std::to_string(h.channels) + " channels per frame, the joints list " +
                              std::to_string(channels));
   }
   auto skeleton = Skeleton::create(std::move(joints));
-  if (!skeleton) return at(label, kHeaderSize, "invalid skeleton: " + skeleton.error().message);
+  if (!skeleton) return byte_error(label, kHeaderSize, "invalid skeleton: " + skeleton.error().message);
   return skeleton;
 }
 
@@ -220,7 +214,7 @@ Status finish_values(std::vector<double>& values, std::size_t channels, std::siz
     if ((carry >> 63) == 0) continue;
     for (std::size_t i = b; i < e; ++i) {
       if (!std::isfinite(values[i])) {
-        return at(label, data_offset + i * 8, "value " + std::to_string(i % channels) + " of frame " +
+        return byte_error(label, data_offset + i * 8, "value " + std::to_string(i % channels) + " of frame " +
                                                    std::to_string(i / channels) + " is not finite");
       }
     }
@@ -319,7 +313,7 @@ Result<Motion> read_gmrb(const std::filesystem::path& path) {
   std::string skel(static_cast<std::size_t>(h->data_offset - kHeaderSize), '\0');
   got = read_fully(fd, skel.data(), skel.size(), path);
   if (!got) return got.error();
-  if (*got != skel.size()) return at(label, kHeaderSize + *got, "file ends inside the skeleton section");
+  if (*got != skel.size()) return byte_error(label, kHeaderSize + *got, "file ends inside the skeleton section");
   auto skeleton = parse_skeleton(std::string_view(skel).substr(0, static_cast<std::size_t>(h->skeleton_bytes)), *h, label);
   if (!skeleton) return skeleton.error();
   Motion m = make_motion(std::move(*skeleton), *h);
@@ -327,7 +321,7 @@ Result<Motion> read_gmrb(const std::filesystem::path& path) {
   const std::size_t data_bytes = m.values.size() * sizeof(double);
   got = read_fully(fd, reinterpret_cast<char*>(m.values.data()), data_bytes, path);
   if (!got) return got.error();
-  if (*got != data_bytes) return at(label, h->data_offset + *got, "file ends inside the channel data (it shrank while read)");
+  if (*got != data_bytes) return byte_error(label, h->data_offset + *got, "file ends inside the channel data (it shrank while read)");
   if (Status s = finish_values(m.values, m.stride(), h->data_offset, label); !s) return s.error();
   return m;
 }

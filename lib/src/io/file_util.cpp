@@ -124,4 +124,11 @@ std::string format_double(double v) {
   return std::string(buf, detail::format_shortest(buf, v));
 }
 
+Error byte_error(std::string_view file, std::size_t offset, std::string message) {
+  Error e;
+  e.file = std::string(file);
+  e.message = "at byte " + std::to_string(offset) + ": " + std::move(message);
+  return e;
+}
+
 }  // namespace gmr

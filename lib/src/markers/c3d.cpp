@@ -35,12 +35,6 @@ constexpr std::size_t kMaxPoints = 65535;
 
 enum class Processor { kIntel, kDec, kMips };
 
-Error at(std::string_view file, std::size_t offset, std::string message) {
-  Error e;
-  e.file = std::string(file);
-  e.message = "at byte " + std::to_string(offset) + ": " + std::move(message);
-  return e;
-}
 
 // Number decoding for one processor type. Offsets are checked by the caller.
 struct Decoder {
@@ -109,7 +103,7 @@ class C3dReader {
 
  private:
   void warn(std::size_t offset, std::string message) {
-    if (warnings_) warnings_->push_back(at(label_, offset, std::move(message)));
+    if (warnings_) warnings_->push_back(byte_error(label_, offset, std::move(message)));
   }
   std::optional<Status> read_parameters(std::size_t start);
   const Parameter* find(const std::string& group, const std::string& name) const {
@@ -179,7 +173,7 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
     if (name_length == 0 || id == 0) break;
     const std::size_t n = static_cast<std::size_t>(name_length < 0 ? -name_length : name_length);
     const std::size_t record = pos;
-    if (pos + 2 + n + 2 > end) return Status(at(label_, record, "parameter record runs past the end of the file"));
+    if (pos + 2 + n + 2 > end) return Status(byte_error(label_, record, "parameter record runs past the end of the file"));
     std::string name = upper(trim(bytes_.substr(pos + 2, n)));
     const std::size_t next_field = pos + 2 + n;
     const std::int16_t next = dec_.i16(next_field);
@@ -187,21 +181,21 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
     if (id < 0) {
       groups[-id] = name;
     } else {
-      if (q + 2 > end) return Status(at(label_, q, "parameter " + name + " ends at the end of the file"));
+      if (q + 2 > end) return Status(byte_error(label_, q, "parameter " + name + " ends at the end of the file"));
       Parameter p;
       p.record = record;
       p.type = static_cast<std::int8_t>(bytes_[q]);
       const std::size_t ndims = static_cast<unsigned char>(bytes_[q + 1]);
       if (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4) {
-        return Status(at(label_, q, "parameter " + name + " has type " + std::to_string(p.type) +
+        return Status(byte_error(label_, q, "parameter " + name + " has type " + std::to_string(p.type) +
                                         " (expected -1, 1, 2 or 4)"));
       }
       if (ndims > kMaxDims) {
-        return Status(at(label_, q + 1, "parameter " + name + " has " + std::to_string(ndims) +
+        return Status(byte_error(label_, q + 1, "parameter " + name + " has " + std::to_string(ndims) +
                                             " dimensions (at most 7)"));
       }
       q += 2;
-      if (q + ndims > end) return Status(at(label_, q, "parameter " + name + " dimensions run past the end of the file"));
+      if (q + ndims > end) return Status(byte_error(label_, q, "parameter " + name + " dimensions run past the end of the file"));
       std::size_t count = 1;
       for (std::size_t d = 0; d < ndims; ++d) {
         p.dims.push_back(static_cast<unsigned char>(bytes_[q + d]));
@@ -210,7 +204,7 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
       q += ndims;
       const std::size_t size = static_cast<std::size_t>(p.type < 0 ? -p.type : p.type);
       if (count > (end - q) / size) {
-        return Status(at(label_, q, "parameter " + name + " holds " + std::to_string(count) + " values of " +
+        return Status(byte_error(label_, q, "parameter " + name + " holds " + std::to_string(count) + " values of " +
                                         std::to_string(size) + " bytes, past the end of the file"));
       }
       p.data = q;
@@ -230,18 +224,18 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
 
 Result<MarkerTrajectories> C3dReader::read() {
   if (bytes_.size() < kBlock) {
-    return at(label_, bytes_.size(), "file too short for a C3D header (" + std::to_string(bytes_.size()) +
+    return byte_error(label_, bytes_.size(), "file too short for a C3D header (" + std::to_string(bytes_.size()) +
                                          " of 512 bytes)");
   }
   const std::size_t param_block = static_cast<unsigned char>(bytes_[0]);
   if (static_cast<unsigned char>(bytes_[1]) != 0x50) {
-    return at(label_, 1, "not a C3D file (byte 2 is " + std::to_string(static_cast<unsigned char>(bytes_[1])) +
+    return byte_error(label_, 1, "not a C3D file (byte 2 is " + std::to_string(static_cast<unsigned char>(bytes_[1])) +
                              ", expected 80)");
   }
-  if (param_block == 0) return at(label_, 0, "parameter section at block 0 (blocks count from 1)");
+  if (param_block == 0) return byte_error(label_, 0, "parameter section at block 0 (blocks count from 1)");
   const std::size_t param_start = (param_block - 1) * kBlock;
   if (param_start + 4 > bytes_.size()) {
-    return at(label_, 0, "parameter section at block " + std::to_string(param_block) + " (byte " +
+    return byte_error(label_, 0, "parameter section at block " + std::to_string(param_block) + " (byte " +
                              std::to_string(param_start) + ") is past the end of the file (" +
                              std::to_string(bytes_.size()) + " bytes)");
   }
@@ -251,7 +245,7 @@ Result<MarkerTrajectories> C3dReader::read() {
     case 85: dec_.processor = Processor::kDec; break;
     case 86: dec_.processor = Processor::kMips; break;
     default:
-      return at(label_, param_start + 3, "unknown processor type " + std::to_string(processor) +
+      return byte_error(label_, param_start + 3, "unknown processor type " + std::to_string(processor) +
                                              " (expected 84 Intel, 85 DEC or 86 MIPS)");
   }
   dec_.bytes = bytes_;
@@ -277,12 +271,12 @@ Result<MarkerTrajectories> C3dReader::read() {
     }
     points = *used;
   }
-  if (points > kMaxPoints) return at(label_, 2, "implausible point count " + std::to_string(points));
+  if (points > kMaxPoints) return byte_error(label_, 2, "implausible point count " + std::to_string(points));
 
   // Scale: negative means float storage; its magnitude scales integers and residuals.
   double scale = header_scale;
   if (auto s = number("POINT", "SCALE")) scale = *s;
-  if (!std::isfinite(scale)) return at(label_, 12, "POINT:SCALE is not a finite number");
+  if (!std::isfinite(scale)) return byte_error(label_, 12, "POINT:SCALE is not a finite number");
   const bool floats = scale < 0;
   const double abs_scale = std::fabs(scale);
   const std::size_t value_size = floats ? 4 : 2;
@@ -323,10 +317,10 @@ Result<MarkerTrajectories> C3dReader::read() {
       data_block = from_param;
     }
   }
-  if (data_block == 0) return at(label_, 16, "data section at block 0 (blocks count from 1)");
+  if (data_block == 0) return byte_error(label_, 16, "data section at block 0 (blocks count from 1)");
   const std::size_t data_start = (data_block - 1) * kBlock;
   if (data_block <= param_block) {
-    return at(label_, 16, "data section (block " + std::to_string(data_block) +
+    return byte_error(label_, 16, "data section (block " + std::to_string(data_block) +
                               ") starts before the end of the parameter section (block " + std::to_string(param_block) + ")");
   }
 
@@ -357,14 +351,14 @@ Result<MarkerTrajectories> C3dReader::read() {
       }
     }
   }
-  if (frames > kMaxFrames) return at(label_, 8, "implausible frame count " + std::to_string(frames));
+  if (frames > kMaxFrames) return byte_error(label_, 8, "implausible frame count " + std::to_string(frames));
   out.first_frame = first;
 
   // Bound everything by the bytes present before allocating.
   const std::size_t frame_bytes = (points * 4 + analog_per_frame) * value_size;
   if (frames > 0 && frame_bytes > 0) {
     if (data_start > bytes_.size()) {
-      return at(label_, 16, "data section at block " + std::to_string(data_block) + " (byte " +
+      return byte_error(label_, 16, "data section at block " + std::to_string(data_block) + " (byte " +
                                 std::to_string(data_start) + ") is past the end of the file (" +
                                 std::to_string(bytes_.size()) + " bytes)");
     }

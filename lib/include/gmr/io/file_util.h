@@ -1,6 +1,7 @@
 // Small file helpers shared by the readers and writers.
 #pragma once
 
+#include <cstddef>
 #include <filesystem>
 #include <string>
 #include <string_view>
@@ -25,5 +26,9 @@ Status write_file_atomic(const std::filesystem::path& path, std::string_view byt
 // std::to_chars(first, last, v), only faster for short decimals. E.g.
 // "0.1", "-6.101614", "1e-07", "0.30000000000000004".
 std::string format_double(double v);
+
+// An error in a binary file: "<file>: at byte <offset>: <message>" (the
+// .gmrb and C3D readers).
+Error byte_error(std::string_view file, std::size_t offset, std::string message);
 
 }  // namespace gmr
