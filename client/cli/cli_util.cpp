@@ -1,6 +1,8 @@
 #include "cli_util.h"
 
+#include <cctype>
 #include <charconv>
+#include <cstdio>
 
 namespace gmr::cli {
 namespace {
@@ -47,6 +49,16 @@ std::vector<std::string> split_list(std::string_view text) {
     start = comma + 1;
   }
   return out;
+}
+
+void print_warnings(const Warnings& warnings) {
+  for (const Error& w : warnings) std::fprintf(stderr, "gmr: warning: %s\n", w.to_string().c_str());
+}
+
+std::string lower_extension(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
 }
 
 }  // namespace gmr::cli

@@ -1,7 +1,9 @@
-// Helpers shared by the subcommands: how a command fails, and frame ranges.
+// Helpers shared by the subcommands: how a command fails, warnings, file
+// extensions, and frame ranges.
 #pragma once
 
 #include <cstddef>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -37,6 +39,13 @@ FrameRange parse_frame_range(std::string_view text);
 // Clamps to [0, frame_count) and throws CommandError when begin > end or begin
 // is past the last frame of a non-empty motion.
 FrameRange clamp_frame_range(FrameRange r, std::size_t frame_count);
+
+// Prints a reader's warnings on stderr, one "gmr: warning: ..." line each
+// (after the command's output; a failing command prints only its error line).
+void print_warnings(const Warnings& warnings);
+
+// The extension of `path` in lower case (".bvh" for "a.BVH"; "" if none).
+std::string lower_extension(const std::filesystem::path& path);
 
 // Splits "A,B,C" into names (empty items are an error).
 std::vector<std::string> split_list(std::string_view text);

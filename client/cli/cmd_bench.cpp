@@ -361,9 +361,7 @@ void run_figure4(const Figure4Options& o) {
   std::error_code ec;
   if (!fs::is_directory(o.dir, ec)) throw CommandError(o.dir + ": not a directory");
   for (fs::recursive_directory_iterator it(o.dir, ec), end; !ec && it != end; it.increment(ec)) {
-    std::string ext = it->path().extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    if (ext == ".bvh" && it->is_regular_file(ec)) files.push_back(it->path());
+    if (lower_extension(it->path()) == ".bvh" && it->is_regular_file(ec)) files.push_back(it->path());
   }
   if (ec) throw CommandError(o.dir + ": " + ec.message());
   std::sort(files.begin(), files.end());

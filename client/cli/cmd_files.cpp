@@ -17,12 +17,6 @@
 namespace gmr::cli {
 namespace {
 
-// Warnings go to stderr, one line each, only once the command has succeeded
-// (a failing command prints its one error line and nothing else).
-void print_warnings(const Warnings& warnings) {
-  for (const Error& w : warnings) std::fprintf(stderr, "gmr: warning: %s\n", w.to_string().c_str());
-}
-
 Motion load(const std::string& file, const std::string& asf, Warnings& warnings) {
   LoadOptions options;
   options.asf = asf;

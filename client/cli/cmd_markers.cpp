@@ -2,7 +2,6 @@
 // `gmr convert`.
 #include "cmd_markers.h"
 
-#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <cstdio>
@@ -14,24 +13,10 @@
 #include "commands.h"
 #include "gmr/io/file_util.h"
 #include "gmr/io/markers.h"
+#include "gmr/io/positions_csv.h"
 
 namespace gmr::cli {
 namespace {
-
-void print_warnings(const Warnings& warnings) {
-  for (const Error& w : warnings) std::fprintf(stderr, "gmr: warning: %s\n", w.to_string().c_str());
-}
-
-// RFC 4180 quoting, only for names that need it (as in the positions CSV).
-std::string csv_field(const std::string& s) {
-  if (s.find_first_of(",\"\r\n") == std::string::npos) return s;
-  std::string out = "\"";
-  for (char c : s) {
-    if (c == '"') out += '"';
-    out += c;
-  }
-  return out + '"';
-}
 
 std::string number(double v) {
   if (v == 0.0) v = 0.0;  // one form for -0 and 0
@@ -113,8 +98,7 @@ void run_marker_info(const std::string& file) {
 }
 
 void run_marker_convert(const std::string& in, const std::string& out) {
-  std::string ext = std::filesystem::path(out).extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const std::string ext = lower_extension(out);
   if (ext != ".trc") {
     throw CommandError(out + ": cannot write markers as '" + ext + "': expected .trc (markers are not turned into a skeleton)");
   }

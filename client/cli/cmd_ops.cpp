@@ -30,10 +30,6 @@ struct OpOptions {
   std::string joints;  // --set / --to / --at / --root
 };
 
-void print_warnings(const Warnings& warnings) {
-  for (const Error& w : warnings) std::fprintf(stderr, "gmr: warning: %s\n", w.to_string().c_str());
-}
-
 // Loads FILE as a pre-rotation motion.
 Motion load_pre(const OpOptions& o, Warnings& warnings) {
   LoadOptions options;
@@ -97,9 +93,7 @@ void run_strip(const OpOptions& o) {
   if (removed.empty()) std::printf("no zero-length joints to remove\n");
   // BVH cannot let siblings rotate independently without zero-length joints:
   // say so when the writer had to insert some back.
-  std::string ext = std::filesystem::path(o.out).extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".bvh") {
+  if (lower_extension(o.out) == ".bvh") {
     const auto post = to_post_rotation(stripped);
     if (post && post->skeleton.size() > stripped.skeleton.size()) {
       std::fprintf(stderr,

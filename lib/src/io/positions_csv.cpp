@@ -6,9 +6,7 @@
 #include "number_format.h"
 
 namespace gmr {
-namespace {
 
-// RFC 4180 quoting, only for names that need it (a ',', '"' or line break).
 std::string csv_field(std::string_view s) {
   if (s.find_first_of(",\"\r\n") == std::string_view::npos) return std::string(s);
   std::string out = "\"";
@@ -19,6 +17,8 @@ std::string csv_field(std::string_view s) {
   out += '"';
   return out;
 }
+
+namespace {
 
 void append_number(std::string& out, double v) {
   if (v == 0.0) v = 0.0;  // "-0" and "0" are the same position: print one form

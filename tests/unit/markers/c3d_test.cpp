@@ -12,17 +12,12 @@
 
 #include "gmr/io/bvh.h"
 #include "gmr/io/markers.h"
+#include "markers_test_util.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "test_data.h"
 
 namespace gmr {
 namespace {
-
-MarkerTrajectories load_c3d(const std::string& rel, Warnings* w = nullptr) {
-  auto r = read_c3d(test::data_file(rel), w);
-  EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().to_string());
-  return r.ok() ? std::move(r).value() : MarkerTrajectories{};
-}
 
 int find(const MarkerTrajectories& d, const std::string& name) {
   const auto it = std::find(d.names.begin(), d.names.end(), name);
@@ -32,7 +27,7 @@ int find(const MarkerTrajectories& d, const std::string& name) {
 TEST(RealFiles, CmuC3d) {
   GMR_REQUIRE_DATA();
   Warnings w;
-  const auto a = load_c3d("c3d/cmu_01_01.c3d", &w);
+  const auto a = test::load_marker_file("c3d/cmu_01_01.c3d", &w);
   EXPECT_TRUE(w.empty());
   EXPECT_EQ(a.marker_count(), 42u);
   EXPECT_EQ(a.frame_count, 2751u);
@@ -44,7 +39,7 @@ TEST(RealFiles, CmuC3d) {
   EXPECT_EQ(a.analog_channels, 0u);
   ASSERT_TRUE(a.validate().ok());
 
-  const auto b = load_c3d("c3d/cmu_02_01.c3d");
+  const auto b = test::load_marker_file("c3d/cmu_02_01.c3d");
   EXPECT_EQ(b.marker_count(), 41u);
   EXPECT_EQ(b.frame_count, 343u);
   EXPECT_EQ(b.first_frame, 50);
@@ -59,7 +54,7 @@ TEST(RealFiles, CmuC3d) {
 
 TEST(RealFiles, VendorC3d) {
   GMR_REQUIRE_DATA();
-  const auto fp = load_c3d("c3d/fp_type3_2frames.c3d");
+  const auto fp = test::load_marker_file("c3d/fp_type3_2frames.c3d");
   EXPECT_EQ(fp.marker_count(), 34u);
   EXPECT_EQ(fp.frame_count, 2u);
   EXPECT_EQ(fp.frame_rate, 250.0);
@@ -67,7 +62,7 @@ TEST(RealFiles, VendorC3d) {
   EXPECT_EQ(fp.analog_channels * 4, 64u);  // 64 analog samples per frame at 1000 Hz
   EXPECT_EQ(fp.analog_rate, 1000.0);
 
-  const auto os = load_c3d("c3d/opensim_walking2.c3d");
+  const auto os = test::load_marker_file("c3d/opensim_walking2.c3d");
   EXPECT_EQ(os.marker_count(), 44u);
   EXPECT_EQ(os.frame_count, 1249u);
   EXPECT_EQ(os.frame_rate, 250.0);
@@ -78,7 +73,7 @@ TEST(RealFiles, VendorC3d) {
     ASSERT_FALSE(zero) << "a zero point at value " << i;
   }
 
-  const auto vi = load_c3d("c3d/vicon_markers_analogs.c3d");
+  const auto vi = test::load_marker_file("c3d/vicon_markers_analogs.c3d");
   EXPECT_EQ(vi.marker_count(), 51u);
   EXPECT_EQ(vi.frame_count, 580u);
   EXPECT_EQ(vi.frame_rate, 100.0);
@@ -91,7 +86,7 @@ TEST(RealFiles, OptotrakShorterThanDeclared) {
   GMR_REQUIRE_DATA();
   // Declares 1149 frames; the stored copy holds 29 whole frames (28,640 bytes).
   Warnings w;
-  const auto d = load_c3d("c3d/optotrak.c3d", &w);
+  const auto d = test::load_marker_file("c3d/optotrak.c3d", &w);
   EXPECT_EQ(d.marker_count(), 54u);
   EXPECT_EQ(d.names.front(), "Marker_1");
   EXPECT_EQ(d.names.back(), "Marker_54");
@@ -106,7 +101,7 @@ TEST(RealFiles, DecFormatLoads) {
   GMR_REQUIRE_DATA();
   // DEC (VAX) floats converted: header and POINT:RATE both read 25 Hz.
   Warnings w;
-  const auto d = load_c3d("malformed/ezc3d_read_NOTworking2.c3d", &w);
+  const auto d = test::load_marker_file("malformed/ezc3d_read_NOTworking2.c3d", &w);
   EXPECT_TRUE(w.empty());
   EXPECT_EQ(d.marker_count(), 23u);
   EXPECT_EQ(d.frame_count, 670u);
@@ -120,7 +115,7 @@ TEST(RealFiles, DecFormatLoads) {
 
 TEST(RealFiles, Cmu0201WaistMatchesBvhRoot) {
   GMR_REQUIRE_DATA();
-  const auto c3d = load_c3d("c3d/cmu_02_01.c3d");
+  const auto c3d = test::load_marker_file("c3d/cmu_02_01.c3d");
   auto bvh = read_bvh(test::data_file("bvh/cmu/02_01.bvh"));
   ASSERT_TRUE(bvh.ok()) << bvh.error().to_string();
   std::vector<Eigen::Vector3d> p(bvh->skeleton.size());
@@ -146,7 +141,7 @@ TEST(RealFiles, Cmu0201WaistMatchesBvhRoot) {
 
 TEST(RealFiles, OpensimWalking2SameNamesInC3dAndTrc) {
   GMR_REQUIRE_DATA();
-  const auto c3d = load_c3d("c3d/opensim_walking2.c3d");
+  const auto c3d = test::load_marker_file("c3d/opensim_walking2.c3d");
   auto trc = read_trc(test::data_file("trc/opensim_std_walking2_markers.trc"));
   ASSERT_TRUE(trc.ok()) << trc.error().to_string();
   ASSERT_EQ(c3d.names.size(), 44u);

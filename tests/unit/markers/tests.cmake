@@ -5,5 +5,6 @@ gmr_add_test(gmr_markers_tests SANITIZE
   unit/markers/c3d_test.cpp
   unit/markers/trc_test.cpp
   unit/markers/markers_mutation_test.cpp
+  unit/markers/markers_test_util.h
 )
 target_include_directories(gmr_markers_tests PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/unit/io)

@@ -10,16 +10,11 @@
 
 #include "gmr/io/file_util.h"
 #include "gmr/io/markers.h"
+#include "markers_test_util.h"
 #include "test_data.h"
 
 namespace gmr {
 namespace {
-
-MarkerTrajectories load_trc(const std::string& rel, Warnings* w = nullptr) {
-  auto r = read_trc(test::data_file(rel), w);
-  EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().to_string());
-  return r.ok() ? std::move(r).value() : MarkerTrajectories{};
-}
 
 // Bit-identical positions (NaN equal to NaN).
 void expect_same_bits(const std::vector<double>& a, const std::vector<double>& b) {
@@ -36,7 +31,7 @@ void expect_same_bits(const std::vector<double>& a, const std::vector<double>& b
 TEST(RealFiles, OpensimTrc) {
   GMR_REQUIRE_DATA();
   Warnings w;
-  const auto a = load_trc("trc/opensim_std_walking2_markers.trc", &w);
+  const auto a = test::load_marker_file("trc/opensim_std_walking2_markers.trc", &w);
   EXPECT_EQ(a.marker_count(), 44u);
   EXPECT_EQ(a.frame_count, 126u);
   EXPECT_EQ(a.frame_rate, 250.0);
@@ -48,7 +43,7 @@ TEST(RealFiles, OpensimTrc) {
   EXPECT_NE(w[0].message.find("does not match DataRate"), std::string::npos);
 
   w.clear();
-  const auto s = load_trc("trc/opensim_subject01_static.trc", &w);
+  const auto s = test::load_marker_file("trc/opensim_subject01_static.trc", &w);
   EXPECT_TRUE(w.empty());
   EXPECT_EQ(s.marker_count(), 49u);
   EXPECT_EQ(s.frame_count, 300u);
@@ -58,7 +53,7 @@ TEST(RealFiles, OpensimTrc) {
   EXPECT_EQ(s.missing_points(), 0u);
 
   w.clear();
-  const auto f = load_trc("trc/opensim_walk_free_01.trc", &w);
+  const auto f = test::load_marker_file("trc/opensim_walk_free_01.trc", &w);
   EXPECT_EQ(f.marker_count(), 41u);
   EXPECT_EQ(f.frame_count, 73u);
   EXPECT_EQ(f.first_frame, 185);
@@ -71,7 +66,7 @@ TEST(RealFiles, OpensimTrc) {
 
 TEST(RealFiles, Pose2simAndCommaSeparated) {
   GMR_REQUIRE_DATA();
-  const auto p = load_trc("trc/pose2sim_BalancingTrial_0-100.trc");
+  const auto p = test::load_marker_file("trc/pose2sim_BalancingTrial_0-100.trc");
   EXPECT_EQ(p.marker_count(), 21u);
   EXPECT_EQ(p.frame_count, 100u);
   EXPECT_EQ(p.units, "m");
@@ -79,7 +74,7 @@ TEST(RealFiles, Pose2simAndCommaSeparated) {
   EXPECT_EQ(p.positions[0], -0.06497214796810755);
 
   Warnings w;
-  const auto c = load_trc("trc/pyomeca_markers.trc", &w);
+  const auto c = test::load_marker_file("trc/pyomeca_markers.trc", &w);
   EXPECT_EQ(c.marker_count(), 51u);
   EXPECT_EQ(c.frame_count, 93u);
   EXPECT_EQ(c.frame_rate, 100.0);
@@ -92,19 +87,19 @@ TEST(RealFiles, Pose2simAndCommaSeparated) {
 
 TEST(RealFiles, EdgeTrc) {
   GMR_REQUIRE_DATA();
-  const auto e = load_trc("trc/edge/dataWithEformat.trc");
+  const auto e = test::load_marker_file("trc/edge/dataWithEformat.trc");
   EXPECT_EQ(e.marker_count(), 14u);
   EXPECT_EQ(e.frame_count, 5u);
   EXPECT_EQ(e.frame_rate, 119.88012);
   EXPECT_EQ(e.positions[0], -0.273);  // -2.73E-01
 
-  const auto n = load_trc("trc/edge/dataWithNaNsOfDifferentCases.trc");
+  const auto n = test::load_marker_file("trc/edge/dataWithNaNsOfDifferentCases.trc");
   EXPECT_EQ(n.marker_count(), 14u);
   EXPECT_EQ(n.frame_count, 5u);
   EXPECT_EQ(n.missing_points(), 5u);  // marker 9 ("thigh") in every frame: NaN, NAN, Nan, naN ...
   for (std::size_t f = 0; f < 5; ++f) EXPECT_TRUE(std::isnan(n.positions[n.index(f, 8, 0)]));
 
-  const auto m = load_trc("trc/edge/exampleFormat_missing_and_nan.trc");
+  const auto m = test::load_marker_file("trc/edge/exampleFormat_missing_and_nan.trc");
   EXPECT_EQ(m.names, (std::vector<std::string>{"marker1", "marker2", "marker3"}));
   EXPECT_EQ(m.frame_count, 5u);
   EXPECT_EQ(m.missing_points(), 2u);
@@ -113,7 +108,7 @@ TEST(RealFiles, EdgeTrc) {
   EXPECT_EQ(m.positions[m.index(1, 0, 1)], 0.0745);
   EXPECT_EQ(m.positions[m.index(4, 2, 2)], -1.7);  // last row, no final newline
 
-  const auto c = load_trc("trc/edge/gait10dof18musc_walk_CRLF_line_ending.trc");
+  const auto c = test::load_marker_file("trc/edge/gait10dof18musc_walk_CRLF_line_ending.trc");
   EXPECT_EQ(c.marker_count(), 41u);
   EXPECT_EQ(c.frame_count, 10u);
 }
@@ -206,7 +201,7 @@ TEST(RoundTrip, TrcWriteReadIsExact) {
   for (const char* rel : {"trc/pose2sim_BalancingTrial_0-100.trc", "trc/edge/exampleFormat_missing_and_nan.trc",
                           "trc/opensim_walk_free_01.trc", "trc/pyomeca_markers.trc"}) {
     SCOPED_TRACE(rel);
-    const auto a = load_trc(rel);
+    const auto a = test::load_marker_file(rel);
     const auto out = dir.path / "out.trc";
     ASSERT_TRUE(write_trc(a, out).ok());
     Warnings w;

@@ -10,12 +10,17 @@
 #include <Eigen/Core>
 #include <ostream>
 #include <span>
+#include <string>
+#include <string_view>
 
 #include "gmr/skeleton/skeleton.h"
 
 namespace gmr {
 
 void write_positions_csv_header(std::ostream& out);
+// A name as one CSV field: RFC 4180 quoting, only when it needs it (a ',',
+// '"' or line break); the joint column here and `gmr markers` use it.
+std::string csv_field(std::string_view name);
 // Rows for `positions` (frame-major, skeleton.size() per frame); the first
 // frame is numbered `first_frame`.
 void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
