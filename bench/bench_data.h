@@ -8,9 +8,13 @@
 #include <string>
 #include <vector>
 
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 #include "gmr/io/bvh.h"
-#include "gmr/ops/ops.h"
+#include "gmr/ops/join_tree.h"
+#include "gmr/ops/set_roots.h"
+#include "gmr/ops/shift_root.h"
+#include "gmr/ops/split_tree.h"
+#include "gmr/ops/strip_dummies.h"
 
 namespace gmr::bench {
 

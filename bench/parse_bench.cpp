@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "bench_data.h"
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/io/gmr_file.h"
 #include "gmr/io/gmrb.h"
 

@@ -13,7 +13,7 @@
 #include <cstdio>
 #include <exception>
 
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/server/library.h"
 #include "gmr/server/server.h"
 

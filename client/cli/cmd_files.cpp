@@ -8,7 +8,9 @@
 #include "cmd_markers.h"
 #include "cmd_ops.h"
 #include "commands.h"
-#include "gmr/io/markers.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
 #include "gmr/kinematics/forward_kinematics.h"
@@ -106,9 +108,8 @@ void run_convert(const ConvertOptions& o) {
 
 // ---- gmr positions
 
-// Options of `gmr positions`. The OPS area adds its transforms (--roots,
-// --strip-dummies, --relative-to) as fields here, registers them in
-// add_positions_transform_options() and applies them in transform_for_positions().
+// Options of `gmr positions`: the frames, and the view (--roots,
+// --strip-dummies, --relative-to; registered by add_positions_transform_options()).
 struct PositionsOptions {
   std::string file;
   std::string asf;

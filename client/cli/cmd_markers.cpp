@@ -11,8 +11,10 @@
 
 #include "cli_util.h"
 #include "commands.h"
-#include "gmr/io/file_util.h"
-#include "gmr/io/markers.h"
+#include "gmr/core/file_util.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "gmr/io/positions_csv.h"
 
 namespace gmr::cli {

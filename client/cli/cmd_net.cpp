@@ -17,7 +17,7 @@
 #include "cli_util.h"
 #include "cmd_ops.h"
 #include "gmr/client/client.h"
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/io/positions_csv.h"
 
 namespace gmr::cli {
@@ -78,10 +78,10 @@ void run_ls(const ServerOptions& s) {
   const auto motions = take(c->list_motions());
   std::printf("%-32s %7s %8s %8s %9s  %s\n", "motion", "joints", "frames", "fps", "seconds", "source");
   for (const auto& m : motions) {
-    const double fps = m.frame_time() > 0 ? 1.0 / m.frame_time() : 0.0;
-    std::printf("%-32s %7u %8llu %8.2f %9.2f  %s\n", m.name().c_str(), m.joint_count(),
-                static_cast<unsigned long long>(m.frame_count()), fps,
-                m.frame_time() * static_cast<double>(m.frame_count()), m.source().c_str());
+    const double fps = m.frame_time > 0 ? 1.0 / m.frame_time : 0.0;
+    std::printf("%-32s %7u %8llu %8.2f %9.2f  %s\n", m.name.c_str(), m.joint_count,
+                static_cast<unsigned long long>(m.frame_count), fps, m.frame_time * static_cast<double>(m.frame_count),
+                m.source.c_str());
   }
 }
 
@@ -120,7 +120,7 @@ void run_query(const QueryOptions& o) {
   write_positions_csv_header(std::cout);
   // Chunks keep each reply well under the server's message limit.
   const std::size_t per_frame = v.skeleton.size() * 3 * 9 + 16;
-  const std::size_t chunk = std::max<std::size_t>(1, c->hello().max_message_bytes() / 2 / per_frame);
+  const std::size_t chunk = std::max<std::size_t>(1, c->hello().max_message_bytes / 2 / per_frame);
   RowOrder order;
   bool have_order = false;
   for (std::size_t f = r.begin; f < r.end; f += chunk) {
@@ -210,10 +210,10 @@ void run_stream(const StreamOptions& o) {
       write_positions_csv_rows(std::cout, order.names, rows, f.frame_index);
     }
   };
-  auto on_end = [st](const client::pb::SubscriptionEnded& e) {
+  auto on_end = [st](const client::SubscriptionEnd& e) {
     std::lock_guard lock(st->mutex);
     st->done = true;
-    st->end_reason = e.reason();
+    st->end_reason = e.reason;
     st->cv.notify_all();
   };
   // Row order must be known before the first frame prints: take it from the

@@ -14,11 +14,15 @@
 #include <vector>
 
 #include "commands.h"
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
-#include "gmr/ops/ops.h"
-#include "gmr/ops/view.h"
+#include "gmr/ops/join_tree.h"
+#include "gmr/ops/set_roots.h"
+#include "gmr/ops/shift_root.h"
+#include "gmr/ops/split_tree.h"
+#include "gmr/ops/strip_dummies.h"
+#include "gmr/view/view.h"
 
 namespace gmr::cli {
 namespace {
@@ -136,7 +140,7 @@ void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange
   if (!o.roots.empty()) spec.roots = split_list(o.roots);
   spec.strip_dummies = o.strip_dummies;
   spec.relative_to = o.relative_to;
-  const View view = take(apply_view(motion, spec));
+  const MotionView view = take(apply_view(motion, spec));
   const FrameRange r = clamp_frame_range(requested, view.motion.frame_count);
   const Skeleton names = view_names(view);
   write_positions_csv_header(out);

@@ -1,6 +1,6 @@
 // gmr: one command, git-style subcommands. Files: info, convert, positions,
-// markers, roots, shift, split, join, strip-dummies; benchmarks: bench; a server: ls,
-// skeleton, query, stream.
+// markers, roots, shift, split, join, strip-dummies, demo; a server: ls,
+// skeleton, query, stream. (The performance experiments are bench/harness: gmr-bench.)
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <exception>
@@ -14,7 +14,6 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "gmr 0.1.0");
   gmr::cli::add_file_commands(app);
   gmr::cli::add_ops_commands(app);
-  gmr::cli::add_bench_commands(app);
   gmr::cli::add_net_commands(app);
   gmr::cli::add_demo_commands(app);
   gmr::cli::add_marker_commands(app);

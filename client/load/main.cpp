@@ -133,16 +133,16 @@ int main(int argc, char** argv) {
       gaps += r->gaps;
     }
     if (auto st = r->client->stats(); st.ok()) {
-      server_dropped += st->frames_dropped();
-      server_sent += st->frames_sent();
+      server_dropped += st->frames_dropped;
+      server_sent += st->frames_sent;
     }
     (void)r->client->unsubscribe(r->subscription);
   }
   std::uint64_t computed = 0, encoded = 0;
   if (!runs.empty()) {
     if (auto st = runs[0]->client->stats(); st.ok()) {
-      computed = st->frames_computed();
-      encoded = st->frames_encoded();
+      computed = st->frames_computed;
+      encoded = st->frames_encoded;
     }
   }
   const double max_ms = all.empty() ? 0.0 : static_cast<double>(*std::max_element(all.begin(), all.end())) / 1e6;

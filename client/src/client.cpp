@@ -10,11 +10,15 @@
 #include <optional>
 #include <thread>
 
+#include "gmr/stream/v1/stream.pb.h"
 #include "gmr/wire/convert.h"
+#include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
 #include "gmr/wire/udp.h"
 
 namespace gmr::client {
+
+namespace pb = ::gmr::stream::v1;
 
 namespace net = boost::asio;
 using tcp = net::ip::tcp;
@@ -27,23 +31,20 @@ std::int64_t now_ns() {
       .count();
 }
 
-template <class T, class R>
-void unpack3(const R& values, std::vector<T>& out) {
-  out.resize(static_cast<std::size_t>(values.size() / 3));
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    const int k = static_cast<int>(3 * i);
-    out[i] = T(values.Get(k), values.Get(k + 1), values.Get(k + 2));
-  }
+ServerHello hello_of(const pb::HelloReply& h) {
+  ServerHello s;
+  s.protocol_version = h.protocol_version();
+  s.server_name = h.server_name();
+  s.session_token = h.session_token();
+  s.udp_port = static_cast<std::uint16_t>(h.udp_port());
+  s.max_message_bytes = h.max_message_bytes();
+  s.heartbeat_interval_ms = h.heartbeat_interval_ms();
+  s.idle_timeout_ms = h.idle_timeout_ms();
+  return s;
 }
 
-template <class R>
-void unpack4(const R& values, std::vector<Eigen::Quaterniond>& out) {
-  out.resize(static_cast<std::size_t>(values.size() / 4));
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    const int k = static_cast<int>(4 * i);
-    // Eigen's constructor takes w first.
-    out[i] = Eigen::Quaterniond(values.Get(k + 3), values.Get(k), values.Get(k + 1), values.Get(k + 2));
-  }
+SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
+  return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason()};
 }
 
 }  // namespace
@@ -59,7 +60,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   // Keeps run() going until close(); then the loop ends once every handler has
   // completed (never io.stop(): a handler left queued would keep Impl alive).
   std::optional<net::executor_work_guard<net::io_context::executor_type>> guard;
-  pb::HelloReply hello;
+  ServerHello hello;
 
   std::atomic<bool> open{false};
   std::atomic<std::uint64_t> next_request{1};
@@ -86,6 +87,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
 
   // I/O-thread state
   std::deque<std::string> write_queue;
+  std::atomic<std::size_t> write_queue_bytes{0};  // also read by callers of send()
   bool writing = false;
   std::array<std::uint8_t, wire::kLengthPrefixBytes> prefix{};
   std::string body;
@@ -93,12 +95,23 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   udp::endpoint udp_sender;
   wire::Reassembler reassembler;
 
-  void send(std::string framed) {
+  // Queues `framed` for the socket; false (nothing queued) when the queue
+  // already holds options.max_write_queue_bytes.
+  bool send(std::string framed) {
+    const std::size_t n = framed.size();
+    if (write_queue_bytes.fetch_add(n) + n > options.max_write_queue_bytes && n <= options.max_write_queue_bytes) {
+      write_queue_bytes -= n;
+      return false;
+    }
     net::post(io, [self = shared_from_this(), framed = std::move(framed)]() mutable {
-      if (!self->open) return;
+      if (!self->open) {
+        self->write_queue_bytes -= framed.size();
+        return;
+      }
       self->write_queue.push_back(std::move(framed));
       self->write_next();
     });
+    return true;
   }
   void write_next() {
     if (writing || write_queue.empty()) return;
@@ -106,7 +119,10 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     net::async_write(socket, net::buffer(write_queue.front()),
                      [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
                        self->writing = false;
-                       if (!self->write_queue.empty()) self->write_queue.pop_front();
+                       if (!self->write_queue.empty()) {
+                         self->write_queue_bytes -= self->write_queue.front().size();
+                         self->write_queue.pop_front();
+                       }
                        if (ec) return self->fail("write failed: " + ec.message());
                        self->write_next();
                      });
@@ -147,13 +163,13 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   }
   void arm_heartbeat() {
     const auto interval = std::chrono::milliseconds(
-        std::max<std::uint32_t>(10, std::min(hello.heartbeat_interval_ms(), hello.idle_timeout_ms() / 3)));
+        std::max<std::uint32_t>(10, std::min(hello.heartbeat_interval_ms, hello.idle_timeout_ms / 3)));
     heartbeat.expires_after(interval);
     heartbeat.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
       if (ec || !self->open) return;
       pb::ClientMessage m;
       m.mutable_heartbeat()->set_client_time_ns(static_cast<std::uint64_t>(now_ns()));
-      self->send(wire::frame_message(m).value());
+      self->send(wire::frame_message(m).value());  // a full queue already keeps the link busy
       self->arm_heartbeat();
     });
   }
@@ -175,24 +191,26 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
         }
       }
       if (!sub || !sub->on_frame) return;
-      ReceivedFrame r;
-      r.receive_time_ns = now_ns();
-      r.view_id = f.view_id();
-      r.subscription_id = f.subscription_id();
-      r.stream_id = f.stream_id();
-      r.skeleton_version = f.skeleton_version();
-      r.frame_index = f.frame_index();
-      r.motion_time = f.motion_time();
-      r.sequence = f.sequence();
-      r.server_send_time_ns = f.server_send_time_ns();
-      r.udp = via_udp;
-      if (f.positions_f64_size() > 0) {
-        unpack3(f.positions_f64(), r.positions);
-        unpack4(f.orientations_f64(), r.orientations);
-      } else {
-        unpack3(f.positions(), r.positions);
-        unpack4(f.orientations(), r.orientations);
+      const std::int64_t received = now_ns();
+      auto decoded = wire::decode_frame(f);
+      if (!decoded.ok()) {
+        std::lock_guard lock(mutex);
+        ++counters.frames_malformed;
+        return;
       }
+      ReceivedFrame r;
+      r.receive_time_ns = received;
+      r.view_id = decoded->view_id;
+      r.subscription_id = decoded->subscription_id;
+      r.stream_id = decoded->stream_id;
+      r.skeleton_version = decoded->skeleton_version;
+      r.frame_index = decoded->frame_index;
+      r.motion_time = decoded->motion_time;
+      r.sequence = decoded->sequence;
+      r.server_send_time_ns = decoded->server_send_time_ns;
+      r.udp = via_udp;
+      r.positions = std::move(decoded->positions);
+      r.orientations = std::move(decoded->orientations);
       sub->on_frame(r);
       return;
     }
@@ -218,7 +236,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
           subs.erase(it);
         }
       }
-      if (sub && sub->on_end) sub->on_end(m.subscription_ended());
+      if (sub && sub->on_end) sub->on_end(end_of(m.subscription_ended()));
     } else if (m.has_udp_registered()) {
       std::lock_guard lock(mutex);
       udp_registered = true;
@@ -259,7 +277,14 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
       future = p.promise.get_future();
       pending.emplace(id, std::move(p));
     }
-    send(std::move(framed).value());
+    if (!send(std::move(framed).value())) {
+      std::lock_guard lock(mutex);
+      pending.erase(id);
+      return make_error(ErrorKind::kResourceExhausted,
+                        "write queue full: " + std::to_string(write_queue_bytes.load()) +
+                            " bytes of requests wait for the server to read them (max_write_queue_bytes " +
+                            std::to_string(options.max_write_queue_bytes) + ")");
+    }
     if (future.wait_for(options.timeout) != std::future_status::ready) {
       std::lock_guard lock(mutex);
       pending.erase(id);
@@ -355,8 +380,8 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
     c->close();
     return make_error("handshake with " + where + " failed: " + r.error().message);
   }
-  d.hello = r->hello();
-  d.server_udp = udp::endpoint(remote.address(), static_cast<std::uint16_t>(d.hello.udp_port()));
+  d.hello = hello_of(r->hello());
+  d.server_udp = udp::endpoint(remote.address(), d.hello.udp_port);
   d.udp_socket.open(remote.address().is_v4() ? udp::v4() : udp::v6(), ec);
   if (!ec) d.udp_socket.bind(udp::endpoint(remote.address().is_loopback() ? remote.address() : net::ip::address(), 0), ec);
   // A deep receive buffer rides out scheduling stalls of the I/O thread (the
@@ -386,7 +411,7 @@ void Client::close() {
   }
 }
 
-const pb::HelloReply& Client::hello() const { return impl_->hello; }
+const ServerHello& Client::hello() const { return impl_->hello; }
 bool Client::connected() const { return impl_->open; }
 
 ClientCounters Client::counters() const {
@@ -394,14 +419,26 @@ ClientCounters Client::counters() const {
   return impl_->counters;
 }
 
-Result<pb::ServerMessage> Client::request(pb::ClientMessage message) { return impl_->call(std::move(message)); }
+Result<std::string> Client::request_raw(std::string_view client_message) {
+  pb::ClientMessage m;
+  if (!m.ParseFromArray(client_message.data(), static_cast<int>(client_message.size()))) {
+    return make_error("request_raw: the bytes are not a gmr.stream.v1.ClientMessage");
+  }
+  auto r = impl_->call(std::move(m));
+  if (!r.ok()) return r.error();
+  return r->SerializeAsString();
+}
 
-Result<std::vector<pb::MotionInfo>> Client::list_motions() {
+Result<std::vector<MotionInfo>> Client::list_motions() {
   pb::ClientMessage m;
   m.mutable_list_motions();
   auto r = impl_->expect(m, pb::ServerMessage::kMotions);
   if (!r.ok()) return r.error();
-  return std::vector<pb::MotionInfo>(r->motions().motions().begin(), r->motions().motions().end());
+  std::vector<MotionInfo> out;
+  for (const auto& i : r->motions().motions()) {
+    out.push_back(MotionInfo{i.name(), i.joint_count(), i.frame_count(), i.frame_time(), i.source()});
+  }
+  return out;
 }
 
 Result<Skeleton> Client::skeleton(const std::string& motion) {
@@ -476,26 +513,22 @@ Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::
   for (const auto& j : joints) q->add_joints(j);
   auto r = impl_->expect(m, pb::ServerMessage::kFrames);
   if (!r.ok()) return r.error();
-  const auto& b = r->frames();
+  auto b = wire::decode_block(r->frames());
+  if (!b.ok()) return make_error(ErrorKind::kInvalidData, "the server sent a bad frame block: " + b.error().message);
   QueryResult out;
-  out.skeleton_version = b.skeleton_version();
-  out.begin = b.begin();
-  out.end = b.end();
-  out.joints.assign(b.joints().begin(), b.joints().end());
-  unpack3(b.positions(), out.positions);
-  unpack4(b.orientations(), out.orientations);
-  if (out.positions.size() != static_cast<std::size_t>(out.end - out.begin) * out.joints.size()) {
-    return make_error("the server sent " + std::to_string(out.positions.size()) + " positions for " +
-                      std::to_string(out.end - out.begin) + " frames of " + std::to_string(out.joints.size()) +
-                      " joints");
-  }
+  out.skeleton_version = b->skeleton_version;
+  out.begin = b->begin;
+  out.end = b->end;
+  out.joints = std::move(b->joints);
+  out.positions = std::move(b->positions);
+  out.orientations = std::move(b->orientations);
   return out;
 }
 
 Status Client::register_udp() {
   auto& d = *impl_;
-  if (!d.udp_socket.is_open() || d.hello.udp_port() == 0) return make_error("the server offers no UDP");
-  const std::string datagram = wire::make_register_datagram(d.hello.session_token());
+  if (!d.udp_socket.is_open() || d.hello.udp_port == 0) return make_error("the server offers no UDP");
+  const std::string datagram = wire::make_register_datagram(d.hello.session_token);
   const auto deadline = std::chrono::steady_clock::now() + d.options.timeout;
   std::unique_lock lock(d.mutex);
   // Registration datagrams can be lost like any other: resend until the
@@ -597,12 +630,23 @@ Status Client::seek(std::uint32_t subscription, std::uint32_t frame) {
   return to_status(impl_->expect(m, pb::ServerMessage::kAck));
 }
 
-Result<pb::Stats> Client::stats() {
+Result<ServerCounters> Client::stats() {
   pb::ClientMessage m;
   m.mutable_get_stats();
   auto r = impl_->expect(m, pb::ServerMessage::kStats);
   if (!r.ok()) return r.error();
-  return r->stats();
+  const pb::Stats& s = r->stats();
+  ServerCounters c;
+  c.connections = s.connections();
+  c.streams = s.streams();
+  c.frames_computed = s.frames_computed();
+  c.frames_computed_float = s.frames_computed_float();
+  c.frames_encoded = s.frames_encoded();
+  c.frames_sent = s.frames_sent();
+  c.frames_dropped = s.frames_dropped();
+  c.queued_bytes = s.queued_bytes();
+  c.max_queued_bytes = s.max_queued_bytes();
+  return c;
 }
 
 }  // namespace gmr::client

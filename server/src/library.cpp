@@ -6,7 +6,7 @@
 #include <system_error>
 #include <thread>
 
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 #include "gmr/demo/demo_library.h"
 #include "gmr/io/motion_file.h"
 

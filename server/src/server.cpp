@@ -2,17 +2,46 @@
 
 #include <stdexcept>
 
+#include <spdlog/spdlog.h>
+
 #include "gmr/wire/framing.h"
-#include "gmr/wire/udp.h"
-#include "server_impl.h"
-#include "session.h"
-#include "stream.h"
+#include "request_handler.h"
+#include "server_state.h"
 
 namespace gmr::server {
 
+Server::Impl::Impl(ServerConfig config, std::vector<LibraryEntry> entries)
+    : cfg(std::move(config)), library(std::move(entries)) {
+  for (std::size_t i = 0; i < library.size(); ++i) by_name.emplace(library[i].name, i);
+}
 
-// ---------------------------------------------------------------------------
-// Listener and UDP registration
+ConnectionLimits Server::Impl::connection_limits() const {
+  ConnectionLimits l;
+  l.max_message_bytes = cfg.max_message_bytes;
+  l.max_reply_queue_bytes = cfg.max_reply_queue_bytes;
+  l.frames_per_key = cfg.frames_per_subscription;
+  l.idle_timeout = cfg.idle_timeout;
+  l.heartbeat_interval = cfg.heartbeat_interval;
+  l.write_timeout = cfg.write_timeout;
+  l.socket_send_buffer = cfg.socket_send_buffer;
+  return l;
+}
+
+std::shared_ptr<const CompiledForm> Server::Impl::compiled_form(std::size_t entry) {
+  if (compiled_forms.size() != library.size()) compiled_forms.resize(library.size());
+  auto c = compiled_forms[entry].lock();
+  if (!c) {
+    c = std::make_shared<const CompiledForm>(library[entry].motion);
+    compiled_forms[entry] = c;
+  }
+  return c;
+}
+
+void Server::Impl::connection_closed(std::uint64_t id) {
+  connections.erase(id);
+  if (stopping && connections.empty() && grace_timer) grace_timer->cancel();
+}
+
 
 void Server::Impl::accept_loop() {
   acceptor.async_accept([this](const boost::system::error_code& ec, tcp::socket socket) {
@@ -21,9 +50,9 @@ void Server::Impl::accept_loop() {
       spdlog::warn("accept failed: {}", ec.message());
     } else if (stopping) {
       return;
-    } else if (sessions.size() >= cfg.max_connections) {
+    } else if (connections.size() >= cfg.max_connections) {
       ++connections_refused;
-      spdlog::warn("refusing a connection: {} connections open (--max-connections)", sessions.size());
+      spdlog::warn("refusing a connection: {} connections open (--max-connections)", connections.size());
       auto bytes = std::make_shared<std::string>(
           wire::frame_message(error_message(0, pb::ERROR_CODE_RESOURCE_EXHAUSTED,
                                             "the server has reached its limit of " +
@@ -36,90 +65,70 @@ void Server::Impl::accept_loop() {
         sock->close(ignored);
       });
     } else {
-      const std::uint64_t id = next_session_id++;
-      auto s = std::make_shared<Session>(*this, std::move(socket), id);
-      sessions[id] = s;
-      s->start();
+      const std::uint64_t id = next_connection_id++;
+      auto c = std::make_shared<Connection>(io, std::move(socket), id, connection_limits());
+      auto handler = std::make_shared<RequestHandler>(*this, c);
+      handler->start();
+      connections[id] = ConnectionEntry{c, handler};
+      c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
     }
     accept_loop();
-  });
-}
-
-void Server::Impl::udp_loop() {
-  udp_socket.async_receive_from(net::buffer(udp_buffer), udp_sender, [this](const boost::system::error_code& ec,
-                                                                            std::size_t n) {
-    if (ec == net::error::operation_aborted || stopping) return;
-    if (!ec) {
-      const auto token = wire::parse_register_datagram(std::string_view(udp_buffer.data(), n));
-      std::shared_ptr<Session> s;
-      if (token) {
-        if (auto it = tokens.find(*token); it != tokens.end()) s = it->second.lock();
-      }
-      if (s && !s->stopped()) {
-        s->udp_registered(udp_sender);
-      } else {
-        // Never answer: an unregistered address gets nothing from this server.
-        if (udp_rejected++ % 1000 == 0) {
-          spdlog::warn("ignoring a {}-byte UDP datagram from {}:{}: {} ({} so far)", n,
-                       udp_sender.address().to_string(), udp_sender.port(),
-                       token ? "unknown session token" : "not a registration datagram", udp_rejected);
-        }
-      }
-    }
-    udp_loop();
   });
 }
 
 void Server::Impl::begin_stop() {
   if (stopping) return;
   stopping = true;
-  prune_streams();
-  spdlog::info("stopping: {} connections, {} streams", sessions.size(), streams.size());
+  spdlog::info("stopping: {} connections, {} streams", connections.size(), streams.live());
   boost::system::error_code ec;
   acceptor.close(ec);
-  udp_socket.close(ec);
-  for (auto& [id, weak] : streams) {
-    if (auto s = weak.lock()) s->stop();
-  }
-  auto open = sessions;
-  for (auto& [id, weak] : open) {
-    if (auto s = weak.lock()) s->finish();
+  udp.close();
+  streams.stop_all();
+  auto open = connections;
+  for (auto& [id, entry] : open) {
+    if (auto c = entry.connection.lock()) c->finish();
   }
   // Whatever has not drained by the deadline is closed; the io_context then runs out of work.
-  if (sessions.empty()) return;
+  if (connections.empty()) return;
   grace_timer = std::make_unique<net::steady_timer>(io, cfg.shutdown_grace);
   grace_timer->async_wait([this](const boost::system::error_code&) {
-    auto left = sessions;
-    for (auto& [id, weak] : left) {
-      if (auto s = weak.lock()) s->stop("server shutdown");
+    auto left = connections;
+    for (auto& [id, entry] : left) {
+      if (auto c = entry.connection.lock()) c->stop("server shutdown");
     }
   });
 }
 
-ServerStats Server::Impl::snapshot() const {
+ServerStats Server::Impl::snapshot() {
   ServerStats st;
-  st.connections = sessions.size();
-  for (auto& [id, w] : streams) {
-    if (auto s = w.lock(); s && !s->targets().empty()) ++st.streams;
-  }
-  st.frames_computed = frames_computed;
-  st.frames_computed_float = frames_computed_float;
-  st.frames_encoded = frames_encoded;
-  st.udp_rejected = udp_rejected;
+  st.connections = connections.size();
+  st.streams = streams.active();
+  st.frames_computed = counters.frames_computed;
+  st.frames_computed_float = counters.frames_computed_float;
+  st.frames_encoded = counters.frames_encoded;
+  st.udp_rejected = udp.rejected();
   st.connections_refused = connections_refused;
-  for (auto& [id, w] : sessions) {
-    if (auto s = w.lock()) st.sessions.push_back(s->stats());
+  for (auto& [id, entry] : connections) {
+    auto c = entry.connection.lock();
+    if (!c) continue;
+    const ConnectionCounters k = c->counters();
+    SessionStats s;
+    s.id = id;
+    s.frames_sent = k.frames_sent;
+    s.frames_dropped = k.frames_dropped;
+    s.queued_bytes = k.queued_bytes;
+    s.max_queued_bytes = k.max_queued_bytes;
+    auto h = entry.handler.lock();
+    s.udp_registered = h && h->udp()->endpoint.has_value();
+    st.sessions.push_back(s);
   }
   return st;
 }
 
 // ---------------------------------------------------------------------------
 
-Server::Server(ServerConfig config, std::vector<LibraryEntry> library) : impl_(std::make_shared<Impl>()) {
-  impl_->cfg = std::move(config);
-  impl_->library = std::move(library);
-  for (std::size_t i = 0; i < impl_->library.size(); ++i) impl_->by_name.emplace(impl_->library[i].name, i);
-}
+Server::Server(ServerConfig config, std::vector<LibraryEntry> library)
+    : impl_(std::make_shared<Impl>(std::move(config), std::move(library))) {}
 
 Server::~Server() { stop(); }
 
@@ -137,16 +146,12 @@ void Server::start() {
   d.acceptor.listen(net::socket_base::max_listen_connections);
   d.tcp_port = d.acceptor.local_endpoint().port();
   const std::uint16_t udp_port = d.cfg.udp_port < 0 ? d.tcp_port : static_cast<std::uint16_t>(d.cfg.udp_port);
-  const udp::endpoint udp_ep(address, udp_port);
-  d.udp_socket.open(udp_ep.protocol());
-  d.udp_socket.bind(udp_ep, ec);
-  if (ec) throw std::runtime_error("cannot bind UDP " + d.cfg.bind_address + ":" + std::to_string(udp_port) + ": " + ec.message());
-  d.udp_port = d.udp_socket.local_endpoint().port();
+  d.udp.open(address, udp_port);
   d.started = true;
   d.accept_loop();
-  d.udp_loop();
+  d.udp.start();
   spdlog::info("serving {} motions on tcp {}:{} and udp {}:{}", d.library.size(), d.cfg.bind_address, d.tcp_port,
-               d.cfg.bind_address, d.udp_port);
+               d.cfg.bind_address, d.udp.port());
   d.thread = std::thread([impl = impl_] {
     try {
       impl->io.run();
@@ -158,7 +163,7 @@ void Server::start() {
 }
 
 std::uint16_t Server::tcp_port() const { return impl_->tcp_port; }
-std::uint16_t Server::udp_port() const { return impl_->udp_port; }
+std::uint16_t Server::udp_port() const { return impl_->udp.port(); }
 
 void Server::stop() {
   auto& d = *impl_;
@@ -181,10 +186,12 @@ ServerStats Server::stats() const {
   if (!d.started || d.stopped_future.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
     return d.snapshot();
   }
-  std::promise<ServerStats> p;
-  auto f = p.get_future();
-  net::post(d.io, [&] { p.set_value(d.snapshot()); });
-  // The I/O thread may be finishing a stop and never run the snapshot.
+  // The promise is shared with the posted handler: when the I/O thread is
+  // finishing a stop and runs it late (or never), this call may already
+  // have returned.
+  auto p = std::make_shared<std::promise<ServerStats>>();
+  auto f = p->get_future();
+  net::post(d.io, [p, impl = impl_.get()] { p->set_value(impl->snapshot()); });
   if (f.wait_for(std::chrono::seconds(5)) != std::future_status::ready) return {};
   return f.get();
 }

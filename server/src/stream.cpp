@@ -1,21 +1,188 @@
 #include "stream.h"
 
+#include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
-#include "gmr/wire/frame_encoding.h"
-#include "session.h"
+#include "gmr/fast/compiled_motion.h"
+#include "gmr/fast/fast_fk.h"
+#include "gmr/view/viewpoint.h"
+#include "gmr/wire/frames.h"
 
 namespace gmr::server {
 
+Stream::Stream(net::io_context& io, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
+               StreamCounters& counters)
+    : io_(io), id_(id), content_(std::move(content)), settings_(std::move(settings)), counters_(counters), timer_(io) {}
+
+void Stream::add(std::shared_ptr<Target> target, std::uint64_t max_frames) {
+  targets_.push_back(Entry{std::move(target), 0, max_frames});
+}
+
+void Stream::remove(const Target* target) {
+  std::erase_if(targets_, [&](const Entry& e) { return e.target.get() == target; });
+}
+
+bool Stream::has(const Target* target) const {
+  return std::any_of(targets_.begin(), targets_.end(), [&](const Entry& e) { return e.target.get() == target; });
+}
+
+double Stream::step() const {
+  return settings_.schedule.speed / (settings_.schedule.rate * content_->motion->frame_time);
+}
+double Stream::position(std::uint64_t tick) const {
+  return base_pos_ + static_cast<double>(tick - base_tick_) * step();
+}
+Clock::duration Stream::period() const {
+  return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / settings_.schedule.rate));
+}
+void Stream::rebase(Clock::time_point now, double pos) {
+  base_time_ = now;
+  base_pos_ = pos;
+  base_tick_ = tick_;
+}
+Clock::time_point Stream::due(std::uint64_t tick) const {
+  return base_time_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
+                          static_cast<double>(tick - base_tick_) / settings_.schedule.rate));
+}
+
+void Stream::arm() {
+  timer_.expires_at(due(tick_));
+  timer_.async_wait([weak = weak_from_this()](const boost::system::error_code& ec) {
+    if (ec) return;
+    if (auto self = weak.lock()) self->on_tick();
+  });
+}
+
+void Stream::start() {
+  rebase(Clock::now(), 0.0);
+  arm();
+}
+
+void Stream::pause() {
+  if (paused_) return;
+  paused_ = true;
+  pause_pos_ = position(tick_);
+  timer_.cancel();
+}
+
+void Stream::resume() {
+  if (!paused_) return;
+  paused_ = false;
+  rebase(Clock::now(), pause_pos_);
+  arm();
+}
+
+void Stream::seek(std::uint32_t frame) {
+  const double pos = static_cast<double>(frame - settings_.schedule.start);
+  last_frame_ = -1;
+  if (paused_) {
+    pause_pos_ = pos;
+    return;
+  }
+  timer_.cancel();
+  rebase(Clock::now(), pos);
+  arm();
+}
+
+void Stream::set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints) {
+  content_ = std::move(content);
+  settings_.joints = std::move(joints);
+  last_frame_ = -1;
+}
+
+std::shared_ptr<Stream> Stream::split_off(std::uint64_t id, const Target* target) {
+  auto s = std::make_shared<Stream>(io_, id, content_, settings_, counters_);
+  s->sequence_ = sequence_;  // the subscriber sees no gap or restart
+  s->last_frame_ = last_frame_;
+  s->paused_ = paused_;
+  const double pos = paused_ ? pause_pos_ : position(tick_);
+  s->pause_pos_ = pos;
+  if (!paused_) {
+    s->rebase(Clock::now(), pos);
+    s->arm();
+  }
+  auto it = std::find_if(targets_.begin(), targets_.end(), [&](const Entry& e) { return e.target.get() == target; });
+  if (it != targets_.end()) {
+    s->targets_.push_back(*it);
+    targets_.erase(it);
+  }
+  return s;
+}
+
+std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
+  const Motion& m = *content_->motion;
+  const std::size_t n = m.skeleton.size();
+  const int viewer = content_->relative_to;
+  const std::vector<int>& joints = settings_.joints;
+  wire::FrameContent c;
+  c.skeleton_version = content_->skeleton_version;
+  c.frame_index = frame;
+  c.motion_time = static_cast<double>(frame) * m.frame_time;
+  c.sequence = sequence_++;
+  c.float64 = settings_.float64;
+
+  // The float path: FK in float, the viewpoint and quaternions computed from
+  // its output and rounded once, straight into what the encoder sends.
+  const fast::CompiledMotion* cm = !settings_.float64 && content_->compiled ? content_->compiled->get() : nullptr;
+  bool done = false;
+  if (cm != nullptr && cm->joint_count() == n && frame < cm->frame_count() && viewer < static_cast<int>(n)) {
+    // The viewer's orientation is needed even when the client wants none.
+    const bool orient = settings_.orientations || viewer >= 0;
+    fk_positions_.resize(n * 3);
+    fk_orientations_.resize(orient ? n * 9 : 0);
+    workspace_.resize(std::max(workspace_.size(), content_->compiled->workspace_floats()));
+    fast::FkFrameJob job{cm, frame, fk_positions_, fk_orientations_, workspace_};
+    if (job.run()) {
+      positions_f32_.resize(joints.size() * 3);
+      orientations_f32_.resize(settings_.orientations ? joints.size() * 4 : 0);
+      view_frame_float(fk_positions_, fk_orientations_, viewer, joints, positions_f32_, orientations_f32_);
+      c.positions = positions_f32_;
+      c.orientations = orientations_f32_;
+      ++counters_.frames_computed_float;
+      done = true;
+    }
+  }
+  if (!done) {
+    all_positions_.resize(n);
+    all_orientations_.resize(settings_.orientations || viewer >= 0 ? n : 0);
+    view_frame(m, viewer, frame, all_positions_, all_orientations_);
+    positions_f64_.clear();
+    orientations_f64_.clear();
+    for (int j : joints) {
+      const auto& p = all_positions_[static_cast<std::size_t>(j)];
+      positions_f64_.insert(positions_f64_.end(), {p.x(), p.y(), p.z()});
+      if (settings_.orientations) {
+        const Eigen::Quaterniond q(all_orientations_[static_cast<std::size_t>(j)]);
+        orientations_f64_.insert(orientations_f64_.end(), {q.x(), q.y(), q.z(), q.w()});
+      }
+    }
+    if (settings_.float64) {
+      c.positions_f64 = positions_f64_;
+      c.orientations_f64 = orientations_f64_;
+    } else {  // a float32 stream whose motion did not compile: rounded once here
+      positions_f32_.assign(positions_f64_.begin(), positions_f64_.end());
+      orientations_f32_.assign(orientations_f64_.begin(), orientations_f64_.end());
+      c.positions = positions_f32_;
+      c.orientations = orientations_f32_;
+    }
+  }
+  ++counters_.frames_computed;
+  c.server_send_time_ns = now_ns();
+  auto body = std::make_shared<const std::string>(wire::encode_frame_body(c));
+  ++counters_.frames_encoded;
+  return body;
+}
+
 void Stream::on_tick() {
   if (paused_ || targets_.empty()) return;
-  const Motion& m = *content_->motion;
+  const Schedule& sched = settings_.schedule;
   const double pos = position(tick_);
-  const double length = static_cast<double>(schedule_.end - schedule_.start);
-  std::vector<std::pair<std::weak_ptr<Session>, std::uint32_t>> ended;
+  const double length = static_cast<double>(sched.end - sched.start);
+  std::vector<std::pair<std::shared_ptr<Target>, std::uint64_t>> ended;
   bool finished = false;
   double p = pos;
-  if (schedule_.loop) {
+  if (sched.loop) {
     p = std::fmod(pos, length);
     if (p < 0) p += length;
   } else if (pos >= length - 1e-9) {
@@ -24,48 +191,22 @@ void Stream::on_tick() {
   if (!finished) {
     const auto offset = std::min<std::uint64_t>(static_cast<std::uint64_t>(std::floor(p + 1e-9)),
                                                 static_cast<std::uint64_t>(length) - 1);
-    const std::uint64_t frame = schedule_.start + offset;
-    if (!(schedule_.skip_repeats && static_cast<std::int64_t>(frame) == last_frame_)) {
+    const std::uint64_t frame = sched.start + offset;
+    if (!(sched.skip_repeats && static_cast<std::int64_t>(frame) == last_frame_)) {
       last_frame_ = static_cast<std::int64_t>(frame);
-      const std::size_t n = m.skeleton.size();
-      all_positions_.resize(n);
-      all_orientations_.resize(orientations_ ? n : 0);
-      // One place decides the path: float32 streams the float path, float64 the double one.
-      const FramePath path =
-          compute_stream_frame(*content_, frame, !float64_, float_buffers_, all_positions_, all_orientations_);
-      ++impl_.frames_computed;
-      if (path == FramePath::kFloat) ++impl_.frames_computed_float;
-      positions_.clear();
-      quaternions_.clear();
-      for (int j : joints_) {
-        positions_.push_back(all_positions_[static_cast<std::size_t>(j)]);
-        if (orientations_) quaternions_.emplace_back(all_orientations_[static_cast<std::size_t>(j)]);
+      const auto body = encode(frame);
+      // Copy the targets first: a target may end a subscription re-entrantly.
+      const auto targets = targets_;
+      for (const auto& e : targets) {
+        if (e.target->alive()) e.target->deliver(id_, body);
       }
-      wire::FrameContent c;
-      c.skeleton_version = content_->skeleton_version;
-      c.frame_index = frame;
-      c.motion_time = static_cast<double>(frame) * m.frame_time;
-      c.sequence = sequence_++;
-      c.server_send_time_ns = now_ns();
-      c.positions = positions_;
-      c.orientations = quaternions_;
-      c.float64 = float64_;
-      auto body = std::make_shared<const std::string>(wire::encode_frame_body(c));
-      ++impl_.frames_encoded;
-      // Copy the targets first: a session may end a subscription re-entrantly.
-      auto targets = targets_;
-      for (auto& t : targets) {
-        auto s = t.session.lock();
-        if (!s || s->stopped()) continue;
-        s->push_frame(t.subscription_id, t.view_id, id_, body, t.udp);
-      }
-      for (auto& t : targets_) {
-        ++t.sent;
-        if (t.max_frames != 0 && t.sent >= t.max_frames) ended.emplace_back(t.session, t.subscription_id);
+      for (auto& e : targets_) {
+        ++e.sent;
+        if (e.max_frames != 0 && e.sent >= e.max_frames) ended.emplace_back(e.target, e.sent);
       }
     }
   } else {
-    for (auto& t : targets_) ended.emplace_back(t.session, t.subscription_id);
+    for (const auto& e : targets_) ended.emplace_back(e.target, e.sent);
   }
   ++tick_;
   // Drift-free: the next tick is due at base + k/rate, so a late tick is
@@ -73,18 +214,16 @@ void Stream::on_tick() {
   // Only when the server fell far behind (a stall) does playback jump to the
   // tick due now rather than burst through the backlog.
   const auto now = Clock::now();
-  if (due(tick_) + std::max<Clock::duration>(period(), impl_.cfg.max_catch_up) < now) {
-    const double behind = std::chrono::duration<double>(now - base_time_).count() * schedule_.rate;
+  if (due(tick_) + std::max<Clock::duration>(period(), settings_.max_catch_up) < now) {
+    const double behind = std::chrono::duration<double>(now - base_time_).count() * sched.rate;
     tick_ = std::max(tick_, base_tick_ + static_cast<std::uint64_t>(behind));
   }
-  auto self = shared_from_this();  // sessions may drop the last reference below
-  for (auto& [weak, sub] : ended) {
-    const auto it = std::find_if(targets_.begin(), targets_.end(),
-                                 [&](const Target& t) { return t.subscription_id == sub && !t.session.owner_before(weak) && !weak.owner_before(t.session); });
-    const std::uint64_t sent = it != targets_.end() ? it->sent : 0;
-    if (auto s = weak.lock()) s->subscription_ended(sub, sent, finished ? "end of motion" : "max_frames reached");
+  auto self = shared_from_this();  // ending targets may drop the last reference below
+  for (auto& [target, sent] : ended) {
+    remove(target.get());
+    if (target->alive()) target->ended(sent, finished ? "end of motion" : "max_frames reached");
   }
-  std::erase_if(targets_, [](const Target& t) { return t.session.expired(); });
+  std::erase_if(targets_, [](const Entry& e) { return !e.target->alive(); });
   if (!targets_.empty() && !finished) arm();
 }
 

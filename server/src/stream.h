@@ -1,22 +1,43 @@
-// A stream: one schedule and one content, fanned out to its targets (the
-// subscriptions of one or more sessions). Per tick: one forward-kinematics
-// pass, one encoding, the same bytes for every target.
+// Stream: one schedule and one view content, fanned out to its targets. Per
+// tick: one forward-kinematics pass, one encoding, the same bytes handed to
+// every target. Float32 streams run the float path (gmr::fast::FkFrameJob on
+// the content's compiled form, then gmr::view_frame_float straight into the
+// float encoding); float64 streams, and contents that do not compile, the
+// double reference path (gmr::view_frame).
+//
+// Frame k of the schedule is due at base_time + k / rate (drift-free).
 #pragma once
 
 #include <Eigen/Core>
-#include <Eigen/Geometry>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "gmr/server/view.h"
-#include "server_impl.h"
+#include "net.h"
 
 namespace gmr::server {
 
-// Stream: one schedule, one content; one FK and one encoding per tick, fanned
-// out to every target. Float32 streams compute with the float path
-// (compute_stream_frame), float64 ones with the double reference path. Frame k of the schedule is due at base_time + k/rate.
+// Where a stream's frames go: a subscription over TCP or over UDP.
+class Target {
+ public:
+  virtual ~Target() = default;
+  // False once the target's connection is gone: the stream forgets it.
+  virtual bool alive() const = 0;
+  // One frame: the shared Frame body (fields >= 16) of stream `stream_id`.
+  virtual void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) = 0;
+  // The stream ended this target after `sent` frames ("end of motion",
+  // "max_frames reached"); the stream has already forgotten it.
+  virtual void ended(std::uint64_t sent, const std::string& reason) = 0;
+};
+
+// The server-wide counters streams add to.
+struct StreamCounters {
+  std::uint64_t frames_computed = 0;        // forward-kinematics runs
+  std::uint64_t frames_computed_float = 0;  // of those, by the float path
+  std::uint64_t frames_encoded = 0;         // encodings (one per tick that sends)
+};
+
 class Stream : public std::enable_shared_from_this<Stream> {
  public:
   struct Schedule {
@@ -27,108 +48,67 @@ class Stream : public std::enable_shared_from_this<Stream> {
     double rate = 0.0;
     bool skip_repeats = false;
   };
-  struct Target {
-    std::weak_ptr<Session> session;
-    std::uint32_t subscription_id = 0;
-    std::uint32_t view_id = 0;
-    bool udp = false;
+  struct Settings {
+    std::vector<int> joints;  // sent, in this order
+    bool orientations = false;
+    bool float64 = false;
+    Schedule schedule;
+    std::chrono::milliseconds max_catch_up{250};
+  };
+
+  Stream(net::io_context& io, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
+         StreamCounters& counters);
+
+  std::uint64_t id() const { return id_; }
+  const Schedule& schedule() const { return settings_.schedule; }
+  bool paused() const { return paused_; }
+  bool idle() const { return targets_.empty(); }
+  std::size_t target_count() const { return targets_.size(); }
+  // The key under which the registry lets others join; empty: not joinable.
+  const std::string& share_key() const { return share_key_; }
+  void set_share_key(std::string key) { share_key_ = std::move(key); }
+
+  // A target starts (or stops) getting this stream's frames; max_frames: it
+  // ends after that many (0: no limit).
+  void add(std::shared_ptr<Target> target, std::uint64_t max_frames);
+  void remove(const Target* target);
+  bool has(const Target* target) const;
+
+  void start();
+  void pause();
+  void resume();
+  void seek(std::uint32_t frame);
+  void stop() { timer_.cancel(); }
+  void set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints);
+  // A copy of this stream (content, settings, position, sequence) that takes
+  // `target` over from it, so the target sees no gap or restart.
+  std::shared_ptr<Stream> split_off(std::uint64_t id, const Target* target);
+
+ private:
+  struct Entry {
+    std::shared_ptr<Target> target;
     std::uint64_t sent = 0;
     std::uint64_t max_frames = 0;
   };
 
-  Stream(Server::Impl& impl, std::uint64_t id, std::shared_ptr<const ViewContent> content, std::vector<int> joints,
-         bool orientations, bool float64, Schedule schedule)
-      : impl_(impl), id_(id), content_(std::move(content)), joints_(std::move(joints)), orientations_(orientations),
-        float64_(float64), schedule_(schedule), timer_(impl.io) {}
-
-  std::uint64_t id() const { return id_; }
-  std::string key;  // non-empty while it can be joined by a shared subscription
-  const std::vector<int>& joints() const { return joints_; }
-  const Schedule& schedule() const { return schedule_; }
-  bool paused() const { return paused_; }
-  std::vector<Target>& targets() { return targets_; }
-
-  void start() {
-    rebase(Clock::now(), 0.0);
-    arm();
-  }
-  void pause() {
-    if (paused_) return;
-    paused_ = true;
-    pause_pos_ = position(tick_);
-    timer_.cancel();
-  }
-  void resume() {
-    if (!paused_) return;
-    paused_ = false;
-    rebase(Clock::now(), pause_pos_);
-    arm();
-  }
-  void seek(std::uint32_t frame) {
-    const double pos = static_cast<double>(frame - schedule_.start);
-    last_frame_ = -1;
-    if (paused_) {
-      pause_pos_ = pos;
-      return;
-    }
-    timer_.cancel();
-    rebase(Clock::now(), pos);
-    arm();
-  }
-  void set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints) {
-    content_ = std::move(content);
-    joints_ = std::move(joints);
-    last_frame_ = -1;
-  }
-  // A copy of this stream's content and position for one target leaving it.
-  std::shared_ptr<Stream> clone(std::uint64_t id) const {
-    auto s = std::make_shared<Stream>(impl_, id, content_, joints_, orientations_, float64_, schedule_);
-    s->sequence_ = sequence_;  // the subscriber sees no gap or restart
-    s->last_frame_ = last_frame_;
-    s->paused_ = paused_;
-    const double pos = paused_ ? pause_pos_ : position(tick_);
-    s->pause_pos_ = pos;
-    if (!paused_) {
-      s->rebase(Clock::now(), pos);
-      s->arm();
-    }
-    return s;
-  }
-  void stop() { timer_.cancel(); }
-
- private:
-  double step() const { return schedule_.speed / (schedule_.rate * content_->motion->frame_time); }
-  double position(std::uint64_t tick) const { return base_pos_ + static_cast<double>(tick - base_tick_) * step(); }
-  std::chrono::steady_clock::duration period() const {
-    return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / schedule_.rate));
-  }
-  void rebase(Clock::time_point now, double pos) {
-    base_time_ = now;
-    base_pos_ = pos;
-    base_tick_ = tick_;
-  }
-  Clock::time_point due(std::uint64_t tick) const {
-    return base_time_ + std::chrono::duration_cast<Clock::duration>(
-                            std::chrono::duration<double>(static_cast<double>(tick - base_tick_) / schedule_.rate));
-  }
-  void arm() {
-    timer_.expires_at(due(tick_));
-    timer_.async_wait([weak = weak_from_this()](const boost::system::error_code& ec) {
-      if (ec) return;
-      if (auto self = weak.lock()) self->on_tick();
-    });
-  }
+  double step() const;
+  double position(std::uint64_t tick) const;
+  Clock::duration period() const;
+  void rebase(Clock::time_point now, double pos);
+  Clock::time_point due(std::uint64_t tick) const;
+  void arm();
   void on_tick();
+  // Computes and encodes frame `frame` (the shared body).
+  std::shared_ptr<const std::string> encode(std::uint64_t frame);
 
-  Server::Impl& impl_;
+  net::io_context& io_;
   std::uint64_t id_;
   std::shared_ptr<const ViewContent> content_;
-  std::vector<int> joints_;
-  bool orientations_;
-  bool float64_;
-  Schedule schedule_;
+  Settings settings_;
+  StreamCounters& counters_;
   net::steady_timer timer_;
-  std::vector<Target> targets_;
+  std::vector<Entry> targets_;
+  std::string share_key_;
 
   Clock::time_point base_time_{};
   std::uint64_t base_tick_ = 0;
@@ -139,11 +119,12 @@ class Stream : public std::enable_shared_from_this<Stream> {
   std::int64_t last_frame_ = -1;
   std::uint64_t sequence_ = 0;
 
-  std::vector<Eigen::Vector3d> all_positions_;
+  // Per-tick buffers, reused (they grow to the largest content shown).
+  std::vector<Eigen::Vector3d> all_positions_;   // double path
   std::vector<Eigen::Matrix3d> all_orientations_;
-  std::vector<Eigen::Vector3d> positions_;
-  std::vector<Eigen::Quaterniond> quaternions_;
-  FloatFrameBuffers float_buffers_;  // float32 streams: the float path's outputs and workspace
+  std::vector<double> positions_f64_, orientations_f64_;
+  std::vector<float> fk_positions_, fk_orientations_, workspace_;  // float path
+  std::vector<float> positions_f32_, orientations_f32_;
 };
 
 }  // namespace gmr::server

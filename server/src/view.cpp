@@ -4,12 +4,16 @@
 
 #include <algorithm>
 #include <exception>
+#include <functional>
 #include <new>
 
 #include "gmr/fast/compiled_motion.h"
 #include "gmr/fast/fast_fk.h"
-#include "gmr/kinematics/forward_kinematics.h"
-#include "gmr/ops/ops.h"
+#include "gmr/ops/join_tree.h"
+#include "gmr/ops/set_roots.h"
+#include "gmr/ops/shift_root.h"
+#include "gmr/ops/split_tree.h"
+#include "gmr/ops/strip_dummies.h"
 
 namespace gmr::server {
 
@@ -47,106 +51,6 @@ const fast::CompiledMotion* CompiledForm::get() const {
   return compiled_.get();
 }
 
-void compute_view_frame(const ViewContent& view, std::size_t f, std::span<Eigen::Vector3d> out_positions,
-                        std::span<Eigen::Matrix3d> out_orientations) {
-  const Motion& m = *view.motion;
-  if (view.relative_to < 0) {
-    compute_frame(m, f, out_positions, out_orientations);
-    return;
-  }
-  // The viewer's frame is needed even when the caller wants no orientations.
-  thread_local std::vector<Eigen::Matrix3d> scratch;
-  std::span<Eigen::Matrix3d> orient = out_orientations;
-  if (orient.empty()) {
-    scratch.resize(m.skeleton.size());
-    orient = scratch;
-  }
-  compute_frame(m, f, out_positions, orient);
-  const auto v = static_cast<std::size_t>(view.relative_to);
-  const Eigen::Matrix3d wt = orient[v].transpose();
-  const Eigen::Vector3d pv = out_positions[v];
-  for (auto& p : out_positions) p = wt * (p - pv);
-  if (!out_orientations.empty()) {
-    for (auto& w : out_orientations) w = wt * w;
-  }
-}
-
-namespace {
-
-// The viewpoint of joint v applied to float FK outputs, in double:
-// P'_j = W_v^T (P_j - P_v), W'_j = W_v^T W_j (W row-major 3x3).
-void float_to_view(const float* pos, const float* orient, std::size_t n, int relative_to,
-                   std::span<Eigen::Vector3d> out_positions, std::span<Eigen::Matrix3d> out_orientations) {
-  if (relative_to < 0) {
-    for (std::size_t j = 0; j < n; ++j) {
-      out_positions[j] = Eigen::Vector3d(pos[3 * j], pos[3 * j + 1], pos[3 * j + 2]);
-    }
-    if (!out_orientations.empty()) {
-      for (std::size_t j = 0; j < n; ++j) {
-        const float* w = orient + 9 * j;
-        auto& o = out_orientations[j];
-        for (int r = 0; r < 3; ++r) {
-          for (int c = 0; c < 3; ++c) o(r, c) = w[3 * r + c];
-        }
-      }
-    }
-    return;
-  }
-  const auto v = static_cast<std::size_t>(relative_to);
-  double wv[9];  // W_v, row-major
-  for (int k = 0; k < 9; ++k) wv[k] = orient[9 * v + static_cast<std::size_t>(k)];
-  const double pv[3] = {pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]};
-  for (std::size_t j = 0; j < n; ++j) {
-    const double d0 = static_cast<double>(pos[3 * j]) - pv[0];
-    const double d1 = static_cast<double>(pos[3 * j + 1]) - pv[1];
-    const double d2 = static_cast<double>(pos[3 * j + 2]) - pv[2];
-    auto& p = out_positions[j];
-    for (int r = 0; r < 3; ++r) p[r] = wv[r] * d0 + wv[3 + r] * d1 + wv[6 + r] * d2;  // (W^T)_{r k} = W_{k r}
-  }
-  if (!out_orientations.empty()) {
-    for (std::size_t j = 0; j < n; ++j) {
-      const float* w = orient + 9 * j;
-      auto& o = out_orientations[j];
-      for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c) {
-          o(r, c) = wv[r] * static_cast<double>(w[c]) + wv[3 + r] * static_cast<double>(w[3 + c]) +
-                    wv[6 + r] * static_cast<double>(w[6 + c]);
-        }
-      }
-    }
-  }
-}
-
-}  // namespace
-
-FramePath compute_stream_frame(const ViewContent& view, std::size_t f, bool float32, FloatFrameBuffers& buffers,
-                               std::span<Eigen::Vector3d> out_positions, std::span<Eigen::Matrix3d> out_orientations) {
-  const fast::CompiledMotion* cm = float32 && view.compiled ? view.compiled->get() : nullptr;
-  const std::size_t n = view.motion->skeleton.size();
-  if (cm != nullptr && cm->joint_count() == n && f < cm->frame_count() && out_positions.size() >= n &&
-      view.relative_to < static_cast<int>(n) &&
-      (out_orientations.empty() || out_orientations.size() >= n)) {
-    // The viewer's orientation is needed even when the caller wants none.
-    const bool orient = !out_orientations.empty() || view.relative_to >= 0;
-    buffers.positions.resize(n * 3);
-    buffers.orientations.resize(orient ? n * 9 : 0);
-    buffers.workspace.resize(std::max(buffers.workspace.size(), view.compiled->workspace_floats()));
-    fast::FkFrameJob job;
-    job.motion = cm;
-    job.frame = f;
-    job.out_positions = buffers.positions;
-    job.out_orientations = buffers.orientations;
-    job.workspace = buffers.workspace;
-    if (job.run()) {
-      float_to_view(buffers.positions.data(), buffers.orientations.data(), n, view.relative_to, out_positions,
-                    out_orientations);
-      return FramePath::kFloat;
-    }
-  }
-  compute_view_frame(view, f, out_positions, out_orientations);
-  return FramePath::kDouble;
-}
-
 View::View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion,
            std::shared_ptr<const CompiledForm> compiled)
     : id_(id), motion_name_(std::move(motion_name)) {
@@ -160,7 +64,8 @@ View::View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Moti
 Result<int> View::joint_index(const std::string& name) const {
   const int j = motion().skeleton.find(name);
   if (j < 0) {
-    return make_error("view " + std::to_string(id_) + " (" + motion_name_ + ") has no joint '" + name + "'");
+    return make_error(ErrorKind::kNotFound,
+                      "view " + std::to_string(id_) + " (" + motion_name_ + ") has no joint '" + name + "'");
   }
   return j;
 }
@@ -181,7 +86,7 @@ namespace {
 // Applies an op's result, keeping the viewer joint (by name) when it survived.
 Status adopt(View& view, Result<Motion> result, const std::string& what,
              const std::function<void(std::shared_ptr<const Motion>, int)>& replace) {
-  if (!result.ok()) return make_error(what + ": " + result.error().to_string());
+  if (!result.ok()) return make_error(result.error().kind, what + ": " + result.error().to_string());
   auto next = std::make_shared<const Motion>(std::move(result).value());
   int viewer = -1;
   if (view.content()->relative_to >= 0) {

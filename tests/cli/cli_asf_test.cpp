@@ -11,8 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "gmr/io/asf_amc.h"
-#include "gmr/io/file_util.h"
+#include "gmr/acclaim/convert.h"
+#include "gmr/acclaim/kinematics.h"
+#include "gmr/core/file_util.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "cli_test_util.h"
 #include "test_data.h"

@@ -11,7 +11,7 @@
 #include <filesystem>
 #include <string>
 
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "cli_test_util.h"
 #include "test_data.h"
 

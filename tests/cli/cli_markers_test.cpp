@@ -9,7 +9,9 @@
 #include <string>
 
 #include "cli_test_util.h"
-#include "gmr/io/markers.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "test_data.h"
 
 namespace gmr {

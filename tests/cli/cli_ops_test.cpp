@@ -13,7 +13,7 @@
 #include <sstream>
 #include <string>
 
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/io/motion_file.h"
 #include "cli_test_util.h"
 #include "test_data.h"

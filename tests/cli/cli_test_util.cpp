@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cstdlib>
 
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 
 namespace gmr::test {
 namespace fs = std::filesystem;
@@ -34,7 +34,9 @@ std::string CliTest::path(const std::string& name) const { return shell_quote((d
 void CliTest::expect_one_line_error(const std::string& args, const std::string& needle) {
   const CliOutcome r = gmr(args);
   EXPECT_EQ(r.status, 1) << args;
-  EXPECT_THAT(r.err, ::testing::StartsWith("gmr: ")) << args;
+  // Each program names itself: "gmr: ...", "gmr-bench: ...".
+  const std::string prefix = fs::path(GMR_CLI_PATH).filename().string() + ": ";
+  EXPECT_THAT(r.err, ::testing::StartsWith(prefix)) << args;
   EXPECT_THAT(r.err, ::testing::HasSubstr(needle)) << args;
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }

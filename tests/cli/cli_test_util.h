@@ -1,4 +1,4 @@
-// Running the built `gmr` command from a test: a fresh temporary folder per
+// Running a built command (`gmr`, or the program GMR_CLI_PATH names) from a test: a fresh temporary folder per
 // test (test::TempDir), and the command's exit status, stdout and stderr.
 #pragma once
 
@@ -27,7 +27,7 @@ class CliTest : public ::testing::Test {
   // The quoted path of `name` inside dir_.
   std::string path(const std::string& name) const;
   // A command that must fail: exit 1 and exactly one line on stderr,
-  // starting "gmr: " and containing `needle`.
+  // starting with the program's name ("gmr: ") and containing `needle`.
   void expect_one_line_error(const std::string& args, const std::string& needle);
 
   TempDir tmp_;                                // a fresh, empty folder per test, removed after it

@@ -12,7 +12,7 @@
 #include <cerrno>
 #include <cstring>
 
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/wire/framing.h"
 #include "test_data.h"
@@ -159,7 +159,7 @@ namespace {
 struct Collected {
   std::mutex mutex;
   std::vector<client::ReceivedFrame> frames;
-  Latch<pb::SubscriptionEnded> ended;
+  Latch<client::SubscriptionEnd> ended;
 };
 }  // namespace
 
@@ -177,14 +177,14 @@ std::vector<client::ReceivedFrame> stream_all(client::Client& c, const client::V
         std::lock_guard lock(col->mutex);
         col->frames.push_back(f);
       },
-      [col](const pb::SubscriptionEnded& e) { col->ended.set(e); });
+      [col](const client::SubscriptionEnd& e) { col->ended.set(e); });
   EXPECT_TRUE(sub.ok()) << sub.error().to_string();
   if (!sub.ok()) return {};
   auto end = col->ended.wait();
   EXPECT_TRUE(end.has_value()) << "the stream did not end";
   if (end) {
-    EXPECT_EQ(end->reason(), "end of motion");
-    if (out_dropped) *out_dropped = end->frames_dropped();
+    EXPECT_EQ(end->reason, "end of motion");
+    if (out_dropped) *out_dropped = end->frames_dropped;
   }
   std::lock_guard lock(col->mutex);
   return col->frames;

@@ -11,6 +11,7 @@
 #include "gmr/fast/fast_fk.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/server/view.h"
+#include "gmr/view/viewpoint.h"
 #include "net_test_util.h"
 #include "test_data.h"
 
@@ -175,10 +176,11 @@ TEST_P(FloatPath, Float64StreamStillUsesTheDoublePath) {
     // The double path, exactly (float64 on the wire loses nothing).
     const std::size_t n = local.motion().skeleton.size();
     std::vector<Eigen::Vector3d> want(n);
+    std::vector<Eigen::Matrix3d> rot(n);
     double worst = 0.0;
     for (const auto& f : frames) {
       ASSERT_EQ(f.positions.size(), n);
-      server::compute_view_frame(*local.content(), f.frame_index, want, {});
+      view_frame(local.motion(), local.content()->relative_to, f.frame_index, want, rot);
       for (std::size_t j = 0; j < n; ++j) worst = std::max(worst, (f.positions[j] - want[j]).norm());
     }
     EXPECT_EQ(worst, 0.0);
@@ -199,7 +201,7 @@ TEST_P(FloatPath, Float32OrientationsMatchTheReference) {
     double worst = 0.0, worst_pos = 0.0;
     for (const auto& f : frames) {
       ASSERT_EQ(f.orientations.size(), n);
-      server::compute_view_frame(*local.content(), f.frame_index, pos, rot);
+      view_frame(local.motion(), local.content()->relative_to, f.frame_index, pos, rot);
       for (std::size_t j = 0; j < n; ++j) {
         const Eigen::Matrix3d got = f.orientations[j].normalized().toRotationMatrix();
         worst = std::max(worst, (got - rot[j]).cwiseAbs().maxCoeff());
@@ -214,9 +216,10 @@ TEST_P(FloatPath, Float32OrientationsMatchTheReference) {
 INSTANTIATE_TEST_SUITE_P(Motions, FloatPath, ::testing::Values("walk", "cmu/02_01"),
                          [](const auto& p) { return p.param == "walk" ? std::string("DemoWalk") : std::string("Cmu02_01"); });
 
-// The decision itself: float path only for float32 and a compiled form; the
-// float form follows the motion (kept by a change of viewpoint, new after an edit).
-TEST(FloatPath, ComputeStreamFramePicksThePath) {
+// The float form follows the motion: shared by the views of one library
+// motion, kept by a change of viewpoint, new after an edit; a form that
+// cannot compile gives no compiled motion (streams then take the double path).
+TEST(FloatPath, CompiledFormFollowsTheMotion) {
   const auto& lib = test_library();
   const auto source = std::find_if(lib.begin(), lib.end(), [](const auto& e) { return e.name == "walk"; })->motion;
   const auto shared = std::make_shared<const server::CompiledForm>(source);
@@ -231,23 +234,11 @@ TEST(FloatPath, ComputeStreamFramePicksThePath) {
   ASSERT_NE(b.content()->compiled, nullptr);
   EXPECT_NE(b.content()->compiled, shared);  // an edited motion gets its own
   EXPECT_EQ(b.content()->compiled->motion(), b.content()->motion);
-
-  const std::size_t n = source->skeleton.size();
-  std::vector<Eigen::Vector3d> pos(n), ref(n);
-  std::vector<Eigen::Matrix3d> rot(n);
-  server::FloatFrameBuffers buffers;
-  EXPECT_EQ(server::compute_stream_frame(*a.content(), 3, false, buffers, pos, rot), server::FramePath::kDouble);
-  server::compute_view_frame(*a.content(), 3, ref, {});
-  for (std::size_t j = 0; j < n; ++j) EXPECT_EQ(pos[j], ref[j]);
-  EXPECT_EQ(server::compute_stream_frame(*a.content(), 3, true, buffers, pos, rot), server::FramePath::kFloat);
-  for (std::size_t j = 0; j < n; ++j) EXPECT_LT((pos[j] - ref[j]).norm(), 1e-5 * skeleton_size(*source));
-  // No float form (or one that cannot compile): the double path.
-  server::ViewContent bare = *a.content();
-  bare.compiled = nullptr;
-  EXPECT_EQ(server::compute_stream_frame(bare, 3, true, buffers, pos, {}), server::FramePath::kDouble);
-  bare.compiled = std::make_shared<const server::CompiledForm>(nullptr);
-  EXPECT_EQ(bare.compiled->get(), nullptr);
-  EXPECT_EQ(server::compute_stream_frame(bare, 3, true, buffers, pos, {}), server::FramePath::kDouble);
+  ASSERT_NE(shared->get(), nullptr);
+  EXPECT_EQ(shared->get()->joint_count(), source->skeleton.size());
+  EXPECT_GT(shared->workspace_floats(), 0u);
+  const server::CompiledForm none(nullptr);
+  EXPECT_EQ(none.get(), nullptr);
 }
 
 }  // namespace

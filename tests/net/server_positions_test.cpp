@@ -8,7 +8,7 @@
 #include <mutex>
 
 #include "gmr/kinematics/forward_kinematics.h"
-#include "gmr/ops/view.h"
+#include "gmr/view/view.h"
 #include "net_test_util.h"
 #include "test_data.h"
 
@@ -208,7 +208,7 @@ TEST_P(ServerPositions, UdpStreamEqualsGmrPositionsWithFragmentedFrames) {
   EXPECT_EQ(counters.udp_malformed, 0u);
   auto st = client_->stats();
   ASSERT_TRUE(st.ok());
-  EXPECT_EQ(st->frames_dropped(), 0u);
+  EXPECT_EQ(st->frames_dropped, 0u);
 }
 
 TEST_P(ServerPositions, Float32StreamIsWithinFloatPrecision) {

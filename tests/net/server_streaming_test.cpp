@@ -16,7 +16,7 @@ using client::ReceivedFrame;
 struct Sink {
   std::mutex mutex;
   std::vector<ReceivedFrame> frames;
-  Latch<pb::SubscriptionEnded> ended;
+  Latch<client::SubscriptionEnd> ended;
   Latch<bool> reached;  // set when `until` says so
   std::function<bool(const ReceivedFrame&)> until;
 
@@ -28,7 +28,7 @@ struct Sink {
     };
   }
   client::EndCallback on_end() {
-    return [this](const pb::SubscriptionEnded& e) { ended.set(e); };
+    return [this](const client::SubscriptionEnd& e) { ended.set(e); };
   }
   std::vector<ReceivedFrame> copy() {
     std::lock_guard lock(mutex);
@@ -54,8 +54,8 @@ TEST(Streaming, LoopWithMaxFramesWrapsAndStops) {
   ASSERT_TRUE(sub.ok()) << sub.error().to_string();
   auto end = sink.ended.wait();
   ASSERT_TRUE(end.has_value());
-  EXPECT_EQ(end->reason(), "max_frames reached");
-  EXPECT_EQ(end->frames_sent(), 35u);
+  EXPECT_EQ(end->reason, "max_frames reached");
+  EXPECT_EQ(end->frames_sent, 35u);
   const auto frames = sink.copy();
   ASSERT_EQ(frames.size(), 35u);
   for (std::size_t k = 0; k < frames.size(); ++k) {
@@ -214,7 +214,7 @@ TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {
   ASSERT_TRUE(c->subscribe(v->id, o, sink.on_frame(), sink.on_end()).ok());
   auto end = sink.ended.wait();
   ASSERT_TRUE(end.has_value());
-  EXPECT_EQ(end->frames_dropped(), 0u);
+  EXPECT_EQ(end->frames_dropped, 0u);
   const auto frames = sink.copy();
   ASSERT_EQ(frames.size(), 500u);
   for (std::size_t k = 0; k < frames.size(); ++k) EXPECT_EQ(frames[k].sequence, k);

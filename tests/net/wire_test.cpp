@@ -3,66 +3,31 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <random>
 
 #include "gmr/demo/demo_library.h"
 #include "gmr/wire/convert.h"
-#include "gmr/wire/frame_encoding.h"
+#include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
 #include "gmr/wire/udp.h"
 
 namespace {
 
 namespace pb = gmr::stream::v1;
-using gmr::wire::StreamDecoder;
 
-TEST(Framing, RoundTripsMessagesFedByteByByte) {
-  pb::ClientMessage a;
-  a.set_request_id(7);
-  a.mutable_create_view()->set_motion("walk");
-  pb::ClientMessage b;
-  b.set_request_id(8);
-  b.mutable_list_motions();
-  const std::string stream = gmr::wire::frame_message(a).value() + gmr::wire::frame_message(b).value();
-  StreamDecoder d;
-  std::vector<std::string> got;
-  for (char c : stream) {
-    d.feed(std::string_view(&c, 1));
-    std::string out;
-    while (d.next(out) == StreamDecoder::Next::kMessage) got.push_back(out);
-  }
-  ASSERT_EQ(got.size(), 2u);
-  pb::ClientMessage ra, rb;
-  ASSERT_TRUE(ra.ParseFromString(got[0]));
-  ASSERT_TRUE(rb.ParseFromString(got[1]));
-  EXPECT_EQ(ra.request_id(), 7u);
-  EXPECT_EQ(ra.create_view().motion(), "walk");
-  EXPECT_TRUE(rb.has_list_motions());
-  EXPECT_EQ(d.buffered(), 0u);
-}
-
-TEST(Framing, RefusesAnOversizedLengthBeforeBufferingTheBody) {
-  StreamDecoder d(1024);
-  d.feed(std::string("\x00\x00\x04\x01", 4));  // 1025 > 1024
-  std::string out;
-  EXPECT_EQ(d.next(out), StreamDecoder::Next::kError);
-  EXPECT_NE(d.error().message.find("1025"), std::string::npos) << d.error().message;
-  EXPECT_NE(d.error().message.find("1024"), std::string::npos) << d.error().message;
-  d.feed("more");
-  EXPECT_EQ(d.next(out), StreamDecoder::Next::kError);  // stays failed
-  EXPECT_EQ(d.buffered(), 0u);
-}
-
-TEST(Framing, WaitsForATruncatedPrefixOrBody) {
-  StreamDecoder d;
-  std::string out;
-  d.feed(std::string("\x00\x00", 2));
-  EXPECT_EQ(d.next(out), StreamDecoder::Next::kNeedMore);
-  d.feed(std::string("\x00\x05" "abc", 5));
-  EXPECT_EQ(d.next(out), StreamDecoder::Next::kNeedMore);
-  d.feed("de");
-  ASSERT_EQ(d.next(out), StreamDecoder::Next::kMessage);
-  EXPECT_EQ(out, "abcde");
+TEST(Framing, LengthPrefixIsBigEndianAndCapped) {
+  pb::ClientMessage m;
+  m.mutable_get_skeleton()->set_motion("walk");
+  const std::string framed = gmr::wire::frame_message(m).value();
+  ASSERT_GE(framed.size(), gmr::wire::kLengthPrefixBytes);
+  std::array<std::uint8_t, gmr::wire::kLengthPrefixBytes> prefix{};
+  std::copy_n(framed.begin(), prefix.size(), prefix.begin());
+  EXPECT_EQ(gmr::wire::read_length_prefix(prefix), framed.size() - prefix.size());
+  gmr::wire::write_length_prefix(0x01020304u, prefix);
+  EXPECT_EQ(prefix, (std::array<std::uint8_t, 4>{1, 2, 3, 4}));
+  EXPECT_TRUE(gmr::wire::check_length(1000, 1000).ok());
+  EXPECT_FALSE(gmr::wire::check_length(1001, 1000).ok());
 }
 
 TEST(Framing, FrameMessageRefusesAMessageAboveTheCap) {
@@ -147,45 +112,83 @@ TEST(UdpRegister, RoundTripsAndRejectsOtherBytes) {
   EXPECT_FALSE(gmr::wire::parse_register_datagram(wrong_kind));
 }
 
-TEST(FrameEncoding, SharedBodyPlusSubscriberHeadIsOneServerMessage) {
-  std::vector<Eigen::Vector3d> p{{1.5, -2.25, 3.0}, {0.1, 0.2, 0.3}};
-  std::vector<Eigen::Quaterniond> q{Eigen::Quaterniond(0.5, 0.5, 0.5, 0.5), Eigen::Quaterniond::Identity()};
-  gmr::wire::FrameContent c;
-  c.skeleton_version = 3;
-  c.frame_index = 17;
-  c.motion_time = 17 / 120.0;
-  c.sequence = 99;
-  c.server_send_time_ns = 123456789;
-  c.positions = p;
-  c.orientations = q;
-  c.float64 = true;
-  const std::string body = gmr::wire::encode_frame_body(c);
-  for (std::uint32_t view : {1u, 300u, 70000u}) {
-    const std::string head = gmr::wire::frame_head_for(view, view + 1, 5, body.size(), true);
-    const std::string whole = head + body;
-    StreamDecoder d;
-    d.feed(whole);
-    std::string out;
-    ASSERT_EQ(d.next(out), StreamDecoder::Next::kMessage);
-    EXPECT_EQ(out, gmr::wire::frame_message_for(view, view + 1, 5, body));
-    pb::ServerMessage m;
-    ASSERT_TRUE(m.ParseFromString(out));
-    ASSERT_TRUE(m.has_frame());
-    const auto& f = m.frame();
-    EXPECT_EQ(f.view_id(), view);
-    EXPECT_EQ(f.subscription_id(), view + 1);
-    EXPECT_EQ(f.stream_id(), 5u);
-    EXPECT_EQ(f.skeleton_version(), 3u);
-    EXPECT_EQ(f.frame_index(), 17u);
-    EXPECT_EQ(f.motion_time(), 17 / 120.0);
-    EXPECT_EQ(f.sequence(), 99u);
-    EXPECT_EQ(f.server_send_time_ns(), 123456789);
-    ASSERT_EQ(f.positions_f64_size(), 6);
-    EXPECT_EQ(f.positions_f64(1), -2.25);
-    ASSERT_EQ(f.orientations_f64_size(), 8);
-    EXPECT_EQ(f.orientations_f64(3), 0.5);  // w of the first
-    EXPECT_EQ(f.orientations_f64(7), 1.0);
+// The shared body after a subscriber's head is one length-prefixed
+// ServerMessage, and decode_frame gives back every value, in both precisions.
+TEST(FrameEncoding, SharedBodyPlusSubscriberHeadDecodesToTheFrame) {
+  const std::vector<double> p{1.5, -2.25, 3.0, 0.1, 0.2, 0.3};
+  const std::vector<double> q{0.5, 0.5, 0.5, 0.5, 0, 0, 0, 1};  // x y z w
+  const std::vector<float> pf(p.begin(), p.end()), qf(q.begin(), q.end());
+  for (bool float64 : {true, false}) {
+    gmr::wire::FrameContent c;
+    c.skeleton_version = 3;
+    c.frame_index = 17;
+    c.motion_time = 17 / 120.0;
+    c.sequence = 99;
+    c.server_send_time_ns = 123456789;
+    c.float64 = float64;
+    if (float64) {
+      c.positions_f64 = p;
+      c.orientations_f64 = q;
+    } else {
+      c.positions = pf;
+      c.orientations = qf;
+    }
+    const std::string body = gmr::wire::encode_frame_body(c);
+    for (std::uint32_t view : {1u, 300u, 70000u}) {
+      const std::string head = gmr::wire::frame_head_for(view, view + 1, 5, body.size(), true);
+      const std::string whole = head + body;
+      std::array<std::uint8_t, gmr::wire::kLengthPrefixBytes> prefix{};
+      std::copy_n(whole.begin(), prefix.size(), prefix.begin());
+      ASSERT_EQ(gmr::wire::read_length_prefix(prefix), whole.size() - prefix.size());
+      const std::string out = whole.substr(prefix.size());
+      EXPECT_EQ(out, gmr::wire::frame_message_for(view, view + 1, 5, body));
+      pb::ServerMessage m;
+      ASSERT_TRUE(m.ParseFromString(out));
+      ASSERT_TRUE(m.has_frame());
+      auto f = gmr::wire::decode_frame(m.frame());
+      ASSERT_TRUE(f.ok()) << f.error().to_string();
+      EXPECT_EQ(f->view_id, view);
+      EXPECT_EQ(f->subscription_id, view + 1);
+      EXPECT_EQ(f->stream_id, 5u);
+      EXPECT_EQ(f->skeleton_version, 3u);
+      EXPECT_EQ(f->frame_index, 17u);
+      EXPECT_EQ(f->motion_time, 17 / 120.0);
+      EXPECT_EQ(f->sequence, 99u);
+      EXPECT_EQ(f->server_send_time_ns, 123456789);
+      EXPECT_EQ(f->float64, float64);
+      ASSERT_EQ(f->positions.size(), 2u);
+      EXPECT_EQ(f->positions[0], Eigen::Vector3d(1.5, -2.25, 3.0));
+      EXPECT_EQ(f->positions[1].x(), float64 ? 0.1 : static_cast<double>(0.1f));
+      ASSERT_EQ(f->orientations.size(), 2u);
+      EXPECT_EQ(f->orientations[0].w(), 0.5);
+      EXPECT_EQ(f->orientations[1].w(), 1.0);
+      EXPECT_EQ(f->orientations[1].x(), 0.0);
+    }
   }
+}
+
+TEST(FrameDecoding, RefusesCountsThatDoNotFormWholeValues) {
+  pb::Frame f;
+  for (int i = 0; i < 4; ++i) f.add_positions(1.0f);
+  auto r = gmr::wire::decode_frame(f);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().kind, gmr::ErrorKind::kInvalidData);
+  f.add_positions(1.0f), f.add_positions(1.0f);  // two whole positions
+  for (int i = 0; i < 5; ++i) f.add_orientations(0.0f);  // neither 0 nor 8
+  EXPECT_FALSE(gmr::wire::decode_frame(f).ok());
+  for (int i = 0; i < 3; ++i) f.add_orientations(0.0f);
+  EXPECT_TRUE(gmr::wire::decode_frame(f).ok());
+
+  pb::FrameBlock b;
+  b.set_begin(2);
+  b.set_end(4);
+  b.add_joints(0);
+  for (int i = 0; i < 3; ++i) b.add_positions(0.5);  // one frame of two
+  EXPECT_FALSE(gmr::wire::decode_block(b).ok());
+  for (int i = 0; i < 3; ++i) b.add_positions(0.5);
+  auto ok = gmr::wire::decode_block(b);
+  ASSERT_TRUE(ok.ok()) << ok.error().to_string();
+  EXPECT_EQ(ok->positions.size(), 2u);
 }
 
 TEST(SkeletonConversion, RoundTripsTheDemoSkeleton) {

@@ -38,7 +38,7 @@ endforeach()
 # Nothing private (lib/src) or from other targets gets installed.
 file(GLOB_RECURSE installed_headers RELATIVE ${prefix}/include ${prefix}/include/*)
 foreach(header ${installed_headers})
-  if(NOT header MATCHES "^gmr/[a-z_]+/[a-z_]+\\.h$" OR header MATCHES "^gmr/(wire|server|client|stream)/")
+  if(NOT header MATCHES "^gmr/[a-z0-9_]+/[a-z0-9_]+\\.h$" OR header MATCHES "^gmr/(wire|server|client|stream)/")
     message(FATAL_ERROR "install: unexpected file include/${header}")
   endif()
 endforeach()

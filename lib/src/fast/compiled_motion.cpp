@@ -7,7 +7,18 @@
 #include <new>
 #include <string>
 
+#include "fast/frame_program.h"
+
 namespace gmr::fast {
+
+CompiledMotion::CompiledMotion() : plan_(std::make_unique<detail::CompiledPlan>()) {}
+CompiledMotion::~CompiledMotion() = default;
+CompiledMotion::CompiledMotion(CompiledMotion&&) noexcept = default;
+CompiledMotion& CompiledMotion::operator=(CompiledMotion&&) noexcept = default;
+
+std::size_t CompiledMotion::frame_program_bytes_per_frame() const {
+  return 3 * plan_->program.local_count * sizeof(float);
+}
 
 void CompiledMotion::AlignedFree::operator()(float* p) const { ::operator delete[](p, std::align_val_t{64}); }
 void FrameProgram::AngleFree::operator()(float* p) const { ::operator delete[](p, std::align_val_t{64}); }
@@ -46,7 +57,8 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
   out.frame_count_ = motion.frame_count;
   out.frame_stride_ = padded_frames(motion.frame_count);
   out.all_roots_ = joints > 0 && sk.roots().size() == joints;
-  out.plans_.resize(joints);
+  out.plan_->joints.resize(joints);
+  out.joint_count_ = joints;
 
   // Streams: every rotation channel, and every position channel unless all
   // joints are roots (then positions come from stored_positions_).
@@ -54,9 +66,9 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
   std::int32_t slots = 0;
   for (std::size_t j = 0; j < joints; ++j) {
     const Joint& joint = sk.joint(static_cast<int>(j));
-    JointPlan& p = out.plans_[j];
+    JointPlan& p = out.plan_->joints[j];
     p.parent = joint.parent;
-    p.parent_slot = joint.parent == kNoParent ? kIdentitySlot : out.plans_[static_cast<std::size_t>(joint.parent)].world_slot;
+    p.parent_slot = joint.parent == kNoParent ? kIdentitySlot : out.plan_->joints[static_cast<std::size_t>(joint.parent)].world_slot;
     for (int a = 0; a < 3; ++a) p.offset[a] = static_cast<float>(joint.offset[a]);
     int rotation_channel[3] = {0, 0, 0};  // index of each rotation channel in joint.channels
     for (std::size_t i = 0; i < joint.channels.size(); ++i) {
@@ -75,7 +87,7 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
     // and computing them once keeps the one-root GMR as cheap as the BVH.
     int twin = -1;
     for (std::size_t i = 0; i < j && p.rotation_count > 0 && twin < 0; ++i) {
-      const JointPlan& q = out.plans_[i];
+      const JointPlan& q = out.plan_->joints[i];
       if (!q.owns_slot || q.parent_slot != p.parent_slot || q.rotation_count != p.rotation_count ||
           !std::equal(q.axes, q.axes + 3, p.axes)) {
         continue;
@@ -100,7 +112,7 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
     if (twin >= 0) {
       // No rotation of its own to compute: it uses its twin's world rotation.
       p.rotation_count = 0;
-      p.world_slot = out.plans_[static_cast<std::size_t>(twin)].world_slot;
+      p.world_slot = out.plan_->joints[static_cast<std::size_t>(twin)].world_slot;
     } else {
       for (int r = 0; r < p.rotation_count; ++r) p.rotation_stream[r] = streams++;
     }
@@ -121,13 +133,13 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
   // propagates the marks.
   std::vector<char> needed(static_cast<std::size_t>(slots), 0);
   const bool pre = motion.convention == Convention::kPreRotation;
-  for (const JointPlan& p : out.plans_) {
+  for (const JointPlan& p : out.plan_->joints) {
     if (p.parent == kNoParent || p.zero_offset) continue;
     const std::int32_t s = pre ? p.world_slot : p.parent_slot;
     if (s != kIdentitySlot) needed[static_cast<std::size_t>(s)] = 1;
   }
   for (std::size_t j = joints; j-- > 0;) {
-    JointPlan& p = out.plans_[j];
+    JointPlan& p = out.plan_->joints[j];
     if (!p.owns_slot || !needed[static_cast<std::size_t>(p.world_slot)]) continue;
     p.world_for_positions = true;
     if (p.parent_slot != kIdentitySlot) needed[static_cast<std::size_t>(p.parent_slot)] = 1;
@@ -151,7 +163,7 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
   const std::size_t stride = motion.stride();
   for (std::size_t j = 0; j < joints; ++j) {
     const Joint& joint = sk.joint(static_cast<int>(j));
-    const JointPlan& p = out.plans_[j];
+    const JointPlan& p = out.plan_->joints[j];
     const std::size_t first = static_cast<std::size_t>(sk.channel_offset(static_cast<int>(j)));
     int r = 0;
     for (std::size_t i = 0; i < joint.channels.size(); ++i) {
@@ -177,7 +189,7 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
     }
   }
 
-  for (const JointPlan& p : out.plans_) {
+  for (const JointPlan& p : out.plan_->joints) {
     for (int r = 0; r < p.rotation_count; ++r) {
       out.rotation_offsets_.push_back(p.rotation_stream[r] * static_cast<std::int32_t>(out.frame_stride_));
     }
@@ -200,8 +212,8 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
 }
 
 void CompiledMotion::build_frame_program() {
-  FrameProgram& prog = program_;
-  const std::size_t joints = plans_.size();
+  FrameProgram& prog = plan_->program;
+  const std::size_t joints = plan_->joints.size();
   const auto key_of = [](const JointPlan& p) {
     return static_cast<int>(p.rotation_count) * 64 + p.axes[0] * 16 + (p.rotation_count > 1 ? p.axes[1] : 0) * 4 +
            (p.rotation_count > 2 ? p.axes[2] : 0);
@@ -210,7 +222,7 @@ void CompiledMotion::build_frame_program() {
   std::vector<int> keys;
   std::vector<std::vector<std::size_t>> members;
   for (std::size_t j = 0; j < joints; ++j) {
-    const JointPlan& p = plans_[j];
+    const JointPlan& p = plan_->joints[j];
     if (!p.owns_slot) continue;
     const int key = key_of(p);
     std::size_t g = 0;
@@ -224,7 +236,7 @@ void CompiledMotion::build_frame_program() {
   std::vector<std::int32_t> local_of(joints, -1);
   std::size_t next = 0;
   for (std::size_t g = 0; g < keys.size(); ++g) {
-    const JointPlan& p0 = plans_[members[g].front()];
+    const JointPlan& p0 = plan_->joints[members[g].front()];
     FrameProgram::Group group;
     group.count = static_cast<std::uint8_t>(p0.rotation_count);
     for (int r = 0; r < 3; ++r) group.axes[r] = r < p0.rotation_count ? p0.axes[r] : 0;
@@ -239,11 +251,11 @@ void CompiledMotion::build_frame_program() {
   const auto world_off = [](std::int32_t slot) { return (slot + 1) * 12; };  // kIdentitySlot -> 0
   const bool pre = convention_ == Convention::kPreRotation;
   std::vector<char> has_child(joints, 0);
-  for (const JointPlan& p : plans_) {
+  for (const JointPlan& p : plan_->joints) {
     if (p.parent != kNoParent) has_child[static_cast<std::size_t>(p.parent)] = 1;
   }
   for (std::size_t j = 0; j < joints; ++j) {
-    const JointPlan& p = plans_[j];
+    const JointPlan& p = plan_->joints[j];
     const auto jj = static_cast<std::int32_t>(j);
     if (p.parent == kNoParent) prog.roots.push_back(jj);
     if (!p.owns_slot) {
@@ -281,7 +293,7 @@ void CompiledMotion::build_frame_program() {
   if (!all_roots_) {
     prog.offsets.assign(joints * 4, 0.0f);
     for (std::size_t j = 0; j < joints; ++j) {
-      const JointPlan& p = plans_[j];
+      const JointPlan& p = plan_->joints[j];
       for (int a = 0; a < 3; ++a) {
         const auto dst = static_cast<std::int32_t>(j * 4) + a;
         if (p.offset_stream[a] == kNoStream) {
@@ -311,8 +323,8 @@ std::size_t CompiledMotion::bytes_per_frame() const {
 }
 
 std::size_t CompiledMotion::bytes() const {
-  return (stream_count_ * frame_stride_ + stored_positions_.size() + (program_.angles ? frame_count_ * 3 * program_.local_count : 0)) * sizeof(float) +
-         plans_.size() * sizeof(JointPlan);
+  return (stream_count_ * frame_stride_ + stored_positions_.size() + (plan_->program.angles ? frame_count_ * 3 * plan_->program.local_count : 0)) * sizeof(float) +
+         plan_->joints.size() * sizeof(JointPlan);
 }
 
 }  // namespace gmr::fast

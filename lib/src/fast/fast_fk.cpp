@@ -6,7 +6,7 @@
 #include <cstring>
 #include <string>
 
-#include "src/fast/fk_kernels.h"
+#include "fast/fk_kernels.h"
 
 namespace gmr::fast {
 namespace {
@@ -60,7 +60,7 @@ void frame_chain(const CompiledMotion& m, std::size_t f, const float* sines, con
   const bool pre = m.convention() == Convention::kPreRotation;
   const bool want_world = out_ori != nullptr;
   const bool positions = out_pos != nullptr && !m.all_roots();
-  const auto plans = m.joints();
+  const auto plans = joint_plans(m);
   std::size_t k = 0;
   for (std::size_t j = 0; j < plans.size(); ++j) {
     const JointPlan& p = plans[j];
@@ -121,7 +121,7 @@ Status check_frame_args(const CompiledMotion* m, std::size_t frame, std::span<fl
 }  // namespace
 
 std::size_t fk_workspace_size(const CompiledMotion& motion) {
-  return 16 + std::max({range_scratch(motion), frame_scratch(motion), motion.frame_program().workspace_floats});
+  return 16 + std::max({range_scratch(motion), frame_scratch(motion), frame_program(motion).workspace_floats});
 }
 
 Status FkRangeJob::check() const {
@@ -215,7 +215,7 @@ bool FkFrameJob::run() const {
   std::size_t k = 0;
   const bool need_angles = !out_orientations.empty() || !m.all_roots();
   if (need_angles) {
-    for (const JointPlan& p : m.joints()) {
+    for (const JointPlan& p : joint_plans(m)) {
       for (int i = 0; i < p.rotation_count; ++i) angles[k++] = m.stream(static_cast<std::size_t>(p.rotation_stream[i]))[frame];
     }
     std::fill(angles + k, angles + padded, 0.0f);
@@ -235,7 +235,7 @@ bool scalar_float_frame(const CompiledMotion& motion, std::size_t frame, std::sp
   float* cosines = sines + padded;
   float* world = cosines + padded;
   std::size_t k = 0;
-  for (const JointPlan& p : motion.joints()) {
+  for (const JointPlan& p : joint_plans(motion)) {
     for (int i = 0; i < p.rotation_count; ++i, ++k) {
       const float x = motion.stream(static_cast<std::size_t>(p.rotation_stream[i]))[frame] * 0.017453292519943295f;
       sines[k] = std::sin(x);
@@ -249,41 +249,4 @@ bool scalar_float_frame(const CompiledMotion& motion, std::size_t frame, std::sp
 const char* simd_target_name() { return detail::target_name(); }
 std::size_t simd_lanes() { return detail::lane_count(); }
 
-namespace detail {
-
-void write_block(const RangeArgs& a, std::size_t f0, std::size_t count, std::size_t lanes, const float* world,
-                 const float* pos, bool positions_written) {
-  const CompiledMotion& m = *a.motion;
-  const std::size_t joints = m.joint_count();
-  const std::size_t first = f0 - a.begin;
-  if (a.positions && !positions_written) {
-    const std::size_t comps = joints * 3;
-    if (a.layout == Layout::kFrameMajor) {
-      for (std::size_t l = 0; l < count; ++l) {
-        float* dst = a.positions_out + (first + l) * comps;
-        for (std::size_t k = 0; k < comps; ++k) dst[k] = pos[k * lanes + l];
-      }
-    } else {
-      for (std::size_t k = 0; k < comps; ++k) std::memcpy(a.positions_out + k * a.stride + first, pos + k * lanes, count * sizeof(float));
-    }
-  }
-  if (a.orientations == nullptr) return;
-  const auto plans = m.joints();
-  for (std::size_t j = 0; j < joints; ++j) {
-    const std::int32_t slot = plans[j].world_slot;
-    const float* w = slot == kIdentitySlot ? nullptr : world + static_cast<std::size_t>(slot) * 9 * lanes;
-    for (std::size_t e = 0; e < 9; ++e) {
-      if (a.layout == Layout::kFrameMajor) {
-        for (std::size_t l = 0; l < count; ++l) {
-          a.orientations[((first + l) * joints + j) * 9 + e] = w == nullptr ? kIdentity[e] : w[e * lanes + l];
-        }
-      } else {
-        float* dst = a.orientations + (j * 9 + e) * a.stride + first;
-        for (std::size_t l = 0; l < count; ++l) dst[l] = w == nullptr ? kIdentity[e] : w[e * lanes + l];
-      }
-    }
-  }
-}
-
-}  // namespace detail
 }  // namespace gmr::fast

@@ -3,14 +3,14 @@
 // runs. One vector holds one channel of N consecutive frames, so every joint
 // is computed for N frames at once with no shuffles.
 #undef HWY_TARGET_INCLUDE
-#define HWY_TARGET_INCLUDE "src/fast/fk_kernels.cpp"
+#define HWY_TARGET_INCLUDE "fast/fk_kernels.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
 #include <algorithm>
 #include <cstring>
 
-#include "src/fast/fk_kernels.h"
+#include "fast/fk_kernels.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace gmr::fast::detail {
@@ -193,7 +193,7 @@ void RangeKernel(const RangeArgs& a) {
   const D d;
   const std::size_t n = hn::Lanes(d);
   const CompiledMotion& m = *a.motion;
-  const auto plans = m.joints();
+  const auto plans = joint_plans(m);
   const std::size_t joints = plans.size();
   float* const world = a.workspace;                               // slot_count * 9 * n
   float* const pos = world + m.slot_count() * 9 * kFrameAlignment;  // joints * 3 * n
@@ -383,7 +383,7 @@ HWY_INLINE void RunSteps(const FrameProgram& prog, std::size_t nl, const float* 
 // position-only ops) and one over the end sites.
 bool FrameKernel(const FrameArgs& a) {
   const CompiledMotion& m = *a.motion;
-  const FrameProgram& prog = m.frame_program();
+  const FrameProgram& prog = frame_program(m);
   const std::size_t f = a.frame;
   const std::size_t nl = prog.local_count;
   const std::size_t joints = m.joint_count();
@@ -442,7 +442,7 @@ bool FrameKernel(const FrameArgs& a) {
     out[3 * (joints - 1) + 2] = last[2];
   }
   if (want_world) {
-    const auto plans = m.joints();
+    const auto plans = joint_plans(m);
     for (std::size_t j = 0; j < joints; ++j) {
       const float* w = world + static_cast<std::size_t>(plans[j].world_slot + 1) * 12;
       float* o = a.orientations + 9 * j;

@@ -6,6 +6,7 @@
 
 #include "gmr/fast/compiled_motion.h"
 #include "gmr/fast/fast_fk.h"
+#include "fast/frame_program.h"
 
 namespace gmr::fast::detail {
 

@@ -1,8 +1,8 @@
 #include "hierarchy_text.h"
 
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 
-#include "number_format.h"
+#include "core/number_format.h"
 
 #include <algorithm>
 #include <array>

@@ -1,12 +1,11 @@
-// load_motion(). save_motion() is in motion_save.cpp so that a program that
-// only loads does not link the convention conversions.
 #include "gmr/io/motion_file.h"
 
 #include <algorithm>
 #include <cctype>
 #include <system_error>
 
-#include "gmr/io/asf_amc.h"
+#include "gmr/acclaim/convert.h"
+#include "gmr/ops/convert.h"
 #include "gmr/io/bvh.h"
 #include "gmr/io/gmr_file.h"
 #include "gmr/io/gmrb.h"
@@ -87,9 +86,49 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
     if (!asf) return asf.error();
     return read_asf_amc(*asf, path, out_warnings);
   }
-  // ---- .gmrb (GMR binary, PERF area: lib/src/fast/gmrb.cpp)
+  // ---- .gmrb (GMR binary: gmr/io/gmrb.h)
   if (ext == ".gmrb") return read_gmrb(path);
   return detail::unknown_extension(path, "read");
+}
+
+// ---- saving ------------------------------------------------------------
+
+namespace {
+
+Error at_path(Error e, const std::filesystem::path& path) {
+  if (e.file.empty()) e.file = path.string();
+  return e;
+}
+
+}  // namespace
+
+Status save_motion(const Motion& motion, const std::filesystem::path& path, const LoadOptions& options) {
+  const std::string ext = detail::lower_extension(path);
+  if (ext == ".bvh") {
+    if (motion.convention == Convention::kPostRotation) return write_bvh(motion, path);
+    auto post = to_post_rotation(motion);
+    if (!post) return at_path(post.error(), path);
+    return write_bvh(*post, path);
+  }
+  if (ext == ".gmr" || ext == ".amc" || ext == ".gmrb") {
+    Result<Motion> converted = Motion{};
+    const Motion* pre = &motion;
+    if (motion.convention != Convention::kPreRotation) {
+      converted = to_pre_rotation(motion);
+      if (!converted) return at_path(converted.error(), path);
+      pre = &*converted;
+    }
+    if (ext == ".gmr") return write_gmr(*pre, path);
+    if (ext == ".amc") {
+      // The skeleton goes to options.asf, else beside the motion with the same stem.
+      std::filesystem::path asf = options.asf;
+      if (asf.empty()) asf = std::filesystem::path(path).replace_extension(".asf");
+      return write_asf_amc(*pre, asf, path);
+    }
+    // ---- .gmrb (GMR binary: gmr/io/gmrb.h)
+    return write_gmrb(*pre, path);
+  }
+  return detail::unknown_extension(path, "write");
 }
 
 }  // namespace gmr

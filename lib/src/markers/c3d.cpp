@@ -19,8 +19,8 @@
 #include <optional>
 #include <string_view>
 
-#include "gmr/io/file_util.h"
-#include "gmr/io/markers.h"
+#include "gmr/core/file_util.h"
+#include "gmr/markers/c3d.h"
 #include "names.h"
 
 namespace gmr {

@@ -5,7 +5,9 @@
 #include <map>
 #include <set>
 
-#include "gmr/io/markers.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "names.h"
 
 namespace gmr {

@@ -13,8 +13,8 @@
 #include <cmath>
 #include <limits>
 
-#include "gmr/io/file_util.h"
-#include "gmr/io/markers.h"
+#include "gmr/core/file_util.h"
+#include "gmr/markers/trc.h"
 #include "names.h"
 
 namespace gmr {

@@ -1,4 +1,4 @@
-// BVH (post-rotation) <-> GMR (pre-rotation). See ../shared/GMR-MATH.md.
+// BVH (post-rotation) <-> GMR (pre-rotation). The formulas are in docs/gmr-math.md.
 //
 // post: W_j = W_p S_j, P_j = P_p + W_p t_j      pre: W_j = W_p R_j, P_j = P_p + W_j t_j
 //
@@ -8,7 +8,7 @@
 // S_x = R_c when all children share R_c (S_root = R_root R_c); when they do not,
 // x gets S = I (roots: R_root) and each group of children with equal rotation
 // hangs under a zero-length joint whose S is that rotation.
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 
 #include <set>
 #include <string>

@@ -38,6 +38,18 @@ Result<Skeleton> from_proto(const pb::Skeleton& message) {
   return Skeleton::create(std::move(joints));
 }
 
+pb::ErrorCode error_code_for(ErrorKind kind) {
+  switch (kind) {
+    case ErrorKind::kNotFound: return pb::ERROR_CODE_NOT_FOUND;
+    case ErrorKind::kFailedPrecondition: return pb::ERROR_CODE_FAILED_PRECONDITION;
+    case ErrorKind::kResourceExhausted: return pb::ERROR_CODE_RESOURCE_EXHAUSTED;
+    case ErrorKind::kInvalidArgument:
+    case ErrorKind::kInvalidData: return pb::ERROR_CODE_BAD_REQUEST;
+    case ErrorKind::kIo: return pb::ERROR_CODE_INTERNAL;
+  }
+  return pb::ERROR_CODE_INTERNAL;
+}
+
 const char* error_code_name(pb::ErrorCode code) {
   switch (code) {
     case pb::ERROR_CODE_BAD_REQUEST: return "BAD_REQUEST";

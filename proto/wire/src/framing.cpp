@@ -44,38 +44,4 @@ Result<std::string> frame_message(const google::protobuf::MessageLite& message, 
   return out;
 }
 
-void StreamDecoder::feed(std::string_view bytes) {
-  if (failed_) return;
-  // Compact before growing so the buffer never holds consumed bytes.
-  if (read_pos_ > 0) {
-    buffer_.erase(0, read_pos_);
-    read_pos_ = 0;
-  }
-  buffer_.append(bytes);
-}
-
-StreamDecoder::Next StreamDecoder::next(std::string& out) {
-  if (failed_) return Next::kError;
-  const std::size_t avail = buffer_.size() - read_pos_;
-  if (avail < kLengthPrefixBytes) return Next::kNeedMore;
-  const auto* p = reinterpret_cast<const std::uint8_t*>(buffer_.data() + read_pos_);
-  const std::uint32_t length = read_length_prefix(std::span<const std::uint8_t, kLengthPrefixBytes>(p, 4));
-  if (auto s = check_length(length, max_bytes_); !s.ok()) {
-    failed_ = true;
-    error_ = s.error();
-    error_.message = "bad length prefix: " + error_.message;
-    buffer_.clear();
-    read_pos_ = 0;
-    return Next::kError;
-  }
-  if (avail - kLengthPrefixBytes < length) return Next::kNeedMore;
-  out.assign(buffer_, read_pos_ + kLengthPrefixBytes, length);
-  read_pos_ += kLengthPrefixBytes + length;
-  if (read_pos_ == buffer_.size()) {
-    buffer_.clear();
-    read_pos_ = 0;
-  }
-  return Next::kMessage;
-}
-
 }  // namespace gmr::wire

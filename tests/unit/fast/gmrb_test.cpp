@@ -10,9 +10,9 @@
 #include <limits>
 
 #include "fast_test_util.h"
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 #include "gmr/io/bvh.h"
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/io/motion_file.h"
 
 namespace gmr {

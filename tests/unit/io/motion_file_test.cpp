@@ -7,7 +7,7 @@
 
 #include <filesystem>
 
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "io_test_util.h"
 #include "test_data.h"

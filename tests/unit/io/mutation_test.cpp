@@ -8,7 +8,7 @@
 #include <string>
 
 #include "gmr/io/bvh.h"
-#include "gmr/io/file_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/io/gmr_file.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "io_test_util.h"

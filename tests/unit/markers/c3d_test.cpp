@@ -11,7 +11,9 @@
 #include <vector>
 
 #include "gmr/io/bvh.h"
-#include "gmr/io/markers.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "markers_test_util.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "test_data.h"

@@ -6,8 +6,10 @@
 #include <random>
 #include <string>
 
-#include "gmr/io/file_util.h"
-#include "gmr/io/markers.h"
+#include "gmr/core/file_util.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "io_test_util.h"
 #include "test_data.h"
 

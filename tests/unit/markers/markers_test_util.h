@@ -5,7 +5,9 @@
 
 #include <string>
 
-#include "gmr/io/markers.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "test_data.h"
 
 namespace gmr::test {

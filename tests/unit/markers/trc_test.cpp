@@ -8,8 +8,10 @@
 #include <string>
 #include <vector>
 
-#include "gmr/io/file_util.h"
-#include "gmr/io/markers.h"
+#include "gmr/core/file_util.h"
+#include "gmr/markers/c3d.h"
+#include "gmr/markers/markers.h"
+#include "gmr/markers/trc.h"
 #include "markers_test_util.h"
 #include "test_data.h"
 

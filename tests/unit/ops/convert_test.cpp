@@ -1,4 +1,4 @@
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
-// The OPS area on real data: every BVH of ../shared/data/bvh, every frame.
+// The operations and conversions on real data: every BVH of ../shared/data/bvh, every frame.
 //
 // Tolerances are relative to skeleton_size(): 1e-6 for the conversions and the
-// file round trip (issue 2), 1e-9 for the operations (issue 3).
+// file round trip, 1e-9 for the operations.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,12 +10,16 @@
 #include <random>
 #include <unistd.h>
 
-#include "gmr/convert/convert.h"
+#include "gmr/ops/convert.h"
 #include "gmr/io/bvh.h"
 #include "gmr/io/gmr_file.h"
-#include "gmr/kinematics/fk_stats.h"
+#include "kinematics/fk_stats.h"
 #include "gmr/kinematics/forward_kinematics.h"
-#include "gmr/ops/ops.h"
+#include "gmr/ops/join_tree.h"
+#include "gmr/ops/set_roots.h"
+#include "gmr/ops/shift_root.h"
+#include "gmr/ops/split_tree.h"
+#include "gmr/ops/strip_dummies.h"
 #include "ops_test_util.h"
 #include "test_data.h"
 
@@ -76,7 +80,7 @@ std::vector<int> indices_of(const Motion& m, const std::vector<std::string>& nam
   return out;
 }
 
-TEST(Issue2, EveryBvhConvertsToGmrWithSamePositions) {
+TEST(BvhToGmrOnCorpus, KeepsEveryPosition) {
   GMR_REQUIRE_DATA();
   ASSERT_FALSE(corpus().empty());
   for (const Loaded& l : corpus()) {
@@ -94,7 +98,7 @@ TEST(Issue2, EveryBvhConvertsToGmrWithSamePositions) {
   }
 }
 
-TEST(Issue2, EveryBvhSurvivesGmrFileAndBvhFile) {
+TEST(GmrAndBvhFilesOnCorpus, RoundTripKeepsPositions) {
   GMR_REQUIRE_DATA();
   const fs::path dir = fs::temp_directory_path() / ("gmr_ops_data_" + std::to_string(::getpid()));
   fs::create_directories(dir);
@@ -113,7 +117,7 @@ TEST(Issue2, EveryBvhSurvivesGmrFileAndBvhFile) {
   fs::remove_all(dir);
 }
 
-TEST(Issue3, RandomOperationSequencesKeepEveryPosition) {
+TEST(OperationSequencesOnCorpus, KeepEveryPosition) {
   GMR_REQUIRE_DATA();
   std::uint32_t seed = 2012;
   for (const Loaded& l : corpus()) {
@@ -169,7 +173,7 @@ TEST(Issue3, RandomOperationSequencesKeepEveryPosition) {
   }
 }
 
-TEST(Issue3, FullyTranslationalConfigurationReadsPositions) {
+TEST(AllRootsOnCorpus, ReadsPositionsWithoutRotations) {
   GMR_REQUIRE_DATA();
   for (const Loaded& l : corpus()) {
     SCOPED_TRACE(label(l));
@@ -186,7 +190,7 @@ TEST(Issue3, FullyTranslationalConfigurationReadsPositions) {
   }
 }
 
-TEST(Issue3, SplitJoinAndShiftThereAndBackRestoreLocalData) {
+TEST(SplitJoinShiftOnCorpus, ThereAndBackRestoreLocalData) {
   GMR_REQUIRE_DATA();
   std::uint32_t seed = 77;
   for (const Loaded& l : corpus()) {
@@ -213,7 +217,7 @@ TEST(Issue3, SplitJoinAndShiftThereAndBackRestoreLocalData) {
   }
 }
 
-TEST(Issue3, DummyRemovalOnCmuStyleFiles) {
+TEST(StripDummiesOnCmuFiles, RemovesOnlyZeroLengthJoints) {
   GMR_REQUIRE_DATA();
   int cmu_files = 0;
   for (const Loaded& l : corpus()) {

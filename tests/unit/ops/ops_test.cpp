@@ -1,4 +1,8 @@
-#include "gmr/ops/ops.h"
+#include "gmr/ops/join_tree.h"
+#include "gmr/ops/set_roots.h"
+#include "gmr/ops/shift_root.h"
+#include "gmr/ops/split_tree.h"
+#include "gmr/ops/strip_dummies.h"
 
 #include <gtest/gtest.h>
 
@@ -6,8 +10,8 @@
 #include <cmath>
 #include <numeric>
 
-#include "gmr/convert/convert.h"
-#include "gmr/kinematics/fk_stats.h"
+#include "gmr/ops/convert.h"
+#include "kinematics/fk_stats.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "ops_test_util.h"
 
@@ -426,34 +430,13 @@ TEST(ConstantRotationJoints, ReportsJointsThatNeverRotate) {
   EXPECT_EQ(c, (std::vector<std::string>{"Leg", "Foot"}));
 }
 
-TEST(IntrinsicPositions, ViewerSeesItselfAtTheOrigin) {
-  const Motion m = random_pre(12, 1, 10, 4);
-  for (int v = 0; v < static_cast<int>(m.skeleton.size()); ++v) {
-    std::vector<Eigen::Vector3d> p;
-    std::vector<Eigen::Matrix3d> o;
-    intrinsic_positions(m, v, 0, m.frame_count, p, &o);
-    const auto world = compute_positions(m);
-    const std::size_t n = m.skeleton.size();
-    ASSERT_EQ(p.size(), world.size());
-    for (std::size_t f = 0; f < m.frame_count; ++f) {
-      EXPECT_LE(p[f * n + static_cast<std::size_t>(v)].norm(), 1e-12);
-      EXPECT_TRUE(o[f * n + static_cast<std::size_t>(v)].isIdentity(1e-12));
-      for (std::size_t a = 0; a < n; ++a) {  // a rigid change of frame keeps distances
-        EXPECT_NEAR((p[f * n + a] - p[f * n]).norm(), (world[f * n + a] - world[f * n]).norm(), 1e-9);
-      }
-    }
-  }
-  std::vector<Eigen::Vector3d> p;
-  intrinsic_positions(m, 99, 0, 4, p);
-  EXPECT_TRUE(p.empty());
-}
-
 TEST(FindJoints, NamesUnknownJoint) {
   const Motion m = random_pre(1);
   const std::vector<std::string> names{"j0", "nope"};
   auto r = find_joints(m.skeleton, names);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().message, "unknown joint 'nope'");
+  EXPECT_EQ(r.error().kind, ErrorKind::kNotFound);
 }
 
 }  // namespace

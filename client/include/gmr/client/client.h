@@ -15,15 +15,16 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "gmr/core/error.h"
 #include "gmr/skeleton/skeleton.h"
-#include "gmr/stream/v1/stream.pb.h"
 
+// The public types are plain structs: a program using the client needs
+// neither protobuf's headers nor the generated code (gmr::wire, linked by
+// gmr::client, speaks the protocol).
 namespace gmr::client {
-
-namespace pb = ::gmr::stream::v1;
 
 struct ClientOptions {
   std::string host = "127.0.0.1";
@@ -32,6 +33,30 @@ struct ClientOptions {
   std::chrono::milliseconds timeout{5000};  // connect, and each request's reply
   std::uint32_t max_message_bytes = 16u << 20;  // largest reply accepted
   int receive_buffer = 0;                   // SO_RCVBUF (0: system default)
+  // Requests written to the socket but not yet taken by the kernel: beyond
+  // this many bytes a request fails at once ("write queue full") instead of
+  // queueing without bound behind a server that stopped reading.
+  std::size_t max_write_queue_bytes = 4u << 20;
+};
+
+// What the server said in its Hello reply.
+struct ServerHello {
+  std::uint32_t protocol_version = 0;
+  std::string server_name;
+  std::uint64_t session_token = 0;  // for UDP registration (register_udp does it)
+  std::uint16_t udp_port = 0;       // 0: no UDP
+  std::uint32_t max_message_bytes = 0;
+  std::uint32_t heartbeat_interval_ms = 0;
+  std::uint32_t idle_timeout_ms = 0;
+};
+
+// One motion of the server's library.
+struct MotionInfo {
+  std::string name;
+  std::uint32_t joint_count = 0;
+  std::uint64_t frame_count = 0;
+  double frame_time = 0.0;
+  std::string source;  // the file it came from, or "builtin"
 };
 
 // A view as the server last described it.
@@ -95,8 +120,31 @@ struct SubscriptionInfo {
   bool joined_running = false;
 };
 
+// The server ended a subscription (end of motion, max_frames, a view change
+// that removed a subscribed joint).
+struct SubscriptionEnd {
+  std::uint32_t subscription_id = 0;
+  std::uint64_t frames_sent = 0;
+  std::uint64_t frames_dropped = 0;
+  std::string reason;
+};
+
+// The server's counters (GetStats); the frames_sent .. max_queued_bytes are
+// this connection's.
+struct ServerCounters {
+  std::uint32_t connections = 0;
+  std::uint32_t streams = 0;
+  std::uint64_t frames_computed = 0;        // forward-kinematics runs for streams
+  std::uint64_t frames_computed_float = 0;  // of those, by the float path
+  std::uint64_t frames_encoded = 0;         // encodings (one per stream tick)
+  std::uint64_t frames_sent = 0;
+  std::uint64_t frames_dropped = 0;
+  std::uint64_t queued_bytes = 0;
+  std::uint64_t max_queued_bytes = 0;
+};
+
 using FrameCallback = std::function<void(const ReceivedFrame&)>;
-using EndCallback = std::function<void(const pb::SubscriptionEnded&)>;
+using EndCallback = std::function<void(const SubscriptionEnd&)>;
 
 // Counters of what arrived; read any time.
 struct ClientCounters {
@@ -104,6 +152,7 @@ struct ClientCounters {
   std::uint64_t frames_udp = 0;
   std::uint64_t udp_incomplete_dropped = 0;  // messages with a lost fragment
   std::uint64_t udp_malformed = 0;
+  std::uint64_t frames_malformed = 0;        // frames whose values did not decode (dropped)
 };
 
 class Client {
@@ -115,14 +164,14 @@ class Client {
   Client(const Client&) = delete;
   Client& operator=(const Client&) = delete;
 
-  const pb::HelloReply& hello() const;
+  const ServerHello& hello() const;
   bool connected() const;
   // Closes the connection; pending requests fail. Idempotent.
   void close();
 
   // Requests. A server Error comes back as an Error whose message starts with
   // its code ("NOT_FOUND: unknown motion 'x'").
-  Result<std::vector<pb::MotionInfo>> list_motions();
+  Result<std::vector<MotionInfo>> list_motions();
   Result<Skeleton> skeleton(const std::string& motion);
   Result<ViewState> create_view(const std::string& motion);
   Status close_view(std::uint32_t view);
@@ -143,12 +192,15 @@ class Client {
   Status pause(std::uint32_t subscription);
   Status resume(std::uint32_t subscription);
   Status seek(std::uint32_t subscription, std::uint32_t frame);
-  Result<pb::Stats> stats();
+  Result<ServerCounters> stats();
   // Registers the UDP endpoint now (subscribe does it when needed).
   Status register_udp();
 
-  // Any request; the reply as it came (an Error reply is a value here).
-  Result<pb::ServerMessage> request(pb::ClientMessage message);
+  // Any request, as a serialized gmr.stream.v1.ClientMessage (its
+  // request_id is set here); the reply as serialized ServerMessage bytes, as
+  // it came (an Error reply is a value here). For requests this API does not
+  // wrap yet.
+  Result<std::string> request_raw(std::string_view client_message);
 
   ClientCounters counters() const;
 

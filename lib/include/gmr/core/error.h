@@ -6,12 +6,28 @@
 #pragma once
 
 #include <cassert>
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <variant>
 #include <vector>
 
 namespace gmr {
+
+// What kind of problem an Error is, so a caller (the server choosing a
+// protocol error code, a tool choosing an exit status) can react without
+// re-checking the request itself.
+enum class ErrorKind : std::uint8_t {
+  kInvalidData,         // outside data (a file, a packet) is malformed; file/line/column say where
+  kInvalidArgument,     // a call's or request's values are wrong in themselves (empty set, name listed twice)
+  kNotFound,            // a named or numbered thing does not exist (joint, motion, file)
+  kFailedPrecondition,  // valid values the current state refuses (not a root, post-rotation input)
+  kResourceExhausted,   // a limit was reached (size, count)
+  kIo,                  // the system refused (open, read, write, rename)
+};
+
+// "invalid data", "not found", ... (for logs and messages).
+const char* error_kind_name(ErrorKind kind);
 
 // One problem found in a file, a request or a call. line and column are
 // 1-based; 0 means "not known / not applicable".
@@ -20,6 +36,7 @@ struct Error {
   int line = 0;
   int column = 0;
   std::string message;  // what was expected / what is wrong, one line
+  ErrorKind kind = ErrorKind::kInvalidData;
 
   // "file:line:column: message", leaving out the parts that are unknown.
   std::string to_string() const;
@@ -56,7 +73,11 @@ class [[nodiscard]] Result {
 struct Ok {};
 using Status = Result<Ok>;
 
-// Shorthand to build an Error with no location.
-inline Error make_error(std::string message) { return Error{{}, 0, 0, std::move(message)}; }
+// Shorthands to build an Error with no location: of the given kind, or
+// kInvalidArgument.
+inline Error make_error(ErrorKind kind, std::string message) {
+  return Error{{}, 0, 0, std::move(message), kind};
+}
+inline Error make_error(std::string message) { return make_error(ErrorKind::kInvalidArgument, std::move(message)); }
 
 }  // namespace gmr

@@ -79,4 +79,8 @@ class Skeleton {
   int channel_count_ = 0;
 };
 
+// Indices of the joints named `names`, in the same order; fails on the first
+// unknown name ("unknown joint 'X'", ErrorKind::kNotFound).
+Result<std::vector<int>> find_joints(const Skeleton& skeleton, std::span<const std::string> names);
+
 }  // namespace gmr

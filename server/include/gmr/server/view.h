@@ -1,14 +1,13 @@
 // A view: one connection's own copy of a motion's root configuration, edited
 // by shift/split/join/set-roots/strip-dummies, seen in world coordinates or
-// from a joint (the intrinsic viewpoint).
+// from a joint (the intrinsic viewpoint). Its frames are computed by the
+// library's view module (gmr/view/viewpoint.h): view_frame on the double
+// path, FkFrameJob + view_frame_float on the float path.
 #pragma once
 
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 #include <cstddef>
 #include <memory>
 #include <mutex>
-#include <span>
 #include <string>
 #include <vector>
 
@@ -59,35 +58,6 @@ struct ViewContent {
   std::shared_ptr<const CompiledForm> compiled;
 };
 
-// Positions (and orientations, when out_orientations is not empty) of every
-// joint of frame f, in the view's coordinates:
-//   world:     P_j, W_j from forward kinematics
-//   intrinsic: W_v^T (P_j - P_v), W_v^T W_j for viewer v
-// This is the double (reference) path: queries and float64 streams, within
-// 1e-9 of `gmr positions`. It and compute_stream_frame below are the only
-// places the server computes kinematics.
-void compute_view_frame(const ViewContent& view, std::size_t f, std::span<Eigen::Vector3d> out_positions,
-                        std::span<Eigen::Matrix3d> out_orientations);
-
-// Per-stream buffers of the float path, reused every tick (they grow to the
-// largest motion the stream showed and never shrink).
-struct FloatFrameBuffers {
-  std::vector<float> positions;     // joints * 3
-  std::vector<float> orientations;  // joints * 9, row-major
-  std::vector<float> workspace;     // fk_workspace_size()
-};
-
-// Which path computed a frame.
-enum class FramePath { kDouble, kFloat };
-
-// A stream's frame f, the same values as compute_view_frame: float32 streams
-// (float32 = true) run the float path, gmr::fast::FkFrameJob on the content's
-// compiled form (float round-off: within about 1e-6 of the skeleton's size),
-// then the viewpoint in double; float64 streams, and contents whose motion
-// does not compile, run compute_view_frame. The outputs hold every joint.
-FramePath compute_stream_frame(const ViewContent& view, std::size_t f, bool float32, FloatFrameBuffers& buffers,
-                               std::span<Eigen::Vector3d> out_positions, std::span<Eigen::Matrix3d> out_orientations);
-
 class View {
  public:
   // `compiled`: the float form of `motion` to share (e.g. with other views of
@@ -109,7 +79,8 @@ class View {
   Status strip_dummies(std::vector<std::string>* out_removed = nullptr);
   Status set_relative_to(const std::string& joint);  // empty: world coordinates
 
-  // The joint's index, or an error "view 3 (walk) has no joint 'x'".
+  // The joint's index, or an error (ErrorKind::kNotFound) "view 3 (walk) has
+  // no joint 'x'". Every edit fails with that error for an unknown joint.
   Result<int> joint_index(const std::string& name) const;
 
  private:

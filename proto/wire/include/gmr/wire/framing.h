@@ -46,31 +46,4 @@ Result<std::string> frame_message(const google::protobuf::MessageLite& message,
 // Prefix + already serialized bytes (which the caller sized).
 std::string frame_bytes(std::string_view serialized);
 
-// Incremental decoder for a byte stream: feed what arrived, then take whole
-// messages out. Holds at most one partial message (never more than
-// kLengthPrefixBytes + max_bytes bytes of it). After an error it stays failed.
-class StreamDecoder {
- public:
-  explicit StreamDecoder(std::uint32_t max_bytes = kDefaultMaxMessageBytes) : max_bytes_(max_bytes) {}
-
-  enum class Next { kNeedMore, kMessage, kError };
-
-  // Appends bytes (ignored once failed).
-  void feed(std::string_view bytes);
-  // Moves the next whole message body into `out` (kMessage), or tells that
-  // more bytes are needed, or that the stream is broken (error() says why).
-  Next next(std::string& out);
-  const Error& error() const { return error_; }
-  bool failed() const { return failed_; }
-  // Bytes held (partial message plus unparsed input).
-  std::size_t buffered() const { return buffer_.size() - read_pos_; }
-
- private:
-  std::uint32_t max_bytes_;
-  std::string buffer_;
-  std::size_t read_pos_ = 0;
-  bool failed_ = false;
-  Error error_;
-};
-
 }  // namespace gmr::wire

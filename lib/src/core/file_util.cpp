@@ -1,0 +1,135 @@
+#include "gmr/core/file_util.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "core/number_format.h"
+
+namespace gmr {
+namespace fs = std::filesystem;
+
+namespace {
+
+Error file_error(const fs::path& path, std::string_view what, int err) {
+  Error e;
+  e.file = path.string();
+  e.message = std::string(what) + ": " + std::strerror(err);
+  e.kind = err == ENOENT ? ErrorKind::kNotFound : ErrorKind::kIo;
+  return e;
+}
+
+// Closes a descriptor on every path out of a function.
+struct Fd {
+  int fd = -1;
+  ~Fd() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+}  // namespace
+
+Result<std::string> read_file(const fs::path& path) {
+  Fd f;
+  f.fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (f.fd < 0) return file_error(path, "cannot open file", errno);
+  struct stat st {};
+  if (::fstat(f.fd, &st) != 0) return file_error(path, "cannot stat file", errno);
+  if (S_ISDIR(st.st_mode)) return file_error(path, "cannot read file", EISDIR);
+  // Regular files are read at their stat size (+1 so that EOF shows without a
+  // regrow); pipes and files that grow while read double the buffer.
+  std::string bytes;
+  bytes.resize(S_ISREG(st.st_mode) && st.st_size > 0 ? static_cast<std::size_t>(st.st_size) + 1 : 1 << 16);
+  std::size_t len = 0;
+  while (true) {
+    if (len == bytes.size()) bytes.resize(bytes.size() * 2);
+    const ssize_t n = ::read(f.fd, bytes.data() + len, bytes.size() - len);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return file_error(path, "cannot read file", errno);
+    }
+    if (n == 0) break;
+    len += static_cast<std::size_t>(n);
+  }
+  bytes.resize(len);
+  return bytes;
+}
+
+Status write_file_atomic(const fs::path& path, std::string_view bytes) {
+  static std::atomic<unsigned> counter{0};
+  if (path.empty() || !path.has_filename()) return file_error(path, "cannot write file", EINVAL);
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  // The temporary lives in the target's directory so that rename() is atomic
+  // (same file system); its name is unique per process and call.
+  std::string tmp_name = ".";
+  tmp_name += path.filename().string();
+  tmp_name += ".tmp.";
+  tmp_name += std::to_string(::getpid());
+  tmp_name += '.';
+  tmp_name += std::to_string(counter.fetch_add(1));
+  const fs::path tmp = dir / tmp_name;
+  mode_t mode = 0666;
+  struct stat old {};
+  const bool replacing = ::stat(path.c_str(), &old) == 0;
+  if (replacing && S_ISDIR(old.st_mode)) return file_error(path, "cannot write file", EISDIR);
+  if (replacing) mode = old.st_mode & 07777;
+
+  Fd f;
+  f.fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, mode);
+  if (f.fd < 0) return file_error(path, "cannot create temporary file in " + dir.string(), errno);
+  auto fail = [&](std::string_view what, int err) -> Status {
+    ::close(f.fd);
+    f.fd = -1;
+    ::unlink(tmp.c_str());
+    return file_error(path, what, err);
+  };
+  if (replacing) (void)::fchmod(f.fd, mode);  // keep the replaced file's permissions (umask would drop some)
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(f.fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return fail("cannot write file", errno);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fsync(f.fd) != 0) return fail("cannot flush file", errno);
+  if (::close(f.fd) != 0) {
+    f.fd = -1;
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    return file_error(path, "cannot close file", err);
+  }
+  f.fd = -1;
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    return file_error(path, "cannot replace file", err);
+  }
+  // Make the rename itself durable; failure here leaves a complete file, so it is not reported.
+  Fd d;
+  d.fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (d.fd >= 0) (void)::fsync(d.fd);
+  return Ok{};
+}
+
+std::string format_double(double v) {
+  char buf[32];
+  return std::string(buf, detail::format_shortest(buf, v));
+}
+
+Error byte_error(std::string_view file, std::size_t offset, std::string message) {
+  Error e;
+  e.file = std::string(file);
+  e.message = "at byte " + std::to_string(offset) + ": " + std::move(message);
+  return e;
+}
+
+}  // namespace gmr

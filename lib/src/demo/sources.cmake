@@ -1,1 +1,0 @@
-target_sources(gmr PRIVATE src/demo/demo_library.cpp)

@@ -1,0 +1,60 @@
+#include "gmr/view/viewpoint.h"
+
+#include <Eigen/Geometry>
+#include <cassert>
+
+#include "gmr/kinematics/forward_kinematics.h"
+
+namespace gmr {
+
+Viewpoint::Viewpoint(const Eigen::Vector3d& origin, const Eigen::Matrix3d& orientation)
+    : world_(false), rt_(orientation.transpose()), origin_(origin) {}
+
+Viewpoint Viewpoint::of_joint(std::span<const float> positions, std::span<const float> orientations,
+                              std::size_t v) {
+  assert(positions.size() >= 3 * (v + 1) && orientations.size() >= 9 * (v + 1));
+  const float* p = positions.data() + 3 * v;
+  const float* w = orientations.data() + 9 * v;
+  Eigen::Matrix3d wv;
+  wv << w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8];
+  return Viewpoint(Eigen::Vector3d(p[0], p[1], p[2]), wv);
+}
+
+void view_frame(const Motion& motion, int viewer, std::size_t f, std::span<Eigen::Vector3d> out_positions,
+                std::span<Eigen::Matrix3d> out_orientations) {
+  assert(viewer < 0 || out_orientations.size() == out_positions.size());
+  compute_frame(motion, f, out_positions, out_orientations);
+  if (viewer < 0) return;
+  const auto v = static_cast<std::size_t>(viewer);
+  const Viewpoint from(out_positions[v], out_orientations[v]);
+  for (auto& p : out_positions) p = from.position(p);
+  for (auto& w : out_orientations) w = from.orientation(w);
+}
+
+void view_frame_float(std::span<const float> fk_positions, std::span<const float> fk_orientations, int viewer,
+                      std::span<const int> joints, std::span<float> out_positions, std::span<float> out_quaternions) {
+  assert(out_positions.size() >= 3 * joints.size());
+  assert(out_quaternions.empty() || out_quaternions.size() >= 4 * joints.size());
+  const Viewpoint from = viewer < 0 ? Viewpoint()
+                                    : Viewpoint::of_joint(fk_positions, fk_orientations, static_cast<std::size_t>(viewer));
+  for (std::size_t i = 0; i < joints.size(); ++i) {
+    const auto j = static_cast<std::size_t>(joints[i]);
+    assert(fk_positions.size() >= 3 * (j + 1));
+    const float* p = fk_positions.data() + 3 * j;
+    const Eigen::Vector3d q = from.position(Eigen::Vector3d(p[0], p[1], p[2]));
+    for (int k = 0; k < 3; ++k) out_positions[3 * i + static_cast<std::size_t>(k)] = static_cast<float>(q[k]);
+    if (out_quaternions.empty()) continue;
+    assert(fk_orientations.size() >= 9 * (j + 1));
+    const float* w = fk_orientations.data() + 9 * j;
+    Eigen::Matrix3d m;
+    m << w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8];
+    const Eigen::Quaterniond r(from.orientation(m));
+    float* o = out_quaternions.data() + 4 * i;
+    o[0] = static_cast<float>(r.x());
+    o[1] = static_cast<float>(r.y());
+    o[2] = static_cast<float>(r.z());
+    o[3] = static_cast<float>(r.w());
+  }
+}
+
+}  // namespace gmr

@@ -1,0 +1,85 @@
+// Frames both ways: pushed frames encoded once per stream tick and shared by
+// every subscriber (server), and pushed frames and query batches decoded into
+// plain values (client).
+//
+// A Frame's per-subscriber fields (view_id, subscription_id, stream_id) have
+// numbers 1..3; everything else (numbers >= 16) is the same for every
+// subscriber of a stream. Protobuf parses concatenated encodings as one
+// message, so a subscriber's bytes are a few varints followed by the shared
+// body: the expensive part (positions) is encoded once.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "gmr/core/error.h"
+#include "gmr/stream/v1/stream.pb.h"
+
+namespace gmr::wire {
+
+// What a stream tick sends. float32 frames carry `positions` (3 floats per
+// joint) and `orientations` (4 per joint, x y z w, or empty); float64 frames
+// the *_f64 spans instead.
+struct FrameContent {
+  std::uint32_t skeleton_version = 0;
+  std::uint64_t frame_index = 0;
+  double motion_time = 0.0;
+  std::uint64_t sequence = 0;
+  std::int64_t server_send_time_ns = 0;
+  bool float64 = false;
+  std::span<const float> positions;
+  std::span<const float> orientations;
+  std::span<const double> positions_f64;
+  std::span<const double> orientations_f64;
+};
+
+// The shared body: serialized Frame fields >= 16.
+std::string encode_frame_body(const FrameContent& content);
+
+// A whole serialized ServerMessage{frame: Frame{ids + body}} (no length
+// prefix): what a UDP datagram carries.
+std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
+                              std::string_view body);
+
+// The bytes that go before a shared body of `body_size` bytes to make it a
+// whole ServerMessage (with the TCP length prefix when `length_prefix`).
+std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
+                           std::size_t body_size, bool length_prefix);
+
+// A pushed frame as values. Positions and orientations come from whichever
+// precision the frame carries.
+struct DecodedFrame {
+  std::uint32_t view_id = 0;
+  std::uint32_t subscription_id = 0;
+  std::uint64_t stream_id = 0;
+  std::uint32_t skeleton_version = 0;
+  std::uint64_t frame_index = 0;
+  double motion_time = 0.0;
+  std::uint64_t sequence = 0;
+  std::int64_t server_send_time_ns = 0;
+  bool float64 = false;
+  std::vector<Eigen::Vector3d> positions;        // one per joint sent
+  std::vector<Eigen::Quaterniond> orientations;  // empty, or one per joint sent
+};
+// Fails (kInvalidData) when the value counts do not form whole positions and
+// quaternions, or the orientations are neither absent nor one per position.
+Result<DecodedFrame> decode_frame(const stream::v1::Frame& frame);
+
+// A query's frames as values: frame-major, joints.size() per frame.
+struct DecodedBlock {
+  std::uint32_t view_id = 0;
+  std::uint32_t skeleton_version = 0;
+  std::uint32_t begin = 0, end = 0;
+  std::vector<int> joints;
+  std::vector<Eigen::Vector3d> positions;
+  std::vector<Eigen::Quaterniond> orientations;  // empty unless asked for
+};
+// Fails (kInvalidData) when the counts do not match (end - begin) x joints.
+Result<DecodedBlock> decode_block(const stream::v1::FrameBlock& batch);
+
+}  // namespace gmr::wire

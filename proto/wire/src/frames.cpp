@@ -1,0 +1,143 @@
+#include "gmr/wire/frames.h"
+
+#include "gmr/wire/framing.h"
+
+namespace gmr::wire {
+namespace pb = ::gmr::stream::v1;
+namespace {
+
+void put_varint(std::string& out, std::uint64_t v) {
+  while (v >= 0x80) {
+    out.push_back(static_cast<char>(static_cast<std::uint8_t>(v) | 0x80));
+    v >>= 7;
+  }
+  out.push_back(static_cast<char>(v));
+}
+
+// Field tags: (number << 3) | wire type (0 varint, 2 length-delimited).
+constexpr std::uint64_t tag(int number, int wire_type) { return (static_cast<std::uint64_t>(number) << 3) | wire_type; }
+
+std::string frame_ids(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id) {
+  std::string ids;
+  ids.reserve(24);
+  put_varint(ids, tag(pb::Frame::kViewIdFieldNumber, 0));
+  put_varint(ids, view_id);
+  put_varint(ids, tag(pb::Frame::kSubscriptionIdFieldNumber, 0));
+  put_varint(ids, subscription_id);
+  put_varint(ids, tag(pb::Frame::kStreamIdFieldNumber, 0));
+  put_varint(ids, stream_id);
+  return ids;
+}
+
+}  // namespace
+
+std::string encode_frame_body(const FrameContent& c) {
+  pb::Frame f;
+  f.set_skeleton_version(c.skeleton_version);
+  f.set_frame_index(c.frame_index);
+  f.set_motion_time(c.motion_time);
+  f.set_sequence(c.sequence);
+  f.set_server_send_time_ns(c.server_send_time_ns);
+  if (c.float64) {
+    f.mutable_positions_f64()->Add(c.positions_f64.begin(), c.positions_f64.end());
+    f.mutable_orientations_f64()->Add(c.orientations_f64.begin(), c.orientations_f64.end());
+  } else {
+    f.mutable_positions()->Add(c.positions.begin(), c.positions.end());
+    f.mutable_orientations()->Add(c.orientations.begin(), c.orientations.end());
+  }
+  return f.SerializeAsString();
+}
+
+std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
+                           std::size_t body_size, bool length_prefix) {
+  const std::string ids = frame_ids(view_id, subscription_id, stream_id);
+  std::string head;
+  put_varint(head, tag(pb::ServerMessage::kFrameFieldNumber, 2));
+  put_varint(head, ids.size() + body_size);
+  head += ids;
+  if (!length_prefix) return head;
+  std::string out(kLengthPrefixBytes, '\0');
+  write_length_prefix(static_cast<std::uint32_t>(head.size() + body_size),
+                      std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(out.data()),
+                                                                   kLengthPrefixBytes));
+  return out + head;
+}
+
+std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
+                              std::string_view body) {
+  const std::string ids = frame_ids(view_id, subscription_id, stream_id);
+  std::string out;
+  out.reserve(ids.size() + body.size() + 8);
+  put_varint(out, tag(pb::ServerMessage::kFrameFieldNumber, 2));
+  put_varint(out, ids.size() + body.size());
+  out += ids;
+  out.append(body);
+  return out;
+}
+
+namespace {
+
+template <class Values>
+Status unpack(const Values& positions, const Values& orientations, std::vector<Eigen::Vector3d>& out_positions,
+              std::vector<Eigen::Quaterniond>& out_orientations) {
+  if (positions.size() % 3 != 0) {
+    return make_error(ErrorKind::kInvalidData, std::to_string(positions.size()) + " position values are not whole xyz triples");
+  }
+  const auto n = static_cast<std::size_t>(positions.size() / 3);
+  if (!orientations.empty() && static_cast<std::size_t>(orientations.size()) != 4 * n) {
+    return make_error(ErrorKind::kInvalidData, std::to_string(orientations.size()) + " orientation values for " +
+                                                   std::to_string(n) + " positions (expected 0 or " +
+                                                   std::to_string(4 * n) + ")");
+  }
+  out_positions.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const int k = static_cast<int>(3 * i);
+    out_positions[i] = Eigen::Vector3d(positions.Get(k), positions.Get(k + 1), positions.Get(k + 2));
+  }
+  out_orientations.resize(orientations.empty() ? 0 : n);
+  for (std::size_t i = 0; i < out_orientations.size(); ++i) {
+    const int k = static_cast<int>(4 * i);
+    // Eigen's constructor takes w first.
+    out_orientations[i] =
+        Eigen::Quaterniond(orientations.Get(k + 3), orientations.Get(k), orientations.Get(k + 1), orientations.Get(k + 2));
+  }
+  return Ok{};
+}
+
+}  // namespace
+
+Result<DecodedFrame> decode_frame(const pb::Frame& f) {
+  DecodedFrame d;
+  d.view_id = f.view_id();
+  d.subscription_id = f.subscription_id();
+  d.stream_id = f.stream_id();
+  d.skeleton_version = f.skeleton_version();
+  d.frame_index = f.frame_index();
+  d.motion_time = f.motion_time();
+  d.sequence = f.sequence();
+  d.server_send_time_ns = f.server_send_time_ns();
+  d.float64 = f.positions_f64_size() > 0;
+  const Status s = d.float64 ? unpack(f.positions_f64(), f.orientations_f64(), d.positions, d.orientations)
+                             : unpack(f.positions(), f.orientations(), d.positions, d.orientations);
+  if (!s.ok()) return make_error(ErrorKind::kInvalidData, "frame " + std::to_string(d.frame_index) + ": " + s.error().message);
+  return d;
+}
+
+Result<DecodedBlock> decode_block(const pb::FrameBlock& b) {
+  DecodedBlock d;
+  d.view_id = b.view_id();
+  d.skeleton_version = b.skeleton_version();
+  d.begin = b.begin();
+  d.end = b.end();
+  d.joints.assign(b.joints().begin(), b.joints().end());
+  if (auto s = unpack(b.positions(), b.orientations(), d.positions, d.orientations); !s.ok()) return s.error();
+  const std::uint64_t frames = d.end >= d.begin ? d.end - d.begin : 0;
+  if (d.end < d.begin || d.positions.size() != frames * d.joints.size()) {
+    return make_error(ErrorKind::kInvalidData, std::to_string(d.positions.size()) + " positions for frames [" +
+                                                   std::to_string(d.begin) + ", " + std::to_string(d.end) + ") of " +
+                                                   std::to_string(d.joints.size()) + " joints");
+  }
+  return d;
+}
+
+}  // namespace gmr::wire

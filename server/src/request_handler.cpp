@@ -1,0 +1,308 @@
+#include "request_handler.h"
+
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Geometry>
+
+#include "gmr/view/viewpoint.h"
+#include "gmr/wire/convert.h"
+#include "gmr/wire/framing.h"
+#include "targets.h"
+
+namespace gmr::server {
+
+RequestHandler::RequestHandler(Server::Impl& server, const std::shared_ptr<Connection>& connection)
+    : server_(server),
+      connection_(connection),
+      connection_id_(connection->id()),
+      udp_(std::make_shared<UdpPublisher::Registration>()) {}
+
+void RequestHandler::start() {
+  token_ = server_.udp.add_session([weak = weak_from_this()](const udp::endpoint& ep) {
+    if (auto self = weak.lock()) self->udp_registered(ep);
+  });
+}
+
+void RequestHandler::on_stop() {
+  stopped_ = true;
+  for (auto& [id, sub] : subs_) sub.stream->remove(sub.target.get());
+  subs_.clear();
+  views_.clear();
+  server_.udp.remove_session(token_);
+}
+
+void RequestHandler::send(const pb::ServerMessage& m) {
+  auto c = connection_.lock();
+  if (!c || c->stopped()) return;
+  auto bytes = wire::frame_message(m, server_.cfg.max_message_bytes);
+  if (!bytes.ok()) {
+    bytes = wire::frame_message(
+        error_message(m.request_id(), pb::ERROR_CODE_INTERNAL, "reply too large: " + bytes.error().message));
+  }
+  c->send(std::move(bytes).value());
+}
+
+void RequestHandler::on_message(const std::string& body) {
+  pb::ClientMessage req;
+  if (!req.ParseFromString(body)) {
+    spdlog::warn("conn {}: a {}-byte message is not a ClientMessage", connection_id_, body.size());
+    send(error_message(0, pb::ERROR_CODE_BAD_REQUEST, "cannot parse the message as a gmr.stream.v1.ClientMessage"));
+    return;
+  }
+  if (req.body_case() == pb::ClientMessage::kHeartbeat) return;  // the connection counted it as a read
+  Reply reply = dispatch(req);
+  if (auto* refused = std::get_if<Refusal>(&reply)) {
+    spdlog::debug("conn {}: request {} refused: {}", connection_id_, req.request_id(), refused->message);
+    send(error_message(req.request_id(), refused->code, std::move(refused->message)));
+    return;
+  }
+  auto& m = std::get<pb::ServerMessage>(reply);
+  m.set_request_id(req.request_id());
+  send(m);
+}
+
+Reply RequestHandler::dispatch(const pb::ClientMessage& req) {
+  using C = pb::ClientMessage;
+  if (req.body_case() == C::kHello) return hello(req.hello());
+  if (req.body_case() == C::BODY_NOT_SET) {
+    return Refusal{pb::ERROR_CODE_UNKNOWN_REQUEST, "unknown or empty request (this server speaks protocol version " +
+                                                       std::to_string(wire::kProtocolVersion) + ")"};
+  }
+  if (!handshaked_) return Refusal{pb::ERROR_CODE_HANDSHAKE_REQUIRED, "send Hello first"};
+  switch (req.body_case()) {
+    case C::kListMotions: return list_motions();
+    case C::kGetSkeleton: return get_skeleton(req.get_skeleton());
+    case C::kCreateView: return create_view(req.create_view());
+    case C::kCloseView: return close_view(req.close_view());
+    case C::kShiftRoot:
+      return edit_view(req.shift_root().view_id(), [&](View& v) { return v.shift_root(req.shift_root().joint()); });
+    case C::kSplit:
+      return edit_view(req.split().view_id(), [&](View& v) { return v.split(req.split().joint()); });
+    case C::kJoin: {
+      double spread = 0.0;
+      Reply r = edit_view(req.join().view_id(), [&](View& v) { return v.join(req.join().root(), &spread); });
+      if (auto* m = std::get_if<pb::ServerMessage>(&r)) m->mutable_view()->set_join_offset_spread(spread);
+      return r;
+    }
+    case C::kSetRoots: {
+      const std::vector<std::string> roots(req.set_roots().roots().begin(), req.set_roots().roots().end());
+      if (roots.empty()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, "set roots: give at least one root"};
+      return edit_view(req.set_roots().view_id(), [&](View& v) { return v.set_roots(roots); });
+    }
+    case C::kStripDummies: {
+      std::vector<std::string> removed;
+      Reply r = edit_view(req.strip_dummies().view_id(), [&](View& v) { return v.strip_dummies(&removed); });
+      if (auto* m = std::get_if<pb::ServerMessage>(&r)) {
+        for (auto& name : removed) m->mutable_view()->add_removed(name);
+      }
+      return r;
+    }
+    case C::kSetCoordinates:
+      return edit_view(req.set_coordinates().view_id(),
+                       [&](View& v) { return v.set_relative_to(req.set_coordinates().relative_to()); });
+    case C::kQueryFrames: return query(req.query_frames());
+    case C::kSubscribe: return subscribe(req.subscribe());
+    case C::kUnsubscribe: return unsubscribe(req.unsubscribe());
+    case C::kPause: return pause(req.pause());
+    case C::kResume: return resume(req.resume());
+    case C::kSeek: return seek(req.seek());
+    case C::kGetStats: return stats();
+    default: return Refusal{pb::ERROR_CODE_UNKNOWN_REQUEST, "unknown request"};
+  }
+}
+
+Reply RequestHandler::hello(const pb::Hello& h) {
+  if (h.protocol_version() != wire::kProtocolVersion) {
+    spdlog::warn("conn {}: refused protocol version {} (this server speaks {})", connection_id_, h.protocol_version(),
+                 wire::kProtocolVersion);
+    if (auto c = connection_.lock()) c->close_after_reply();
+    return Refusal{pb::ERROR_CODE_VERSION_MISMATCH, "client speaks protocol version " +
+                                                        std::to_string(h.protocol_version()) +
+                                                        ", this server speaks version " +
+                                                        std::to_string(wire::kProtocolVersion)};
+  }
+  handshaked_ = true;
+  spdlog::info("conn {}: hello from '{}'", connection_id_, h.client_name());
+  const ServerConfig& cfg = server_.cfg;
+  pb::ServerMessage out;
+  auto* r = out.mutable_hello();
+  r->set_protocol_version(wire::kProtocolVersion);
+  r->set_server_name(cfg.server_name);
+  r->set_session_token(token_);
+  r->set_udp_port(server_.udp.port());
+  r->set_max_message_bytes(cfg.max_message_bytes);
+  r->set_heartbeat_interval_ms(static_cast<std::uint32_t>(cfg.heartbeat_interval.count()));
+  r->set_idle_timeout_ms(static_cast<std::uint32_t>(cfg.idle_timeout.count()));
+  return out;
+}
+
+Reply RequestHandler::list_motions() const {
+  pb::ServerMessage out;
+  auto* list = out.mutable_motions();
+  for (const auto& e : server_.library) {
+    auto* m = list->add_motions();
+    m->set_name(e.name);
+    m->set_joint_count(static_cast<std::uint32_t>(e.motion->skeleton.size()));
+    m->set_frame_count(e.motion->frame_count);
+    m->set_frame_time(e.motion->frame_time);
+    m->set_source(e.source);
+  }
+  return out;
+}
+
+Reply RequestHandler::get_skeleton(const pb::GetSkeleton& r) const {
+  auto it = server_.by_name.find(r.motion());
+  if (it == server_.by_name.end()) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
+  pb::ServerMessage out;
+  out.mutable_skeleton()->set_motion(it->first);
+  wire::to_proto(server_.library[it->second].motion->skeleton, *out.mutable_skeleton()->mutable_skeleton());
+  return out;
+}
+
+Reply RequestHandler::create_view(const pb::CreateView& r) {
+  auto it = server_.by_name.find(r.motion());
+  if (it == server_.by_name.end()) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
+  if (views_.size() >= server_.cfg.max_views_per_connection) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "at most " + std::to_string(server_.cfg.max_views_per_connection) + " views per connection"};
+  }
+  const std::uint32_t id = next_view_++;
+  auto v = std::make_unique<View>(id, it->first, server_.library[it->second].motion, server_.compiled_form(it->second));
+  pb::ServerMessage out;
+  *out.mutable_view() = view_info(*v);
+  views_.emplace(id, std::move(v));
+  return out;
+}
+
+Reply RequestHandler::close_view(const pb::CloseView& r) {
+  View* v = find_view(r.view_id());
+  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+  std::vector<std::uint32_t> ids;
+  for (auto& [id, sub] : subs_) {
+    if (sub.view_id == v->id()) ids.push_back(id);
+  }
+  for (auto id : ids) drop_subscription(id);
+  views_.erase(v->id());
+  pb::ServerMessage out;
+  out.mutable_ack();
+  return out;
+}
+
+// An edit that fails leaves the view as it was: NOT_FOUND for an unknown
+// joint, FAILED_PRECONDITION for anything else the view refuses.
+template <class Edit>
+Reply RequestHandler::edit_view(std::uint32_t view_id, Edit&& edit) {
+  View* v = find_view(view_id);
+  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(view_id)};
+  if (Status s = edit(*v); !s.ok()) {
+    const bool unknown = s.error().kind == ErrorKind::kNotFound;
+    return Refusal{unknown ? pb::ERROR_CODE_NOT_FOUND : pb::ERROR_CODE_FAILED_PRECONDITION, s.error().to_string()};
+  }
+  view_changed(*v);
+  pb::ServerMessage out;
+  *out.mutable_view() = view_info(*v);
+  return out;
+}
+
+Reply RequestHandler::query(const pb::QueryFrames& r) const {
+  const View* v = find_view(r.view_id());
+  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+  const Motion& m = v->motion();
+  const std::uint64_t begin = r.begin();
+  const std::uint64_t end = r.end() == 0 ? begin + 1 : r.end();
+  if (!(begin < end && end <= m.frame_count)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "frames [" + std::to_string(begin) + ", " + std::to_string(end) +
+                                                   ") are not within the motion's " + std::to_string(m.frame_count) +
+                                                   " frames"};
+  }
+  auto joints = resolve_joints(*v, {r.joints().begin(), r.joints().end()});
+  if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
+  // Refuse before computing anything a reply too big to send.
+  const std::uint64_t per_frame = joints->size() * (3 + (r.orientations() ? 4 : 0)) * 9 + 8;
+  const std::uint64_t estimate = (end - begin) * per_frame + 64;
+  if (estimate > server_.cfg.max_message_bytes) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "a query of " + std::to_string(end - begin) + " frames would take about " +
+                       std::to_string(estimate) + " bytes, above the limit of " +
+                       std::to_string(server_.cfg.max_message_bytes) + ": ask for fewer frames"};
+  }
+  pb::ServerMessage out;
+  auto* b = out.mutable_frames();
+  b->set_view_id(v->id());
+  b->set_skeleton_version(v->content()->skeleton_version);
+  b->set_begin(static_cast<std::uint32_t>(begin));
+  b->set_end(static_cast<std::uint32_t>(end));
+  for (int j : *joints) b->add_joints(static_cast<std::uint32_t>(j));
+  const std::size_t n = m.skeleton.size();
+  const int viewer = v->content()->relative_to;
+  std::vector<Eigen::Vector3d> pos(n);
+  std::vector<Eigen::Matrix3d> rot(r.orientations() || viewer >= 0 ? n : 0);
+  b->mutable_positions()->Reserve(static_cast<int>((end - begin) * joints->size() * 3));
+  for (std::uint64_t f = begin; f < end; ++f) {
+    view_frame(m, viewer, f, pos, rot);
+    for (int j : *joints) {
+      const auto& p = pos[static_cast<std::size_t>(j)];
+      b->add_positions(p.x());
+      b->add_positions(p.y());
+      b->add_positions(p.z());
+      if (r.orientations()) {
+        const Eigen::Quaterniond q(rot[static_cast<std::size_t>(j)]);
+        b->add_orientations(q.x());
+        b->add_orientations(q.y());
+        b->add_orientations(q.z());
+        b->add_orientations(q.w());
+      }
+    }
+  }
+  return out;
+}
+
+Reply RequestHandler::stats() {
+  auto c = connection_.lock();
+  const ConnectionCounters own = c ? c->counters() : ConnectionCounters{};
+  pb::ServerMessage out;
+  auto* st = out.mutable_stats();
+  st->set_connections(static_cast<std::uint32_t>(server_.connections.size()));
+  st->set_streams(static_cast<std::uint32_t>(server_.streams.live()));
+  st->set_frames_computed(server_.counters.frames_computed);
+  st->set_frames_computed_float(server_.counters.frames_computed_float);
+  st->set_frames_encoded(server_.counters.frames_encoded);
+  st->set_frames_sent(own.frames_sent);
+  st->set_frames_dropped(own.frames_dropped);
+  st->set_queued_bytes(own.queued_bytes);
+  st->set_max_queued_bytes(own.max_queued_bytes);
+  return out;
+}
+
+View* RequestHandler::find_view(std::uint32_t id) const {
+  auto it = views_.find(id);
+  return it == views_.end() ? nullptr : it->second.get();
+}
+
+Result<std::vector<int>> RequestHandler::resolve_joints(const View& v, const std::vector<std::string>& names) const {
+  std::vector<int> out;
+  if (names.empty()) {
+    for (int j = 0; j < static_cast<int>(v.motion().skeleton.size()); ++j) out.push_back(j);
+    return out;
+  }
+  for (const auto& n : names) {
+    auto j = v.joint_index(n);
+    if (!j.ok()) return j.error();
+    out.push_back(*j);
+  }
+  return out;
+}
+
+pb::ViewInfo RequestHandler::view_info(const View& v) const {
+  pb::ViewInfo info;
+  info.set_view_id(v.id());
+  info.set_motion(v.motion_name());
+  info.set_skeleton_version(v.content()->skeleton_version);
+  wire::to_proto(v.motion().skeleton, *info.mutable_skeleton());
+  if (v.content()->relative_to >= 0) info.set_relative_to(v.motion().skeleton.joint(v.content()->relative_to).name);
+  info.set_frame_count(v.motion().frame_count);
+  info.set_frame_time(v.motion().frame_time);
+  return info;
+}
+
+}  // namespace gmr::server

@@ -1,0 +1,98 @@
+// RequestHandler: one connection's views and subscriptions. It answers each
+// request with a reply or a refusal (a value carrying the protocol's error
+// code, never an exception), and sends nothing itself but through its
+// Connection. Adding a request: a case in dispatch() and a method here.
+//
+// Subscriptions are targets of streams (targets.h): a TcpTarget puts frames
+// into this connection's outbox, a UdpTarget sends them to the registered
+// UDP endpoint through the UdpPublisher.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "connection.h"
+#include "server_state.h"
+#include "stream.h"
+
+namespace gmr::server {
+
+class SubscriptionTarget;
+
+class RequestHandler : public Connection::Handler, public std::enable_shared_from_this<RequestHandler> {
+ public:
+  RequestHandler(Server::Impl& server, const std::shared_ptr<Connection>& connection);
+  // Takes a UDP session token (needs the handler owned by a shared_ptr).
+  void start();
+
+  void on_message(const std::string& body) override;
+  void on_stop() override;
+
+  // A stream ended subscription `id` after `sent` frames.
+  void subscription_ended(std::uint32_t id, std::uint64_t sent, const std::string& reason);
+  // The connection's UDP endpoint was registered (or moved).
+  void udp_registered(const udp::endpoint& endpoint);
+
+  const std::shared_ptr<UdpPublisher::Registration>& udp() const { return udp_; }
+  bool stopped() const { return stopped_; }
+
+ private:
+  struct Subscription {
+    std::uint32_t view_id = 0;
+    std::shared_ptr<Stream> stream;
+    std::shared_ptr<SubscriptionTarget> target;
+    std::vector<std::string> joint_names;  // empty: every joint
+  };
+
+  void send(const pb::ServerMessage& m);
+  Reply dispatch(const pb::ClientMessage& m);
+  Reply hello(const pb::Hello& r);
+
+  // request_handler.cpp: the library and views.
+  Reply list_motions() const;
+  Reply get_skeleton(const pb::GetSkeleton& r) const;
+  Reply create_view(const pb::CreateView& r);
+  Reply close_view(const pb::CloseView& r);
+  template <class Edit>
+  Reply edit_view(std::uint32_t view_id, Edit&& edit);
+  Reply query(const pb::QueryFrames& r) const;
+  Reply stats();
+
+  // subscriptions.cpp: subscriptions and their streams.
+  Reply subscribe(const pb::Subscribe& r);
+  Reply unsubscribe(const pb::Unsubscribe& r);
+  Reply pause(const pb::Pause& r);
+  Reply resume(const pb::Resume& r);
+  Reply seek(const pb::Seek& r);
+  // After a view edit: its subscriptions follow it onto their own streams,
+  // or end when a subscribed joint is gone.
+  void view_changed(const View& v);
+  void drop_subscription(std::uint32_t id);
+  // The subscription's stream, now its alone (split off a shared one).
+  std::shared_ptr<Stream> detach(Subscription& s);
+
+  // Lookups: a refusal (NOT_FOUND) names what is missing.
+  View* find_view(std::uint32_t id) const;
+  Subscription* find_subscription(std::uint32_t id);
+  Result<std::vector<int>> resolve_joints(const View& v, const std::vector<std::string>& names) const;
+  pb::ViewInfo view_info(const View& v) const;
+
+  Server::Impl& server_;
+  std::weak_ptr<Connection> connection_;
+  std::uint64_t connection_id_ = 0;
+  std::uint64_t token_ = 0;
+  std::shared_ptr<UdpPublisher::Registration> udp_;
+  bool handshaked_ = false;
+  bool stopped_ = false;
+
+  std::map<std::uint32_t, std::unique_ptr<View>> views_;
+  std::uint32_t next_view_ = 1;
+  std::map<std::uint32_t, Subscription> subs_;
+  std::uint32_t next_sub_ = 1;
+
+  friend class SubscriptionTarget;
+};
+
+}  // namespace gmr::server

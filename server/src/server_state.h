@@ -1,0 +1,76 @@
+// Private to the server: what the listener, the request handlers and the
+// streams share. Touched only on the I/O thread.
+//
+//   Listener --accept--> Connection (transport) --bodies--> RequestHandler (views, subscriptions)
+//                                                                 |  subscribe / edit
+//                                                                 v
+//   UdpPublisher <--UdpTarget-- Stream (one FK + one encoding per tick) --TcpTarget--> Connection
+//                                 ^ kept and shared by StreamRegistry
+#pragma once
+
+#include <future>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "connection.h"
+#include "gmr/server/server.h"
+#include "gmr/server/view.h"
+#include "net.h"
+#include "stream_registry.h"
+#include "udp_publisher.h"
+
+namespace gmr::server {
+
+class RequestHandler;
+
+// Stream parameters: beyond these the schedule arithmetic loses meaning (or
+// one stream could monopolise the I/O thread).
+constexpr double kMinSpeed = 1e-3, kMaxSpeed = 1000.0;
+constexpr double kMinRateHz = 1e-2, kMaxRateHz = 10000.0;
+
+struct Server::Impl {
+  Impl(ServerConfig config, std::vector<LibraryEntry> entries);
+
+  ServerConfig cfg;
+  std::vector<LibraryEntry> library;
+  std::map<std::string, std::size_t, std::less<>> by_name;
+
+  net::io_context io;
+  tcp::acceptor acceptor{io};
+  UdpPublisher udp{io, cfg.max_udp_datagrams_in_flight};
+  StreamCounters counters;
+  StreamRegistry streams{io, counters};
+  std::thread thread;
+  std::uint16_t tcp_port = 0;
+  bool started = false;
+  bool stopping = false;
+  std::promise<void> stopped;
+  std::shared_future<void> stopped_future = stopped.get_future().share();
+
+  std::uint64_t next_connection_id = 1;
+  struct ConnectionEntry {
+    std::weak_ptr<Connection> connection;
+    std::weak_ptr<RequestHandler> handler;
+  };
+  std::map<std::uint64_t, ConnectionEntry> connections;
+  std::uint64_t connections_refused = 0;
+  // Per library entry: the float form its unedited views share, while any
+  // view holds it (compiled on first use by a float32 stream; freed with the
+  // last view, so memory follows what is being streamed).
+  std::vector<std::weak_ptr<const CompiledForm>> compiled_forms;
+  std::unique_ptr<net::steady_timer> grace_timer;  // while stopping
+
+  // The connection limits of cfg.
+  ConnectionLimits connection_limits() const;
+  void accept_loop();
+  void begin_stop();
+  void connection_closed(std::uint64_t id);
+  // The shared float form of library entry `entry` (made when no view holds one).
+  std::shared_ptr<const CompiledForm> compiled_form(std::size_t entry);
+  ServerStats snapshot();
+};
+
+}  // namespace gmr::server

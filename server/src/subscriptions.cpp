@@ -1,0 +1,204 @@
+// RequestHandler's subscriptions: each is a target (TCP or UDP) of a stream
+// that the StreamRegistry keeps, shared with other subscriptions while they
+// want the same bytes and split off when one of them changes alone.
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+
+#include "request_handler.h"
+#include "targets.h"
+
+namespace gmr::server {
+
+namespace {
+
+pb::ServerMessage ack() {
+  pb::ServerMessage out;
+  out.mutable_ack();
+  return out;
+}
+
+Refusal unknown_subscription(std::uint32_t id) {
+  return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown subscription " + std::to_string(id)};
+}
+
+}  // namespace
+
+Reply RequestHandler::subscribe(const pb::Subscribe& r) {
+  const View* v = find_view(r.view_id());
+  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+  const Motion& m = v->motion();
+  const ServerConfig& cfg = server_.cfg;
+  if (subs_.size() >= cfg.max_subscriptions_per_connection) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "at most " + std::to_string(cfg.max_subscriptions_per_connection) +
+                                                          " subscriptions per connection"};
+  }
+  Stream::Settings settings;
+  Stream::Schedule& s = settings.schedule;
+  s.start = r.start_frame();
+  s.end = r.end_frame() == 0 ? static_cast<std::uint32_t>(m.frame_count) : r.end_frame();
+  if (!(s.start < s.end && s.end <= m.frame_count)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "frames [" + std::to_string(s.start) + ", " + std::to_string(s.end) +
+                                                   ") are not within the motion's " + std::to_string(m.frame_count) +
+                                                   " frames"};
+  }
+  s.loop = r.loop();
+  s.speed = r.speed() == 0.0 ? 1.0 : r.speed();
+  if (!(std::isfinite(s.speed) && s.speed >= kMinSpeed && s.speed <= kMaxSpeed)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "speed " + std::to_string(r.speed()) + " is not within [" +
+                                                   std::to_string(kMinSpeed) + ", " + std::to_string(kMaxSpeed) + "]"};
+  }
+  s.rate = r.rate_hz() == 0.0 ? s.speed / m.frame_time : r.rate_hz();
+  if (!(std::isfinite(s.rate) && s.rate >= kMinRateHz && s.rate <= kMaxRateHz)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST,
+                   "output rate " + std::to_string(s.rate) + " Hz" +
+                       (r.rate_hz() == 0.0 ? std::string(" (the motion's rate times speed)") : std::string()) +
+                       " is not within [" + std::to_string(kMinRateHz) + ", " + std::to_string(kMaxRateHz) + "] Hz"};
+  }
+  s.skip_repeats = r.skip_repeats();
+  const bool use_udp = r.transport() == pb::TRANSPORT_UDP;
+  if (use_udp && !udp_->endpoint) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "UDP transport: register this connection's UDP endpoint first (send the session token to UDP port " +
+                       std::to_string(server_.udp.port()) + ")"};
+  }
+  const std::vector<std::string> names(r.joints().begin(), r.joints().end());
+  auto joints = resolve_joints(*v, names);
+  if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
+  settings.joints = std::move(joints).value();
+  settings.orientations = r.orientations();
+  settings.float64 = r.precision() == pb::PRECISION_FLOAT64;
+  settings.max_catch_up = cfg.max_catch_up;
+
+  // Streams with the same content and schedule can share one FK and one
+  // encoding per tick.
+  const std::string key = r.shared() ? StreamRegistry::share_key(v->motion_name(), *v->content(), settings) : "";
+  std::shared_ptr<Stream> stream = key.empty() ? nullptr : server_.streams.find_running(key);
+  const bool joined = stream != nullptr;
+  if (!stream) stream = server_.streams.create(v->content(), settings, key);
+
+  const std::uint32_t id = next_sub_++;
+  std::shared_ptr<SubscriptionTarget> target;
+  if (use_udp) {
+    target = std::make_shared<UdpTarget>(weak_from_this(), connection_, id, v->id(), server_.udp, udp_);
+  } else {
+    target = std::make_shared<TcpTarget>(weak_from_this(), connection_, id, v->id());
+  }
+  stream->add(target, r.max_frames());
+  subs_[id] = Subscription{v->id(), stream, target, names};
+  if (!joined) stream->start();
+
+  pb::ServerMessage out;
+  auto* sub = out.mutable_subscribed();
+  sub->set_subscription_id(id);
+  sub->set_view_id(v->id());
+  sub->set_skeleton_version(v->content()->skeleton_version);
+  for (int j : settings.joints) sub->add_joints(static_cast<std::uint32_t>(j));
+  sub->set_rate_hz(s.rate);
+  sub->set_stream_id(stream->id());
+  sub->set_joined_running(joined);
+  spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", connection_id_, id, v->id(),
+                stream->id(), use_udp ? "UDP" : "TCP", s.rate);
+  return out;
+}
+
+Reply RequestHandler::unsubscribe(const pb::Unsubscribe& r) {
+  if (!find_subscription(r.subscription_id())) return unknown_subscription(r.subscription_id());
+  drop_subscription(r.subscription_id());
+  return ack();
+}
+
+Reply RequestHandler::pause(const pb::Pause& r) {
+  Subscription* s = find_subscription(r.subscription_id());
+  if (!s) return unknown_subscription(r.subscription_id());
+  detach(*s)->pause();
+  return ack();
+}
+
+Reply RequestHandler::resume(const pb::Resume& r) {
+  Subscription* s = find_subscription(r.subscription_id());
+  if (!s) return unknown_subscription(r.subscription_id());
+  s->stream->resume();
+  return ack();
+}
+
+Reply RequestHandler::seek(const pb::Seek& r) {
+  Subscription* s = find_subscription(r.subscription_id());
+  if (!s) return unknown_subscription(r.subscription_id());
+  const auto& sched = s->stream->schedule();
+  if (!(r.frame() >= sched.start && r.frame() < sched.end)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "seek to frame " + std::to_string(r.frame()) +
+                                                   ": the subscription plays frames [" + std::to_string(sched.start) +
+                                                   ", " + std::to_string(sched.end) + ")"};
+  }
+  detach(*s)->seek(r.frame());
+  return ack();
+}
+
+RequestHandler::Subscription* RequestHandler::find_subscription(std::uint32_t id) {
+  auto it = subs_.find(id);
+  return it == subs_.end() ? nullptr : &it->second;
+}
+
+std::shared_ptr<Stream> RequestHandler::detach(Subscription& s) {
+  s.stream = server_.streams.detach(s.stream, s.target.get());
+  return s.stream;
+}
+
+void RequestHandler::drop_subscription(std::uint32_t id) {
+  auto it = subs_.find(id);
+  if (it == subs_.end()) return;
+  Subscription& s = it->second;
+  s.stream->remove(s.target.get());
+  if (s.stream->idle()) s.stream->stop();
+  if (auto c = connection_.lock()) c->discard_frames(id);
+  subs_.erase(it);
+}
+
+void RequestHandler::view_changed(const View& v) {
+  std::vector<std::pair<std::uint32_t, std::string>> ended;
+  for (auto& [id, sub] : subs_) {
+    if (sub.view_id != v.id()) continue;
+    auto joints = resolve_joints(v, sub.joint_names);
+    if (!joints.ok()) {
+      ended.emplace_back(id, "the view changed: " + joints.error().message);
+      continue;
+    }
+    detach(sub)->set_content(v.content(), std::move(joints).value());
+  }
+  for (auto& [id, reason] : ended) {
+    pb::ServerMessage m;
+    m.mutable_subscription_ended()->set_subscription_id(id);
+    m.mutable_subscription_ended()->set_reason(reason);
+    drop_subscription(id);
+    send(m);
+  }
+}
+
+void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, const std::string& reason) {
+  auto it = subs_.find(id);
+  if (it == subs_.end()) return;
+  Subscription& s = it->second;
+  pb::ServerMessage m;
+  m.mutable_subscription_ended()->set_subscription_id(id);
+  m.mutable_subscription_ended()->set_frames_sent(sent);
+  m.mutable_subscription_ended()->set_frames_dropped(s.target->dropped());
+  m.mutable_subscription_ended()->set_reason(reason);
+  // The frames still waiting go out before the end notice.
+  if (auto c = connection_.lock()) c->send_frames_now(id);
+  s.stream->remove(s.target.get());
+  subs_.erase(it);
+  send(m);
+}
+
+void RequestHandler::udp_registered(const udp::endpoint& ep) {
+  if (stopped_) return;
+  const bool first = !udp_->endpoint || *udp_->endpoint != ep;
+  udp_->endpoint = ep;
+  if (first) spdlog::info("conn {}: UDP endpoint {}:{} registered", connection_id_, ep.address().to_string(), ep.port());
+  pb::ServerMessage m;
+  m.mutable_udp_registered()->set_endpoint(ep.address().to_string() + ":" + std::to_string(ep.port()));
+  send(m);
+}
+
+}  // namespace gmr::server

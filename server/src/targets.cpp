@@ -1,0 +1,38 @@
+#include "targets.h"
+
+#include "gmr/wire/frames.h"
+#include "request_handler.h"
+
+namespace gmr::server {
+
+bool SubscriptionTarget::alive() const {
+  const auto h = handler_.lock();
+  const auto c = connection_.lock();
+  return h && c && !h->stopped() && !c->stopped();
+}
+
+void SubscriptionTarget::ended(std::uint64_t sent, const std::string& reason) {
+  if (auto h = handler_.lock()) h->subscription_ended(subscription_, sent, reason);
+}
+
+void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
+  auto c = connection_.lock();
+  if (!c || c->closing()) return;
+  // The per-subscriber head (length prefix, ServerMessage tag, ids); the body is shared.
+  if (!c->push_frame(subscription_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), true), body)) {
+    ++dropped_;
+  }
+}
+
+void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
+  auto c = connection_.lock();
+  if (!c || c->closing()) return;
+  if (!publisher_.send(endpoint_, wire::frame_message_for(view_, subscription_, stream_id, *body))) {
+    ++dropped_;
+    c->count_frame_dropped();
+    return;
+  }
+  c->count_frame_sent();
+}
+
+}  // namespace gmr::server

@@ -1,0 +1,59 @@
+// The two kinds of stream target a subscription can be: frames into the
+// connection's TCP outbox, or frames to its registered UDP endpoint. Both
+// count their drops (for SubscriptionEnded) and tell their handler when the
+// stream ends them.
+#pragma once
+
+#include <memory>
+
+#include "connection.h"
+#include "stream.h"
+#include "udp_publisher.h"
+
+namespace gmr::server {
+
+class RequestHandler;
+
+class SubscriptionTarget : public Target {
+ public:
+  SubscriptionTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Connection> connection,
+                     std::uint32_t subscription, std::uint32_t view)
+      : handler_(std::move(handler)), connection_(std::move(connection)), subscription_(subscription), view_(view) {}
+
+  bool alive() const override;
+  void ended(std::uint64_t sent, const std::string& reason) override;
+
+  std::uint32_t subscription() const { return subscription_; }
+  std::uint64_t dropped() const { return dropped_; }
+
+ protected:
+  std::weak_ptr<RequestHandler> handler_;
+  std::weak_ptr<Connection> connection_;
+  std::uint32_t subscription_;
+  std::uint32_t view_;
+  std::uint64_t dropped_ = 0;
+};
+
+// Frames go into the connection's outbox (latest wins per subscription).
+class TcpTarget final : public SubscriptionTarget {
+ public:
+  using SubscriptionTarget::SubscriptionTarget;
+  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+};
+
+// Frames go to the connection's registered UDP endpoint, as fragments.
+class UdpTarget final : public SubscriptionTarget {
+ public:
+  UdpTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Connection> connection, std::uint32_t subscription,
+            std::uint32_t view, UdpPublisher& publisher, std::shared_ptr<UdpPublisher::Registration> endpoint)
+      : SubscriptionTarget(std::move(handler), std::move(connection), subscription, view),
+        publisher_(publisher),
+        endpoint_(std::move(endpoint)) {}
+  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+
+ private:
+  UdpPublisher& publisher_;
+  std::shared_ptr<UdpPublisher::Registration> endpoint_;
+};
+
+}  // namespace gmr::server

@@ -1,0 +1,67 @@
+// UdpPublisher: the server's UDP socket. It takes registrations (a client
+// proves it holds a session's token by sending it from the address that is
+// to receive that session's frames) and sends frames as fragments
+// (gmr/wire/udp.h), with a bound on the datagrams in flight per registration.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <random>
+#include <string_view>
+#include <unordered_map>
+
+#include "net.h"
+
+namespace gmr::server {
+
+class UdpPublisher {
+ public:
+  // Where one session's UDP frames go, once registered.
+  struct Registration {
+    std::optional<udp::endpoint> endpoint;
+    std::size_t in_flight = 0;          // datagrams handed to the kernel, not yet sent
+    std::uint32_t next_message_id = 0;  // fragments of one message share an id
+  };
+  using OnRegister = std::function<void(const udp::endpoint&)>;
+
+  UdpPublisher(net::io_context& io, std::size_t max_in_flight);
+
+  // Binds `address`:`port` (0: any free port). Throws std::runtime_error
+  // naming the address when it cannot.
+  void open(const net::ip::address& address, std::uint16_t port);
+  std::uint16_t port() const { return port_; }
+  // Starts taking registrations.
+  void start();
+  void close();
+
+  // A fresh session token (never 0, unique among the live ones); a valid
+  // registration datagram carrying it calls `on_register` with its sender.
+  std::uint64_t add_session(OnRegister on_register);
+  void remove_session(std::uint64_t token);
+
+  // Sends a whole ServerMessage to `to` as fragments. False, sending
+  // nothing, when `to` is not registered or already has max_in_flight
+  // datagrams in flight.
+  bool send(const std::shared_ptr<Registration>& to, std::string_view message);
+
+  // Datagrams that were not a valid registration.
+  std::uint64_t rejected() const { return rejected_; }
+
+ private:
+  void receive();
+
+  udp::socket socket_;
+  std::size_t max_in_flight_;
+  std::uint16_t port_ = 0;
+  bool closed_ = false;
+  std::unordered_map<std::uint64_t, OnRegister> sessions_;
+  std::mt19937_64 rng_{std::random_device{}()};
+  std::array<char, 2048> buffer_{};
+  udp::endpoint sender_;
+  std::uint64_t rejected_ = 0;
+};
+
+}  // namespace gmr::server

@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Checks the shape docs/architecture.md promises, on the source tree itself.
+
+1. lib mirrors its API: every public header lib/include/gmr/X/Y.h has its
+   implementation lib/src/X/Y.cpp (header-only declarations are not allowed
+   to hide elsewhere).
+2. No include loops between lib folders: the graph "folder A includes a
+   header of folder B" (public gmr/B/... or private B/... from lib/src) over
+   lib/include/gmr and lib/src is acyclic.
+3. The client's public headers include no generated protobuf header.
+
+Usage: check_layout.py REPO_ROOT. Prints what it checked and every
+violation; exits 1 when there is one.
+"""
+import pathlib
+import re
+import sys
+
+INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+
+
+def lib_folder(path, lib):
+    """The lib folder (core, ops, ...) a lib file belongs to."""
+    rel = path.relative_to(lib)
+    if rel.parts[0] == "include":
+        return rel.parts[2]  # include/gmr/<folder>/...
+    return rel.parts[1]  # src/<folder>/...
+
+
+def included_folder(target, lib, own_dir):
+    """The lib folder an #include "target" names, or None (not lib)."""
+    parts = target.split("/")
+    if parts[0] == "gmr" and len(parts) >= 3 and (lib / "include" / target).is_file():
+        return parts[1]
+    if len(parts) >= 2 and (lib / "src" / target).is_file():
+        return parts[0]
+    if len(parts) == 1 and (own_dir / target).is_file():
+        return None  # same folder
+    return None
+
+
+def find_cycle(graph):
+    """A list of folders forming a cycle, or None."""
+    state = {}
+    stack = []
+
+    def visit(node):
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def main():
+    root = pathlib.Path(sys.argv[1]).resolve()
+    lib = root / "lib"
+    problems = []
+
+    headers = sorted((lib / "include" / "gmr").rglob("*.h"))
+    for h in headers:
+        rel = h.relative_to(lib / "include" / "gmr")
+        impl = lib / "src" / rel.with_suffix(".cpp")
+        if not impl.is_file():
+            problems.append(f"lib/include/gmr/{rel}: no implementation at lib/src/{rel.with_suffix('.cpp')}")
+
+    graph = {}
+    files = headers + sorted((lib / "src").rglob("*.h")) + sorted((lib / "src").rglob("*.cpp"))
+    for f in files:
+        here = lib_folder(f, lib)
+        graph.setdefault(here, set())
+        for target in INCLUDE.findall(f.read_text()):
+            there = included_folder(target, lib, f.parent)
+            if there and there != here:
+                graph[here].add(there)
+    cycle = find_cycle(graph)
+    if cycle:
+        problems.append("include loop between lib folders: " + " -> ".join(cycle))
+
+    client_headers = sorted((root / "client" / "include").rglob("*.h"))
+    for h in client_headers:
+        for target in INCLUDE.findall(h.read_text()):
+            if target.endswith(".pb.h"):
+                problems.append(f"{h.relative_to(root)} includes the generated {target}")
+
+    print(f"checked {len(headers)} public lib headers, {len(files)} lib files in {len(graph)} folders, "
+          f"{len(client_headers)} client headers")
+    for folder in sorted(graph):
+        print(f"  {folder} -> {', '.join(sorted(graph[folder])) or '(nothing)'}")
+    if len(headers) == 0 or len(client_headers) == 0:
+        problems.append("found no headers: is REPO_ROOT right?")
+    for p in problems:
+        print("LAYOUT: " + p)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,151 @@
+#include "gmr/core/file_util.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+
+#include "gmr/io/bvh.h"
+#include "test_data.h"
+
+namespace gmr {
+namespace {
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+using test::TempDir;
+
+TEST(ReadFile, MissingFileNamesThePath) {
+  auto r = read_file("/nonexistent/dir/x.bvh");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().file, "/nonexistent/dir/x.bvh");
+  EXPECT_THAT(r.error().to_string(), HasSubstr("/nonexistent/dir/x.bvh: cannot open file"));
+}
+
+TEST(ReadFile, DirectoryIsAnError) {
+  TempDir d;
+  auto r = read_file(d.path);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.error().message, HasSubstr("directory"));
+}
+
+TEST(WriteFileAtomic, WritesAndReplaces) {
+  TempDir d;
+  const fs::path p = d.path / "out.bvh";
+  ASSERT_TRUE(write_file_atomic(p, "first").ok());
+  EXPECT_EQ(read_file(p).value(), "first");
+  std::string big(3 << 20, 'x');
+  big[12345] = '\0';
+  ASSERT_TRUE(write_file_atomic(p, big).ok());
+  EXPECT_EQ(read_file(p).value(), big);
+  ASSERT_TRUE(write_file_atomic(p, "").ok());
+  EXPECT_EQ(read_file(p).value(), "");
+  EXPECT_EQ(d.entries(), 1u);  // no temporary left behind
+}
+
+TEST(WriteFileAtomic, FailureLeavesTheOldFileAndNoTemporary) {
+  TempDir d;
+  // The target is a directory holding a file: the write must fail, keep both.
+  const fs::path target = d.path / "target.gmr";
+  fs::create_directories(target);
+  ASSERT_TRUE(write_file_atomic(target / "old.gmr", "old contents").ok());
+  const Status s = write_file_atomic(target, "new contents");
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().file, target.string());
+  EXPECT_EQ(read_file(target / "old.gmr").value(), "old contents");
+  EXPECT_EQ(d.entries(), 1u);
+
+  // A missing directory: an error naming the path, nothing created.
+  const Status m = write_file_atomic(d.path / "missing" / "x.bvh", "data");
+  ASSERT_FALSE(m.ok());
+  EXPECT_THAT(m.error().to_string(), HasSubstr((d.path / "missing" / "x.bvh").string()));
+  EXPECT_FALSE(fs::exists(d.path / "missing"));
+}
+
+TEST(WriteFileAtomic, WriterErrorKeepsTheOldFile) {
+  TempDir d;
+  const fs::path p = d.path / "keep.bvh";
+  ASSERT_TRUE(write_file_atomic(p, "old").ok());
+  Motion pre;  // empty: nothing to write
+  const Status s = write_bvh(pre, p);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().file, p.string());
+  EXPECT_EQ(read_file(p).value(), "old");
+  EXPECT_EQ(d.entries(), 1u);
+}
+
+TEST(WriteFileAtomic, KeepsPermissionsOfTheReplacedFile) {
+  TempDir d;
+  const fs::path p = d.path / "mode.bvh";
+  ASSERT_TRUE(write_file_atomic(p, "a").ok());
+  fs::permissions(p, fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
+  ASSERT_TRUE(write_file_atomic(p, "b").ok());
+  EXPECT_EQ(fs::status(p).permissions(), fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
+}
+
+std::string to_chars_text(double v) {
+  char buf[64];
+  return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+}
+
+// format_double has a fast path; it must write what std::to_chars writes.
+TEST(FormatDouble, SameBytesAsToChars) {
+  std::vector<double> values = {0.0, -0.0, 1.0, -1.0, 10, 100, 1200000, 1e15, 999999999999999.0, 1e16, 0.001, 0.0001,
+                                0.000123, 1e-5, 1.5e-6, 1e-6, 0.1, 0.3, 0.30000000000000004, 123456.789, 1.0 / 3.0,
+                                2.5e-7, 12345678901234.5, 1234567890123.45, 0.5, 5e-324, 1.7976931348623157e308,
+                                std::numeric_limits<double>::infinity(), std::nan("")};
+  std::mt19937_64 rng(99);
+  for (int i = 0; i < 200000; ++i) {
+    // Short decimals of every length and scale, as motion files hold them.
+    const int digits = 1 + static_cast<int>(rng() % 16);
+    std::uint64_t m = rng() % 10000000000000000ull;
+    for (int d = digits; d < 16; ++d) m /= 10;
+    const int k = static_cast<int>(rng() % 20);
+    double v = static_cast<double>(m);
+    for (int j = 0; j < k; ++j) v /= 10;
+    values.push_back(rng() % 2 ? v : -v);
+    values.push_back(std::ldexp(static_cast<double>(rng() % (1ull << 53)), static_cast<int>(rng() % 120) - 80));
+    char text[32];
+    std::snprintf(text, sizeof text, "%.*f", static_cast<int>(rng() % 9), std::ldexp(static_cast<double>(rng() % 100000), -10));
+    values.push_back(std::strtod(text, nullptr));
+  }
+  for (double v : values) ASSERT_EQ(format_double(v), to_chars_text(v)) << std::hexfloat << v;
+}
+
+TEST(FormatDouble, SameBytesAsToCharsOnTheCorpus) {
+  GMR_REQUIRE_DATA();
+  for (const auto& path : test::data_files("bvh", ".bvh")) {
+    const Motion m = read_bvh(path).value();
+    for (double v : m.values) ASSERT_EQ(format_double(v), to_chars_text(v)) << path << ": " << std::hexfloat << v;
+    for (const Joint& j : m.skeleton.joints())
+      for (int i = 0; i < 3; ++i) ASSERT_EQ(format_double(j.offset[i]), to_chars_text(j.offset[i])) << path;
+  }
+}
+
+TEST(FormatDouble, ShortestRoundTrip) {
+  EXPECT_EQ(format_double(0.1), "0.1");
+  EXPECT_EQ(format_double(-6.101614), "-6.101614");
+  EXPECT_EQ(format_double(1e-7), "1e-07");
+  EXPECT_EQ(format_double(0.1 + 0.2), "0.30000000000000004");
+  EXPECT_EQ(format_double(100), "100");
+  std::mt19937_64 rng(42);
+  std::uniform_real_distribution<double> u(-1e3, 1e3);
+  for (int i = 0; i < 10000; ++i) {
+    const double v = i % 2 ? u(rng) : std::ldexp(u(rng), static_cast<int>(rng() % 600) - 300);
+    const std::string s = format_double(v);
+    double back = 0;
+    std::from_chars(s.data(), s.data() + s.size(), back);
+    ASSERT_EQ(back, v) << s;
+  }
+}
+
+}  // namespace
+}  // namespace gmr
