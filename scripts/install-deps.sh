@@ -10,11 +10,12 @@ packages=(
   libbenchmark-dev          # benchmarks in bench/
   libhwy-dev                # Highway: run-time SIMD dispatch for the fast FK path
   libcli11-dev              # argument parsing for the gmr and gmr-server commands
-  nlohmann-json3-dev        # JSON output (gmr bench fk --json)
+  nlohmann-json3-dev        # JSON output of the research harness (gmr-bench fk --json)
   libspdlog-dev libfmt-dev  # logging outside lib/
   libboost-dev libboost-system-dev # Boost.Asio for the server and client
   libprotobuf-dev protobuf-compiler # the wire protocol
-  gnuplot-nox               # the Figure 4 plot
+  gnuplot-nox               # the Figure 4 plot (gmr-bench figure4)
+  python3                   # the layout check (tests/layout/check_layout.py)
 )
 
 missing=()

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "gmr/core/error.h"
+#include "gmr/core/file_util.h"
 
 namespace gmr::cli {
 
@@ -44,8 +45,8 @@ FrameRange clamp_frame_range(FrameRange r, std::size_t frame_count);
 // (after the command's output; a failing command prints only its error line).
 void print_warnings(const Warnings& warnings);
 
-// The extension of `path` in lower case (".bvh" for "a.BVH"; "" if none).
-std::string lower_extension(const std::filesystem::path& path);
+// The extension of `path` in lower case: gmr::lower_extension.
+using ::gmr::lower_extension;
 
 // Splits "A,B,C" into names (empty items are an error).
 std::vector<std::string> split_list(std::string_view text);

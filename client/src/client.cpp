@@ -199,18 +199,9 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
         return;
       }
       ReceivedFrame r;
+      static_cast<wire::FrameValues&>(r) = std::move(decoded).value();
       r.receive_time_ns = received;
-      r.view_id = decoded->view_id;
-      r.subscription_id = decoded->subscription_id;
-      r.stream_id = decoded->stream_id;
-      r.skeleton_version = decoded->skeleton_version;
-      r.frame_index = decoded->frame_index;
-      r.motion_time = decoded->motion_time;
-      r.sequence = decoded->sequence;
-      r.server_send_time_ns = decoded->server_send_time_ns;
       r.udp = via_udp;
-      r.positions = std::move(decoded->positions);
-      r.orientations = std::move(decoded->orientations);
       sub->on_frame(r);
       return;
     }

@@ -181,7 +181,7 @@ void Server::wait() {
   if (d.thread.joinable()) d.thread.join();
 }
 
-ServerStats Server::stats() const {
+ServerStats Server::stats(std::chrono::milliseconds timeout) const {
   auto& d = *impl_;
   if (!d.started || d.stopped_future.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
     return d.snapshot();
@@ -192,7 +192,7 @@ ServerStats Server::stats() const {
   auto p = std::make_shared<std::promise<ServerStats>>();
   auto f = p->get_future();
   net::post(d.io, [p, impl = impl_.get()] { p->set_value(impl->snapshot()); });
-  if (f.wait_for(std::chrono::seconds(5)) != std::future_status::ready) return {};
+  if (f.wait_for(timeout) != std::future_status::ready) return {};
   return f.get();
 }
 

@@ -10,7 +10,8 @@
 3. The client's public headers include no generated protobuf header.
 
 Usage: check_layout.py REPO_ROOT. Prints what it checked and every
-violation; exits 1 when there is one.
+violation; exits 1 when there is one. check_layout.py --self-test builds a
+small tree that breaks each promise and checks that each break is reported.
 """
 import pathlib
 import re
@@ -66,8 +67,8 @@ def find_cycle(graph):
     return None
 
 
-def main():
-    root = pathlib.Path(sys.argv[1]).resolve()
+def check(root):
+    """The violations in the tree at `root`, and a summary of what was read."""
     lib = root / "lib"
     problems = []
 
@@ -91,18 +92,70 @@ def main():
     if cycle:
         problems.append("include loop between lib folders: " + " -> ".join(cycle))
 
+    # Followed through every header of ours it reaches (lib, wire, client).
     client_headers = sorted((root / "client" / "include").rglob("*.h"))
+    include_roots = [root / "client" / "include", root / "proto" / "wire" / "include", lib / "include"]
     for h in client_headers:
-        for target in INCLUDE.findall(h.read_text()):
-            if target.endswith(".pb.h"):
-                problems.append(f"{h.relative_to(root)} includes the generated {target}")
+        seen, todo = set(), [h]
+        while todo:
+            f = todo.pop()
+            if f in seen:
+                continue
+            seen.add(f)
+            for target in INCLUDE.findall(f.read_text()):
+                if target.endswith(".pb.h"):
+                    via = "" if f == h else f" (through {f.relative_to(root)})"
+                    problems.append(f"{h.relative_to(root)} includes the generated {target}{via}")
+                todo += [r / target for r in include_roots if (r / target).is_file()]
 
-    print(f"checked {len(headers)} public lib headers, {len(files)} lib files in {len(graph)} folders, "
-          f"{len(client_headers)} client headers")
-    for folder in sorted(graph):
-        print(f"  {folder} -> {', '.join(sorted(graph[folder])) or '(nothing)'}")
     if len(headers) == 0 or len(client_headers) == 0:
         problems.append("found no headers: is REPO_ROOT right?")
+    summary = [f"checked {len(headers)} public lib headers, {len(files)} lib files in {len(graph)} folders, "
+               f"{len(client_headers)} client headers"]
+    summary += [f"  {folder} -> {', '.join(sorted(graph[folder])) or '(nothing)'}" for folder in sorted(graph)]
+    return problems, summary
+
+
+def self_test():
+    """Each broken promise in a made-up tree is reported; the mended tree passes."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = pathlib.Path(tmp)
+
+        def write(rel, text):
+            path = root / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+
+        write("lib/include/gmr/a/x.h", '#pragma once\n#include "gmr/b/y.h"\n')
+        write("lib/src/a/x.cpp", '#include "gmr/a/x.h"\n')
+        write("lib/include/gmr/b/y.h", "#pragma once\n")  # no lib/src/b/y.cpp
+        write("lib/src/b/helper.cpp", '#include "gmr/a/x.h"\n')  # b -> a while a -> b
+        write("client/include/gmr/client/c.h", '#include "gmr/wire/w.h"\n')
+        write("proto/wire/include/gmr/wire/w.h", '#include "gmr/stream/v1/stream.pb.h"\n')
+        problems, _ = check(root)
+        expected = ["lib/include/gmr/b/y.h: no implementation", "include loop between lib folders: a -> b -> a",
+                    "includes the generated gmr/stream/v1/stream.pb.h (through proto/wire/include/gmr/wire/w.h)"]
+        missing = [e for e in expected if not any(e in p for p in problems)]
+        for e in missing:
+            print(f"SELF-TEST: not reported: {e}")
+        write("lib/src/b/y.cpp", '#include "gmr/b/y.h"\n')
+        (root / "lib/src/b/helper.cpp").unlink()
+        write("client/include/gmr/client/c.h", "#pragma once\n")
+        mended, _ = check(root)
+        for p in mended:
+            print(f"SELF-TEST: reported in a correct tree: {p}")
+        print(f"self-test: {len(expected) - len(missing)} of {len(expected)} breaks reported, "
+              f"{len(mended)} false reports")
+        return 1 if missing or mended else 0
+
+
+def main():
+    if sys.argv[1:] == ["--self-test"]:
+        return self_test()
+    problems, summary = check(pathlib.Path(sys.argv[1]).resolve())
+    print("\n".join(summary))
     for p in problems:
         print("LAYOUT: " + p)
     return 1 if problems else 0

@@ -2,7 +2,12 @@
 // with a code, malformed framing closes only that connection, UDP datagrams
 // without a valid session token are ignored. After each, the server still
 // serves a fresh client.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
+
+#include <sstream>
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -77,6 +82,24 @@ TEST(BadInput, TruncatedMessageIsClosedByTheIdleTimeout) {
   c.send_bytes(std::string("\x00\x00\x00\x20" "abc", 7));  // 32 announced, 3 sent, then silence
   EXPECT_TRUE(c.wait_closed(std::chrono::seconds(10)));
   expect_server_alive(s);
+}
+
+// The log names how much of a cut-off message arrived (it once printed 0).
+TEST(BadInput, TruncatedMessageLogNamesTheBytesReceived) {
+  std::ostringstream log;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("capture", sink));
+  {
+    TestServer s;
+    RawConnection c(s.port());
+    c.send_bytes(std::string("\x00\x00\x00\x20" "abc", 7));  // 32 announced, 3 sent, then the end
+    c.shutdown_send();
+    EXPECT_TRUE(c.wait_closed());
+    expect_server_alive(s);
+  }  // the server stops: everything it logged is in
+  spdlog::set_default_logger(previous);
+  EXPECT_THAT(log.str(), ::testing::HasSubstr("truncated message: 3 of 32 bytes announced; closing"));
 }
 
 TEST(BadInput, WellFramedGarbageGetsAnErrorAndTheConnectionStays) {

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <cstdlib>
 #include <iterator>
+#include <string_view>
 #include <system_error>
 
 #include <unistd.h>
@@ -29,17 +30,48 @@ bool in_ci() {
   return ci != nullptr && std::string(ci) == "true";
 }
 
+namespace {
+
+// How many files of each kind the shared corpus holds (../shared/data, see
+// its PROVENANCE.md). A loop over data_files() covers exactly this many, so
+// a renamed or emptied folder fails the test instead of passing it silently.
+struct CorpusCount {
+  std::string_view sub, ext;
+  std::size_t files;
+};
+constexpr CorpusCount kCorpus[] = {
+    {"bvh", ".bvh", 43},        {"bvh/parser_fixtures", ".bvh", 7}, {"malformed", ".bvh", 7},
+    {"asfamc", ".asf", 6},      {"asfamc", ".amc", 9},              {"c3d", ".c3d", 6},
+    {"trc", ".trc", 9},
+};
+
+}  // namespace
+
+std::size_t expected_data_files(const std::string& sub, const std::string& ext) {
+  for (const auto& c : kCorpus) {
+    if (c.sub == sub && c.ext == ext) return c.files;
+  }
+  ADD_FAILURE() << "data_files(\"" << sub << "\", \"" << ext << "\"): no expected count in tests/support";
+  return 0;
+}
+
 std::vector<fs::path> data_files(const std::string& sub, const std::string& ext) {
   std::vector<fs::path> out;
   const fs::path root = data_dir() / sub;
-  if (!fs::is_directory(root)) return out;
-  for (const auto& e : fs::recursive_directory_iterator(root)) {
-    if (!e.is_regular_file()) continue;
-    std::string x = e.path().extension().string();
-    std::transform(x.begin(), x.end(), x.begin(), [](unsigned char c) { return std::tolower(c); });
-    if (x == ext) out.push_back(e.path());
+  if (!have_data()) return out;  // the test skips (GMR_REQUIRE_DATA) or fails in CI
+  if (fs::is_directory(root)) {
+    for (const auto& e : fs::recursive_directory_iterator(root)) {
+      if (!e.is_regular_file()) continue;
+      std::string x = e.path().extension().string();
+      std::transform(x.begin(), x.end(), x.begin(), [](unsigned char c) { return std::tolower(c); });
+      if (x == ext) out.push_back(e.path());
+    }
   }
   std::sort(out.begin(), out.end());
+  const std::size_t want = expected_data_files(sub, ext);
+  if (out.size() != want) {
+    ADD_FAILURE() << root.string() << ": " << out.size() << " " << ext << " files found, the corpus holds " << want;
+  }
   return out;
 }
 

@@ -23,8 +23,12 @@ bool have_data();
 // True when running in CI (CI=true).
 bool in_ci();
 // Every regular file under data_dir()/sub whose extension (lower-cased, with the
-// dot) is `ext`, sorted. Empty when the corpus is missing.
+// dot) is `ext`, sorted. Empty when the corpus is missing. When it is present,
+// fails the running test unless exactly expected_data_files(sub, ext) were
+// found (a renamed or emptied folder never turns a loop into a silent pass).
 std::vector<std::filesystem::path> data_files(const std::string& sub, const std::string& ext);
+// How many such files the corpus holds (fails the test for an unlisted kind).
+std::size_t expected_data_files(const std::string& sub, const std::string& ext);
 // Absolute path of a file in the corpus.
 std::filesystem::path data_file(const std::string& relative);
 

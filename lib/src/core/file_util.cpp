@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -130,6 +131,12 @@ Error byte_error(std::string_view file, std::size_t offset, std::string message)
   e.file = std::string(file);
   e.message = "at byte " + std::to_string(offset) + ": " + std::move(message);
   return e;
+}
+
+std::string lower_extension(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
 }
 
 }  // namespace gmr

@@ -8,19 +8,14 @@
 #include "gmr/ops/convert.h"
 #include "gmr/io/bvh.h"
 #include "gmr/io/gmr_file.h"
+#include "gmr/core/file_util.h"
 #include "gmr/io/gmrb.h"
-#include "extension.h"
 
 namespace gmr {
 
-namespace detail {
+namespace {
 
-std::string lower_extension(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
-}
-
+// "cannot read '.xyz' files: expected .bvh, .gmr, .amc or .gmrb", naming the path.
 Error unknown_extension(const std::filesystem::path& path, std::string_view verb) {
   Error e;
   e.file = path.string();
@@ -30,9 +25,6 @@ Error unknown_extension(const std::filesystem::path& path, std::string_view verb
   return e;
 }
 
-}  // namespace detail
-
-namespace {
 
 // "07" for "07_05-walk" and "07-walk": the CMU subject number before the first '_' or '-'.
 std::string subject_of(const std::filesystem::path& p) {
@@ -49,7 +41,7 @@ Result<std::filesystem::path> find_asf(const std::filesystem::path& amc, const L
   std::vector<std::filesystem::path> found;
   std::error_code ec;
   for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    if (detail::lower_extension(it->path()) == ".asf" && it->is_regular_file(ec)) found.push_back(it->path());
+    if (lower_extension(it->path()) == ".asf" && it->is_regular_file(ec)) found.push_back(it->path());
   }
   Error e;
   e.file = amc.string();
@@ -78,7 +70,7 @@ Result<std::filesystem::path> find_asf(const std::filesystem::path& amc, const L
 }  // namespace
 
 Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions& options, Warnings* out_warnings) {
-  const std::string ext = detail::lower_extension(path);
+  const std::string ext = lower_extension(path);
   if (ext == ".bvh") return read_bvh(path, out_warnings);
   if (ext == ".gmr") return read_gmr(path, out_warnings);
   if (ext == ".amc") {
@@ -88,7 +80,7 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
   }
   // ---- .gmrb (GMR binary: gmr/io/gmrb.h)
   if (ext == ".gmrb") return read_gmrb(path);
-  return detail::unknown_extension(path, "read");
+  return unknown_extension(path, "read");
 }
 
 // ---- saving ------------------------------------------------------------
@@ -103,7 +95,7 @@ Error at_path(Error e, const std::filesystem::path& path) {
 }  // namespace
 
 Status save_motion(const Motion& motion, const std::filesystem::path& path, const LoadOptions& options) {
-  const std::string ext = detail::lower_extension(path);
+  const std::string ext = lower_extension(path);
   if (ext == ".bvh") {
     if (motion.convention == Convention::kPostRotation) return write_bvh(motion, path);
     auto post = to_post_rotation(motion);
@@ -128,7 +120,7 @@ Status save_motion(const Motion& motion, const std::filesystem::path& path, cons
     // ---- .gmrb (GMR binary: gmr/io/gmrb.h)
     return write_gmrb(*pre, path);
   }
-  return detail::unknown_extension(path, "write");
+  return unknown_extension(path, "write");
 }
 
 }  // namespace gmr

@@ -7,20 +7,11 @@
 
 #include "gmr/markers/c3d.h"
 #include "gmr/markers/markers.h"
+#include "gmr/core/file_util.h"
 #include "gmr/markers/trc.h"
 #include "names.h"
 
 namespace gmr {
-namespace {
-
-std::string lower_extension(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
-}
-
-}  // namespace
-
 namespace detail {
 
 bool make_names_unique(std::vector<std::string>& names) {

@@ -106,8 +106,8 @@ Status unpack(const Values& positions, const Values& orientations, std::vector<E
 
 }  // namespace
 
-Result<DecodedFrame> decode_frame(const pb::Frame& f) {
-  DecodedFrame d;
+Result<FrameValues> decode_frame(const pb::Frame& f) {
+  FrameValues d;
   d.view_id = f.view_id();
   d.subscription_id = f.subscription_id();
   d.stream_id = f.stream_id();

@@ -147,5 +147,12 @@ TEST(FormatDouble, ShortestRoundTrip) {
   }
 }
 
+TEST(LowerExtension, LowerCasesTheExtensionWithItsDot) {
+  EXPECT_EQ(lower_extension("a/B.BVH"), ".bvh");
+  EXPECT_EQ(lower_extension("walk.Gmrb"), ".gmrb");
+  EXPECT_EQ(lower_extension("dir.d/noext"), "");
+  EXPECT_EQ(lower_extension("x.tar.GZ"), ".gz");
+}
+
 }  // namespace
 }  // namespace gmr

@@ -20,10 +20,10 @@
 
 #include "gmr/core/error.h"
 #include "gmr/skeleton/skeleton.h"
+#include "gmr/wire/frame_values.h"
 
-// The public types are plain structs: a program using the client needs
-// neither protobuf's headers nor the generated code (gmr::wire, linked by
-// gmr::client, speaks the protocol).
+// The public types are plain structs: a program using the client needs no
+// protobuf header (gmr::wire, linked by gmr::client, speaks the protocol).
 namespace gmr::client {
 
 struct ClientOptions {
@@ -95,19 +95,12 @@ struct SubscribeOptions {
   std::uint64_t max_frames = 0;  // 0: no limit
 };
 
-struct ReceivedFrame {
-  std::uint32_t view_id = 0;
-  std::uint32_t subscription_id = 0;
-  std::uint64_t stream_id = 0;
-  std::uint32_t skeleton_version = 0;
-  std::uint64_t frame_index = 0;
-  double motion_time = 0.0;
-  std::uint64_t sequence = 0;
-  std::int64_t server_send_time_ns = 0;
+// A frame as it arrived: ids, frame index and motion time, sequence,
+// server send time, one position per subscribed joint and, when subscribed,
+// one orientation each (gmr::wire::FrameValues), plus how it came.
+struct ReceivedFrame : wire::FrameValues {
   std::int64_t receive_time_ns = 0;  // system_clock when this client parsed it
   bool udp = false;
-  std::vector<Eigen::Vector3d> positions;      // one per subscribed joint
-  std::vector<Eigen::Quaterniond> orientations;  // when subscribed
 };
 
 struct SubscriptionInfo {

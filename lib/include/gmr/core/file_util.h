@@ -27,6 +27,10 @@ Status write_file_atomic(const std::filesystem::path& path, std::string_view byt
 // "0.1", "-6.101614", "1e-07", "0.30000000000000004".
 std::string format_double(double v);
 
+// The extension of `path` with its dot, in lower case (".bvh" for "a.BVH"),
+// or "" when it has none: file formats are matched by this.
+std::string lower_extension(const std::filesystem::path& path);
+
 // An error in a binary file: "<file>: at byte <offset>: <message>" (the
 // .gmrb and C3D readers).
 Error byte_error(std::string_view file, std::size_t offset, std::string message);

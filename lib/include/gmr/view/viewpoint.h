@@ -1,5 +1,5 @@
 // The intrinsic viewpoint: a motion seen from one of its joints (paper
-// section 1; docs/gmr-math.md, "Viewpoint"). With P_v, W_v the viewer's world
+// section 1; docs/gmr-math.md, "The intrinsic viewpoint"). With P_v, W_v the viewer's world
 // position and orientation in the same frame,
 //
 //   p' = W_v^T (p - P_v)      W' = W_v^T W

@@ -1,15 +1,17 @@
 // The streaming server: a TCP listener for requests and pushed frames, a UDP
 // socket for registered endpoints, and the library it serves.
 //
-//   client --TCP--> Session --requests--> View (per connection)
-//                      ^                     |
-//                      | frames              v
-//                   Stream (one FK + one encoding per tick) --UDP--> registered endpoint
+//   client --TCP--> Connection --bodies--> RequestHandler --edits--> View (per connection)
+//                      ^                        | subscribe
+//                      | frames (TcpTarget)     v
+//                   Stream (one FK + one encoding per tick) --UdpTarget--> UdpPublisher --> registered endpoint
 //
 // All networking and state live on one I/O thread; per tick the work is one
 // forward-kinematics pass and one encoding per stream, a few microseconds.
+// docs/architecture.md draws the whole data flow.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -59,8 +61,9 @@ class Server {
   // Blocks until the server has stopped.
   void wait();
 
-  // A snapshot taken on the I/O thread.
-  ServerStats stats() const;
+  // A snapshot taken on the I/O thread, waiting at most `timeout` for it
+  // (then, or after stop(), what can be read without it: empty counters).
+  ServerStats stats(std::chrono::milliseconds timeout = std::chrono::seconds(5)) const;
 
   struct Impl;
 

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "gmr/core/error.h"
+#include "gmr/wire/frame_values.h"
 #include "gmr/stream/v1/stream.pb.h"
 
 namespace gmr::wire {
@@ -51,24 +52,10 @@ std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_
 std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
                            std::size_t body_size, bool length_prefix);
 
-// A pushed frame as values. Positions and orientations come from whichever
-// precision the frame carries.
-struct DecodedFrame {
-  std::uint32_t view_id = 0;
-  std::uint32_t subscription_id = 0;
-  std::uint64_t stream_id = 0;
-  std::uint32_t skeleton_version = 0;
-  std::uint64_t frame_index = 0;
-  double motion_time = 0.0;
-  std::uint64_t sequence = 0;
-  std::int64_t server_send_time_ns = 0;
-  bool float64 = false;
-  std::vector<Eigen::Vector3d> positions;        // one per joint sent
-  std::vector<Eigen::Quaterniond> orientations;  // empty, or one per joint sent
-};
-// Fails (kInvalidData) when the value counts do not form whole positions and
+// A pushed frame as values, from whichever precision it carries. Fails
+// (kInvalidData) when the value counts do not form whole positions and
 // quaternions, or the orientations are neither absent nor one per position.
-Result<DecodedFrame> decode_frame(const stream::v1::Frame& frame);
+Result<FrameValues> decode_frame(const stream::v1::Frame& frame);
 
 // A query's frames as values: frame-major, joints.size() per frame.
 struct DecodedBlock {
