@@ -1,4 +1,4 @@
-// The OPS options of `gmr positions` (--roots, --strip-dummies, --relative-to),
+// The view options of `gmr positions` (--roots, --strip-dummies, --relative-to),
 // implemented in cmd_ops.cpp so cmd_files.cpp only forwards to them.
 #pragma once
 

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "net.h"
+#include "outbox.h"
 
 namespace gmr::server {
 
@@ -36,14 +37,7 @@ struct ConnectionLimits {
   int socket_send_buffer = 0;             // SO_SNDBUF; 0: the system's default
 };
 
-struct ConnectionCounters {
-  std::uint64_t frames_sent = 0;
-  std::uint64_t frames_dropped = 0;    // a newer frame replaced it, or (UDP) over the datagram bound
-  std::uint64_t queued_bytes = 0;      // replies and frames waiting or being written
-  std::uint64_t max_queued_bytes = 0;  // high-water mark
-};
-
-class Connection : public std::enable_shared_from_this<Connection> {
+class Connection final : public Outbox, public std::enable_shared_from_this<Connection> {
  public:
   // What the connection hands its messages to.
   class Handler {
@@ -64,31 +58,23 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void stop(const std::string& reason);
   // Graceful: drop waiting frames, write the waiting replies, then stop.
   void finish();
-  // The same, but the next reply (queued after this call) is written too.
-  void close_after_reply();
 
-  std::uint64_t id() const { return id_; }
   const std::string& peer() const { return peer_; }
-  bool stopped() const { return stopped_; }
-  // Stopped, or finishing: no more frames are taken.
-  bool closing() const { return stopped_ || close_after_flush_; }
 
-  // Queues a reply (already length-prefixed); replies go out in order.
-  void send(std::string framed);
-  // Queues a frame: `head` (this client's length prefix and ids) before the
-  // shared `body`. False when the key already had frames_per_key waiting and
-  // the oldest was dropped to make room (counted).
-  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body);
-  // Forgets the frames waiting for `key`.
-  void discard_frames(std::uint32_t key);
-  // Moves the frames waiting for `key` into the reply queue, so they go out
-  // before the next reply (an end notice follows its last frames).
-  void send_frames_now(std::uint32_t key);
-  // Frames sent or dropped elsewhere (UDP) count with this connection.
-  void count_frame_sent() { ++counters_.frames_sent; }
-  void count_frame_dropped() { ++counters_.frames_dropped; }
-
-  ConnectionCounters counters() const;
+  // Outbox (outbox.h). A key holds at most frames_per_key frames; the frames
+  // of send_frames_now go into the reply queue, so an end notice follows its
+  // last frames.
+  std::uint64_t id() const override { return id_; }
+  bool stopped() const override { return stopped_; }
+  bool closing() const override { return stopped_ || close_after_flush_; }
+  void send(std::string framed) override;
+  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) override;
+  void discard_frames(std::uint32_t key) override;
+  void send_frames_now(std::uint32_t key) override;
+  void close_after_reply() override;
+  void count_frame_sent() override { ++counters_.frames_sent; }
+  void count_frame_dropped() override { ++counters_.frames_dropped; }
+  ConnectionCounters counters() const override;
 
  private:
   struct PendingFrame {

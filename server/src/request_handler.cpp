@@ -11,10 +11,10 @@
 
 namespace gmr::server {
 
-RequestHandler::RequestHandler(Server::Impl& server, const std::shared_ptr<Connection>& connection)
+RequestHandler::RequestHandler(Server::Impl& server, const std::shared_ptr<Outbox>& outbox)
     : server_(server),
-      connection_(connection),
-      connection_id_(connection->id()),
+      connection_(outbox),
+      connection_id_(outbox->id()),
       udp_(std::make_shared<UdpPublisher::Registration>()) {}
 
 void RequestHandler::start() {

@@ -23,7 +23,8 @@ class SubscriptionTarget;
 
 class RequestHandler : public Connection::Handler, public std::enable_shared_from_this<RequestHandler> {
  public:
-  RequestHandler(Server::Impl& server, const std::shared_ptr<Connection>& connection);
+  // `outbox`: the client's transport (a Connection, or a test's recorder).
+  RequestHandler(Server::Impl& server, const std::shared_ptr<Outbox>& outbox);
   // Takes a UDP session token (needs the handler owned by a shared_ptr).
   void start();
 
@@ -80,7 +81,7 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   pb::ViewInfo view_info(const View& v) const;
 
   Server::Impl& server_;
-  std::weak_ptr<Connection> connection_;
+  std::weak_ptr<Outbox> connection_;
   std::uint64_t connection_id_ = 0;
   std::uint64_t token_ = 0;
   std::shared_ptr<UdpPublisher::Registration> udp_;

@@ -6,7 +6,7 @@
 
 #include <memory>
 
-#include "connection.h"
+#include "outbox.h"
 #include "stream.h"
 #include "udp_publisher.h"
 
@@ -16,7 +16,7 @@ class RequestHandler;
 
 class SubscriptionTarget : public Target {
  public:
-  SubscriptionTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Connection> connection,
+  SubscriptionTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Outbox> connection,
                      std::uint32_t subscription, std::uint32_t view)
       : handler_(std::move(handler)), connection_(std::move(connection)), subscription_(subscription), view_(view) {}
 
@@ -28,7 +28,7 @@ class SubscriptionTarget : public Target {
 
  protected:
   std::weak_ptr<RequestHandler> handler_;
-  std::weak_ptr<Connection> connection_;
+  std::weak_ptr<Outbox> connection_;
   std::uint32_t subscription_;
   std::uint32_t view_;
   std::uint64_t dropped_ = 0;
@@ -44,7 +44,7 @@ class TcpTarget final : public SubscriptionTarget {
 // Frames go to the connection's registered UDP endpoint, as fragments.
 class UdpTarget final : public SubscriptionTarget {
  public:
-  UdpTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Connection> connection, std::uint32_t subscription,
+  UdpTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Outbox> connection, std::uint32_t subscription,
             std::uint32_t view, UdpPublisher& publisher, std::shared_ptr<UdpPublisher::Registration> endpoint)
       : SubscriptionTarget(std::move(handler), std::move(connection), subscription, view),
         publisher_(publisher),

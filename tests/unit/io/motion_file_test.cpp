@@ -116,7 +116,7 @@ std::vector<Eigen::Vector3d> positions_by_name(const Motion& a, const Motion& b)
   return out;
 }
 
-// Issue 2's end-to-end check through files: BVH -> .gmr file -> read ->
+// The end-to-end check through files: BVH -> .gmr file -> read ->
 // .bvh file -> read keeps every joint's position in every frame, for every
 // BVH of the corpus (within 1e-6 of the skeleton's size). Debug and
 // sanitizer builds take evenly spaced frames of each file.

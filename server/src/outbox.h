@@ -1,0 +1,47 @@
+// Outbox: what a client's requests and subscriptions need from its transport.
+// Connection (TCP) is the one the server runs; a WebSocket session would be
+// another, and tests use one that only records, to run a RequestHandler
+// without sockets.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+namespace gmr::server {
+
+struct ConnectionCounters {
+  std::uint64_t frames_sent = 0;
+  std::uint64_t frames_dropped = 0;    // a newer frame replaced it, or (UDP) over the datagram bound
+  std::uint64_t queued_bytes = 0;      // replies and frames waiting or being written
+  std::uint64_t max_queued_bytes = 0;  // high-water mark
+};
+
+class Outbox {
+ public:
+  virtual ~Outbox() = default;
+
+  virtual std::uint64_t id() const = 0;
+  // Stopped: nothing more goes out.
+  virtual bool stopped() const = 0;
+  // Stopped, or finishing: no more frames are taken.
+  virtual bool closing() const = 0;
+  // Queues a reply (already length-prefixed); replies go out in order.
+  virtual void send(std::string framed) = 0;
+  // Queues a frame: `head` (this client's length prefix and ids) before the
+  // shared `body`. False when the key already had its share of frames
+  // waiting and the oldest was dropped to make room (counted).
+  virtual bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) = 0;
+  // Forgets the frames waiting for `key`.
+  virtual void discard_frames(std::uint32_t key) = 0;
+  // Moves the frames waiting for `key` ahead of the next reply.
+  virtual void send_frames_now(std::uint32_t key) = 0;
+  // Closes once the next reply (queued after this call) is out.
+  virtual void close_after_reply() = 0;
+  // Frames sent or dropped elsewhere (UDP) count with this client.
+  virtual void count_frame_sent() = 0;
+  virtual void count_frame_dropped() = 0;
+  virtual ConnectionCounters counters() const = 0;
+};
+
+}  // namespace gmr::server

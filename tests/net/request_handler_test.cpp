@@ -1,0 +1,177 @@
+// RequestHandler without sockets: requests go in as bytes, replies and
+// frames come out of a recording Outbox. What a client sees over TCP is
+// tested in the other server_*_test files; here the handler alone.
+#include "request_handler.h"
+
+#include <gtest/gtest.h>
+#include <spdlog/spdlog.h>
+
+#include <deque>
+
+#include "gmr/wire/framing.h"
+#include "gmr/wire/frames.h"
+#include "net_test_util.h"
+
+namespace gmr::test {
+namespace {
+
+// An Outbox that keeps what it is given.
+class RecordingOutbox final : public server::Outbox {
+ public:
+  std::uint64_t id() const override { return 7; }
+  bool stopped() const override { return false; }
+  bool closing() const override { return closing_; }
+  void send(std::string framed) override { replies.push_back(unframe(framed)); }
+  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) override {
+    frames.push_back(unframe(head + *body));
+    keys.push_back(key);
+    return true;
+  }
+  void discard_frames(std::uint32_t) override {}
+  void send_frames_now(std::uint32_t) override {}
+  void close_after_reply() override { closing_ = true; }
+  void count_frame_sent() override {}
+  void count_frame_dropped() override {}
+  server::ConnectionCounters counters() const override { return {}; }
+
+  std::deque<pb::ServerMessage> replies;
+  std::vector<pb::ServerMessage> frames;
+  std::vector<std::uint32_t> keys;
+
+ private:
+  static pb::ServerMessage unframe(const std::string& framed) {
+    pb::ServerMessage m;
+    EXPECT_GE(framed.size(), wire::kLengthPrefixBytes);
+    EXPECT_TRUE(m.ParseFromString(framed.substr(wire::kLengthPrefixBytes)));
+    return m;
+  }
+  bool closing_ = false;
+};
+
+class RequestHandlerTest : public ::testing::Test {
+ protected:
+  RequestHandlerTest() : server_(server::ServerConfig{}, test_library()) {
+    spdlog::set_level(spdlog::level::warn);  // the handler logs every hello
+    handler_ = std::make_shared<server::RequestHandler>(server_, outbox_);
+    handler_->start();
+  }
+
+  // Sends `m` with request id `id` and returns the reply it produced.
+  pb::ServerMessage ask(pb::ClientMessage m, std::uint64_t id) {
+    m.set_request_id(id);
+    handler_->on_message(m.SerializeAsString());
+    EXPECT_FALSE(outbox_->replies.empty()) << "no reply";
+    if (outbox_->replies.empty()) return {};
+    pb::ServerMessage r = outbox_->replies.back();
+    outbox_->replies.clear();
+    EXPECT_EQ(r.request_id(), id);
+    return r;
+  }
+  pb::ServerMessage hello() {
+    pb::ClientMessage m;
+    m.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+    return ask(m, 1);
+  }
+  std::uint32_t create_view(const std::string& motion) {
+    pb::ClientMessage m;
+    m.mutable_create_view()->set_motion(motion);
+    const auto r = ask(m, 2);
+    EXPECT_TRUE(r.has_view()) << r.DebugString();
+    return r.view().view_id();
+  }
+
+  const Motion& walk() const { return *server_.library[server_.by_name.find("walk")->second].motion; }
+
+  server::Server::Impl server_;
+  std::shared_ptr<RecordingOutbox> outbox_ = std::make_shared<RecordingOutbox>();
+  std::shared_ptr<server::RequestHandler> handler_;
+};
+
+TEST_F(RequestHandlerTest, RefusesEverythingButHelloFirstThenAnswers) {
+  pb::ClientMessage list;
+  list.mutable_list_motions();
+  EXPECT_EQ(ask(list, 5).error().code(), pb::ERROR_CODE_HANDSHAKE_REQUIRED);
+  const auto h = hello();
+  ASSERT_TRUE(h.has_hello());
+  EXPECT_NE(h.hello().session_token(), 0u);
+  const auto r = ask(list, 6);
+  ASSERT_TRUE(r.has_motions());
+  EXPECT_EQ(static_cast<std::size_t>(r.motions().motions_size()), server_.library.size());
+  handler_->on_message("\xff\xff\xff");  // not a message: an error reply, not an exception
+  ASSERT_EQ(outbox_->replies.size(), 1u);
+  EXPECT_EQ(outbox_->replies.back().error().code(), pb::ERROR_CODE_BAD_REQUEST);
+}
+
+TEST_F(RequestHandlerTest, LibraryErrorsBecomeProtocolCodesWithoutPrechecks) {
+  hello();
+  const std::uint32_t v = create_view("walk");
+  pb::ClientMessage shift;
+  shift.mutable_shift_root()->set_view_id(v);
+  shift.mutable_shift_root()->set_joint("no_such_joint");
+  auto r = ask(shift, 10);
+  EXPECT_EQ(r.error().code(), pb::ERROR_CODE_NOT_FOUND) << r.DebugString();
+  EXPECT_NE(r.error().message().find("no_such_joint"), std::string::npos);
+
+  const std::string root = walk().skeleton.joint(0).name;
+  pb::ClientMessage split;
+  split.mutable_split()->set_view_id(v);
+  split.mutable_split()->set_joint(root);
+  EXPECT_EQ(ask(split, 11).error().code(), pb::ERROR_CODE_FAILED_PRECONDITION);
+
+  pb::ClientMessage roots;
+  roots.mutable_set_roots()->set_view_id(v);
+  EXPECT_EQ(ask(roots, 12).error().code(), pb::ERROR_CODE_BAD_REQUEST);
+  roots.mutable_set_roots()->add_roots(root);
+  roots.mutable_set_roots()->add_roots(root);
+  EXPECT_EQ(ask(roots, 13).error().code(), pb::ERROR_CODE_FAILED_PRECONDITION);  // listed twice
+
+  pb::ClientMessage other_view = shift;
+  other_view.mutable_shift_root()->set_view_id(v + 100);
+  EXPECT_EQ(ask(other_view, 14).error().code(), pb::ERROR_CODE_NOT_FOUND);
+}
+
+// A subscription's frames come out of the outbox as whole ServerMessages,
+// then the end notice with the count.
+TEST_F(RequestHandlerTest, SubscriptionFramesGoToTheOutboxThenItEnds) {
+  hello();
+  const std::uint32_t v = create_view("walk");
+  pb::ClientMessage sub;
+  sub.mutable_subscribe()->set_view_id(v);
+  sub.mutable_subscribe()->set_rate_hz(1000);
+  sub.mutable_subscribe()->set_max_frames(5);
+  const auto r = ask(sub, 20);
+  ASSERT_TRUE(r.has_subscribed()) << r.DebugString();
+  const std::uint32_t id = r.subscribed().subscription_id();
+  // Run the server's loop until the subscription has ended (a bounded wait).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (outbox_->replies.empty() && std::chrono::steady_clock::now() < deadline) {
+    server_.io.run_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_EQ(outbox_->frames.size(), 5u);
+  for (std::size_t i = 0; i < outbox_->frames.size(); ++i) {
+    const auto& f = outbox_->frames[i];
+    ASSERT_TRUE(f.has_frame());
+    EXPECT_EQ(f.frame().subscription_id(), id);
+    EXPECT_EQ(f.frame().view_id(), v);
+    EXPECT_EQ(f.frame().sequence(), i);
+    auto values = wire::decode_frame(f.frame());
+    ASSERT_TRUE(values.ok()) << values.error().to_string();
+    EXPECT_EQ(values->positions.size(), walk().skeleton.size());
+    EXPECT_EQ(outbox_->keys[i], id);
+  }
+  ASSERT_EQ(outbox_->replies.size(), 1u);
+  const auto& end = outbox_->replies.front();
+  ASSERT_TRUE(end.has_subscription_ended());
+  EXPECT_EQ(end.subscription_ended().frames_sent(), 5u);
+  EXPECT_EQ(end.subscription_ended().reason(), "max_frames reached");
+}
+
+TEST_F(RequestHandlerTest, AnotherProtocolVersionClosesAfterTheReply) {
+  pb::ClientMessage m;
+  m.mutable_hello()->set_protocol_version(wire::kProtocolVersion + 1);
+  EXPECT_EQ(ask(m, 1).error().code(), pb::ERROR_CODE_VERSION_MISMATCH);
+  EXPECT_TRUE(outbox_->closing());
+}
+
+}  // namespace
+}  // namespace gmr::test
