@@ -95,11 +95,12 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   udp::endpoint udp_sender;
   wire::Reassembler reassembler;
 
-  // Queues `framed` for the socket; false (nothing queued) when the queue
-  // already holds options.max_write_queue_bytes.
+  // Queues `framed` for the socket; false (nothing queued) when it would take
+  // a non-empty queue past options.max_write_queue_bytes.
   bool send(std::string framed) {
     const std::size_t n = framed.size();
-    if (write_queue_bytes.fetch_add(n) + n > options.max_write_queue_bytes && n <= options.max_write_queue_bytes) {
+    const std::size_t before = write_queue_bytes.fetch_add(n);
+    if (before > 0 && before + n > options.max_write_queue_bytes) {
       write_queue_bytes -= n;
       return false;
     }

@@ -33,9 +33,10 @@ struct ClientOptions {
   std::chrono::milliseconds timeout{5000};  // connect, and each request's reply
   std::uint32_t max_message_bytes = 16u << 20;  // largest reply accepted
   int receive_buffer = 0;                   // SO_RCVBUF (0: system default)
-  // Requests written to the socket but not yet taken by the kernel: beyond
-  // this many bytes a request fails at once ("write queue full") instead of
-  // queueing without bound behind a server that stopped reading.
+  // Requests written to the socket but not yet taken by the kernel: a request
+  // that would take them past this many bytes fails at once ("write queue
+  // full", ErrorKind::kResourceExhausted) instead of queueing without bound
+  // behind a server that stopped reading. An empty queue takes any request.
   std::size_t max_write_queue_bytes = 4u << 20;
 };
 

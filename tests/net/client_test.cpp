@@ -1,0 +1,116 @@
+// The C++ client against a server that says Hello and then stops reading:
+// its requests pile up in the kernel, then in the client's write queue, and
+// the queue's bound turns the next request into an immediate error instead
+// of unbounded memory.
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <array>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+#include "gmr/client/client.h"
+#include "gmr/wire/framing.h"
+#include "net_test_util.h"
+
+namespace gmr::test {
+namespace {
+
+// Accepts one connection, answers its Hello, then reads nothing more until
+// release().
+class StubbornServer {
+ public:
+  StubbornServer() {
+    listen_fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    EXPECT_EQ(::bind(listen_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+    EXPECT_EQ(::listen(listen_fd_, 1), 0);
+    socklen_t len = sizeof addr;
+    ::getsockname(listen_fd_, reinterpret_cast<sockaddr*>(&addr), &len);
+    port_ = ntohs(addr.sin_port);
+    thread_ = std::thread([this] { serve(); });
+  }
+  ~StubbornServer() {
+    release();
+    thread_.join();
+    ::close(listen_fd_);
+  }
+  std::uint16_t port() const { return port_; }
+  void release() {
+    std::lock_guard lock(m_);
+    released_ = true;
+    cv_.notify_all();
+  }
+
+ private:
+  static bool read_exact(int fd, char* out, std::size_t n) {
+    while (n > 0) {
+      const ssize_t got = ::recv(fd, out, n, 0);
+      if (got <= 0) return false;
+      out += got;
+      n -= static_cast<std::size_t>(got);
+    }
+    return true;
+  }
+  void serve() {
+    const int fd = ::accept(listen_fd_, nullptr, nullptr);
+    if (fd < 0) return;
+    std::array<std::uint8_t, wire::kLengthPrefixBytes> prefix{};
+    std::string body;
+    if (read_exact(fd, reinterpret_cast<char*>(prefix.data()), prefix.size())) {
+      body.resize(wire::read_length_prefix(prefix));
+      pb::ClientMessage hello;
+      if (read_exact(fd, body.data(), body.size()) && hello.ParseFromString(body)) {
+        pb::ServerMessage reply;
+        reply.set_request_id(hello.request_id());
+        reply.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+        reply.mutable_hello()->set_heartbeat_interval_ms(60000);
+        reply.mutable_hello()->set_idle_timeout_ms(60000);
+        const std::string bytes = wire::frame_message(reply).value();
+        (void)::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
+      }
+    }
+    std::unique_lock lock(m_);
+    cv_.wait(lock, [&] { return released_; });
+    ::close(fd);
+  }
+
+  int listen_fd_ = -1;
+  std::uint16_t port_ = 0;
+  std::thread thread_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool released_ = false;
+};
+
+TEST(ClientWriteQueue, IsBoundedWhenTheServerStopsReading) {
+  StubbornServer server;
+  client::ClientOptions o;
+  o.host = "127.0.0.1";
+  o.port = server.port();
+  o.timeout = std::chrono::milliseconds(20);  // no reply will come: each request gives up quickly
+  o.max_write_queue_bytes = 1 << 20;
+  auto c = client::Client::connect(o);
+  ASSERT_TRUE(c.ok()) << c.error().to_string();
+  const std::string big(256 << 10, 'x');  // 256 KiB of motion name per request
+  int requests = 0;
+  Result<client::ViewState> last = make_error("not sent");
+  // The kernel's buffers take a few MiB; then the queue fills to its bound.
+  for (; requests < 400; ++requests) {
+    last = (*c)->create_view(big);
+    if (!last.ok() && last.error().kind == ErrorKind::kResourceExhausted) break;
+  }
+  ASSERT_LT(requests, 400) << "the write queue never refused a request: " << last.error().to_string();
+  EXPECT_NE(last.error().message.find("write queue full"), std::string::npos) << last.error().message;
+  EXPECT_TRUE((*c)->connected());  // refused, not disconnected
+  server.release();
+}
+
+}  // namespace
+}  // namespace gmr::test
