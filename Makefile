@@ -2,7 +2,7 @@
 #   make run    installs what is missing, builds, and runs the main job
 #   make test   installs what is missing, builds, and runs every test
 BUILD ?= build
-ASAN_BUILD ?= build-asan
+ASAN_BUILD ?= build-sanitize
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
@@ -24,9 +24,12 @@ test-unit: build
 	@cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 
 # The core, readers, operations and server tests under AddressSanitizer and
-# UndefinedBehaviorSanitizer (Debug: slow paths check fewer frames there).
+# UndefinedBehaviorSanitizer (Debug: slow paths check fewer frames there),
+# built with clang: so gmr builds with both of Debian's compilers, and the
+# tree is ready for clang's coverage-guided fuzzing.
 test-sanitize: setup
 	@cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Debug -DGMR_SANITIZE=ON \
+	  -DCMAKE_CXX_COMPILER=clang++ \
 	  -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_NET=ON -DGMR_BUILD_TOOLS=OFF >/dev/null
 	@cmake --build $(ASAN_BUILD) -j $(JOBS) --target gmr_sanitize_tests
 	@cd $(ASAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize

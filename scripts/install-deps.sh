@@ -16,6 +16,7 @@ packages=(
   libprotobuf-dev protobuf-compiler # the wire protocol
   gnuplot-nox               # the Figure 4 plot (gmr-bench figure4)
   python3                   # the layout check (tests/layout/check_layout.py)
+  clang libclang-rt-14-dev  # the sanitizer build uses clang (gmr builds with GCC and clang)
 )
 
 missing=()

@@ -31,7 +31,7 @@ int main(int argc, char** argv) {
   long long write_ms = cfg.write_timeout.count();
   app.add_option("--library", library_dir, "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library)");
   app.add_option("--port", cfg.port, "TCP port (0: any free port)")->capture_default_str();
-  app.add_option("--udp-port", cfg.udp_port, "UDP port (default: the TCP port number; 0: any free port)");
+  app.add_option("--udp-port", cfg.udp_port, "UDP port (default: the TCP port number, or any free port with --port 0; 0: any free port)");
   app.add_option("--bind", cfg.bind_address, "Address to listen on (loopback unless told otherwise)")->capture_default_str();
   app.add_option("--max-message-bytes", cfg.max_message_bytes, "Largest message either way")->capture_default_str();
   app.add_option("--max-connections", cfg.max_connections, "Connections served at once")->capture_default_str();

@@ -6,23 +6,20 @@
 #include <system_error>
 #include <thread>
 
-#include "gmr/ops/convert.h"
+#include "gmr/core/file_util.h"
 #include "gmr/demo/demo_library.h"
+#include "gmr/ops/convert.h"
 #include "gmr/io/motion_file.h"
 
 namespace gmr::server {
 namespace fs = std::filesystem;
 namespace {
 
-std::string lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
-
 struct Job {
   fs::path path;
   LoadOptions options;
   std::string name;
+  std::string source;  // the path relative to the library folder: clients never see the server's own paths
 };
 
 Result<LibraryEntry> load_one(const Job& job) {
@@ -33,7 +30,7 @@ Result<LibraryEntry> load_one(const Job& job) {
   if (auto s = pre->validate(); !s.ok()) return s.error();
   if (pre->frame_count == 0) return Error{job.path.string(), 0, 0, "the motion has no frames"};
   if (!(pre->frame_time > 0.0)) return Error{job.path.string(), 0, 0, "the motion has no frame time"};
-  return LibraryEntry{job.name, job.path.string(), std::make_shared<const Motion>(std::move(pre).value())};
+  return LibraryEntry{job.name, job.source, std::make_shared<const Motion>(std::move(pre).value())};
 }
 
 }  // namespace
@@ -52,11 +49,12 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
   if (ec) return Error{dir.string(), 0, 0, "cannot list the folder: " + ec.message()};
   std::sort(files.begin(), files.end());
   for (const auto& f : files) {
-    const std::string ext = lower(f.extension().string());
+    const std::string ext = lower_extension(f);
     // The name as found under dir (lexically: relative() would resolve a
     // symbolic link and name its target). An .amc's skeleton is found by
     // load_motion: the .asf of its folder, or of its subject among several.
-    Job job{f, {}, f.lexically_relative(dir).replace_extension().generic_string()};
+    const fs::path relative = f.lexically_relative(dir);
+    Job job{f, {}, fs::path(relative).replace_extension().generic_string(), relative.generic_string()};
     if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") {
       jobs.push_back(std::move(job));
     } else {

@@ -145,8 +145,17 @@ void Server::start() {
   if (ec) throw std::runtime_error("cannot bind TCP " + d.cfg.bind_address + ":" + std::to_string(d.cfg.port) + ": " + ec.message());
   d.acceptor.listen(net::socket_base::max_listen_connections);
   d.tcp_port = d.acceptor.local_endpoint().port();
-  const std::uint16_t udp_port = d.cfg.udp_port < 0 ? d.tcp_port : static_cast<std::uint16_t>(d.cfg.udp_port);
+  // The same number as TCP only when that number was chosen: an ephemeral TCP
+  // port's number may well be taken for UDP, so then UDP gets its own.
+  const std::uint16_t udp_port = d.cfg.udp_port >= 0 ? static_cast<std::uint16_t>(d.cfg.udp_port)
+                                 : d.cfg.port == 0   ? std::uint16_t{0}
+                                                     : d.tcp_port;
   d.udp.open(address, udp_port);
+  if (address.is_unspecified()) {
+    spdlog::warn("listening on every interface ({}): any host that can reach this machine can connect and "
+                 "subscribe; use --bind 127.0.0.1 (the default) to serve this machine only",
+                 d.cfg.bind_address);
+  }
   d.started = true;
   d.accept_loop();
   d.udp.start();

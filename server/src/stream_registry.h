@@ -17,9 +17,9 @@ class StreamRegistry {
  public:
   StreamRegistry(net::io_context& io, StreamCounters& counters) : io_(io), counters_(counters) {}
 
-  // The key naming everything that shapes a stream's bytes: the motion and
-  // its joint structure, the viewpoint, the joints, precision, orientations
-  // and the schedule.
+  // The key naming everything that shapes a stream's bytes: the motion, its
+  // skeleton version and joint structure, the viewpoint, the joints,
+  // precision, orientations and the schedule.
   static std::string share_key(const std::string& motion_name, const ViewContent& content,
                                const Stream::Settings& settings);
 

@@ -5,6 +5,7 @@
 
 #include <cmath>
 
+#include "gmr/wire/framing.h"
 #include "request_handler.h"
 #include "targets.h"
 
@@ -56,6 +57,13 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
                        " is not within [" + std::to_string(kMinRateHz) + ", " + std::to_string(kMaxRateHz) + "] Hz"};
   }
   s.skip_repeats = r.skip_repeats();
+  // proto3 keeps enum values it does not know: refuse them rather than guess.
+  if (!pb::Transport_IsValid(r.transport()) || !pb::Precision_IsValid(r.precision())) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "unknown transport " + std::to_string(r.transport()) +
+                                                   " or precision " + std::to_string(r.precision()) +
+                                                   " (this server speaks protocol version " +
+                                                   std::to_string(wire::kProtocolVersion) + ")"};
+  }
   const bool use_udp = r.transport() == pb::TRANSPORT_UDP;
   if (use_udp && !udp_->endpoint) {
     return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,

@@ -29,6 +29,10 @@ TEST(Library, LoadsTheSharedDataAndReportsRejectedFiles) {
   for (const auto& e : lib->entries) {
     EXPECT_EQ(e.motion->convention, Convention::kPreRotation) << e.name;
     EXPECT_GT(e.motion->frame_count, 0u) << e.name;
+    // Clients see where a motion came from relative to the library, never the server's own paths.
+    EXPECT_FALSE(std::filesystem::path(e.source).is_absolute()) << e.source;
+    EXPECT_EQ(e.source.find(".."), std::string::npos) << e.source;
+    EXPECT_TRUE(std::filesystem::exists(data_dir() / e.source)) << e.source;
   }
   // The truncated files are rejected, each with a located reason.
   auto rejected = [&](const std::string& file) {

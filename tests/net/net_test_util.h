@@ -29,7 +29,7 @@ std::filesystem::path cmu_file();
 // True in Debug and sanitizer builds, where the loopback machinery may be too
 // slow to deliver every frame of a 1-2 kHz stream; tests then check that each
 // frame is delivered or counted as dropped instead of that none is dropped.
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || !defined(NDEBUG)
+#if defined(GMR_SANITIZED) || !defined(NDEBUG)
 inline constexpr bool kSlowBuild = true;
 #else
 inline constexpr bool kSlowBuild = false;

@@ -260,6 +260,30 @@ TEST(BadInput, ViewAndConnectionLimits) {
   EXPECT_TRUE(c->list_motions().ok());
 }
 
+// proto3 keeps enum values it does not know; the server refuses them.
+TEST(BadInput, UnknownTransportOrPrecisionIsABadRequest) {
+  TestServer s;
+  RawConnection c(s.port());
+  c.handshake();
+  auto create = request(2);
+  create.mutable_create_view()->set_motion("walk");
+  c.send(create);
+  const auto view = c.reply();
+  ASSERT_TRUE(view && view->has_view());
+  for (const auto& [transport, precision] : {std::pair{7, 0}, std::pair{0, 9}, std::pair{-1, 0}}) {
+    auto m = request(3);
+    m.mutable_subscribe()->set_view_id(view->view().view_id());
+    m.mutable_subscribe()->set_transport(static_cast<pb::Transport>(transport));
+    m.mutable_subscribe()->set_precision(static_cast<pb::Precision>(precision));
+    c.send(m);
+    const auto r = c.reply();
+    EXPECT_EQ(error_of(r), pb::ERROR_CODE_BAD_REQUEST) << transport << " " << precision;
+    if (r) {
+      EXPECT_NE(r->error().message().find("unknown transport"), std::string::npos) << r->error().message();
+    }
+  }
+}
+
 TEST(BadInput, UdpDatagramsWithWrongTokensAreIgnored) {
   TestServer s;
   auto c = s.connect();

@@ -181,6 +181,39 @@ TEST(Streaming, SharedStreamsComputeAndEncodeOncePerTick) {
   EXPECT_EQ(st.frames_computed, st.frames_encoded);
 }
 
+// Two views of one motion with the same content but different skeleton
+// versions (one was edited and changed back) do not share a stream: every
+// frame carries its own view's version.
+TEST(Streaming, SharedStreamsNeverMixSkeletonVersions) {
+  TestServer s;
+  auto a = s.connect();
+  auto b = s.connect();
+  ASSERT_TRUE(a && b);
+  auto va = a->create_view("turn");
+  auto vb = b->create_view("turn");
+  ASSERT_TRUE(va.ok() && vb.ok());
+  auto edited = a->set_coordinates(va->id, "");  // world to world: same content, a new version
+  ASSERT_TRUE(edited.ok()) << edited.error().to_string();
+  ASSERT_NE(edited->skeleton_version, vb->skeleton_version);
+  client::SubscribeOptions o;
+  o.shared = true;
+  o.loop = true;
+  o.rate_hz = 500;
+  Sink sa, sb;
+  sa.until = [](const ReceivedFrame& f) { return f.sequence >= 3; };
+  sb.until = [](const ReceivedFrame& f) { return f.sequence >= 3; };
+  auto suba = a->subscribe(va->id, o, sa.on_frame(), sa.on_end());
+  ASSERT_TRUE(suba.ok());
+  ASSERT_TRUE(sa.reached.wait().has_value());
+  auto subb = b->subscribe(vb->id, o, sb.on_frame(), sb.on_end());
+  ASSERT_TRUE(subb.ok());
+  EXPECT_FALSE(subb->joined_running);
+  EXPECT_NE(subb->stream_id, suba->stream_id);
+  ASSERT_TRUE(sb.reached.wait().has_value());
+  for (const auto& f : sa.copy()) EXPECT_EQ(f.skeleton_version, edited->skeleton_version);
+  for (const auto& f : sb.copy()) EXPECT_EQ(f.skeleton_version, vb->skeleton_version);
+}
+
 TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {
   server::ServerConfig cfg;
   cfg.socket_send_buffer = 8192;  // fill the kernel quickly

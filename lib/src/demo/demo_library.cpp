@@ -169,8 +169,9 @@ std::vector<NamedMotion> demo_library() {
   using Gen = void (*)(double, Pose&, const Skeleton&);
   const std::pair<const char*, Gen> motions[] = {{"walk", walk}, {"wave", wave}, {"jump", jump}, {"turn", turn}};
   std::vector<NamedMotion> out;
-  for (const auto& [name, gen] : motions) {
-    out.push_back({name, generate(s, 240, [&](double t, Pose& p) { gen(t, p, s); })});
+  for (const auto& m : motions) {
+    const Gen gen = m.second;  // a plain variable: lambdas may not capture structured bindings (clang 14)
+    out.push_back({m.first, generate(s, 240, [&](double t, Pose& p) { gen(t, p, s); })});
   }
   return out;
 }

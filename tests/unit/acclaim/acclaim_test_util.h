@@ -95,7 +95,7 @@ inline AmcMotion must_parse_amc(const std::string& text, const AsfSkeleton& s, W
 // ~50x slower: there the corpus-wide tests keep the first kSanitizerFrames
 // frames of each take (and walk prefixes in bigger steps). The Release run
 // (`make test-unit`) checks every frame.
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(GMR_SANITIZED)
 inline constexpr bool kSanitized = true;
 #else
 inline constexpr bool kSanitized = false;

@@ -13,7 +13,7 @@ namespace gmr::test {
 // kinematics of every frame of the corpus takes minutes there); Release
 // builds check every frame. Parsing and value comparisons always cover every
 // frame.
-#if defined(__SANITIZE_ADDRESS__) || !defined(NDEBUG)
+#if defined(GMR_SANITIZED) || !defined(NDEBUG)
 inline constexpr bool kSlowBuild = true;
 inline constexpr std::size_t kMaxFramesForPositions = 40;
 #else

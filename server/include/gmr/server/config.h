@@ -12,7 +12,7 @@ namespace gmr::server {
 struct ServerConfig {
   std::string bind_address = "127.0.0.1";  // loopback unless told to serve a network
   std::uint16_t port = 0;                  // TCP; 0 picks a free port (read it back with Server::tcp_port)
-  int udp_port = -1;                       // -1: the TCP port number; 0: any free port
+  int udp_port = -1;                       // -1: the TCP port number (any free port when port is 0); 0: any free port
   std::string server_name = "gmr-server";
 
   std::uint32_t max_message_bytes = wire::kDefaultMaxMessageBytes;  // either direction

@@ -13,7 +13,7 @@ namespace gmr::server {
 
 struct LibraryEntry {
   std::string name;                     // unique: path relative to the folder without extension, '/'-separated
-  std::string source;                   // the file it came from, or "builtin"
+  std::string source;                   // the file it came from, relative to the library folder, or "builtin"
   std::shared_ptr<const Motion> motion;  // pre-rotation (GMR), validated
 };
 
