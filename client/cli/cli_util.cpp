@@ -55,4 +55,10 @@ void print_warnings(const Warnings& warnings) {
   for (const Error& w : warnings) std::fprintf(stderr, "gmr: warning: %s\n", w.to_string().c_str());
 }
 
+std::string tree_indent(int depth) {
+  constexpr int kMaxIndentLevels = 32;
+  if (depth <= kMaxIndentLevels) return std::string(2 * static_cast<std::size_t>(depth), ' ');
+  return std::string(2 * kMaxIndentLevels, ' ') + "[depth " + std::to_string(depth) + "] ";
+}
+
 }  // namespace gmr::cli

@@ -48,6 +48,10 @@ void print_warnings(const Warnings& warnings);
 // The extension of `path` in lower case: gmr::lower_extension.
 using ::gmr::lower_extension;
 
+// Indentation of a joint at `depth` in a printed tree: two spaces a level up
+// to 32 levels, then "[depth N] " so a deep chain prints in linear size.
+std::string tree_indent(int depth);
+
 // Splits "A,B,C" into names (empty items are an error).
 std::vector<std::string> split_list(std::string_view text);
 

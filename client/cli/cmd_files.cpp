@@ -72,7 +72,7 @@ void run_info(const InfoOptions& o) {
     const int j = stack.back();
     stack.pop_back();
     const Joint& joint = sk.joint(j);
-    out += "  " + std::string(static_cast<std::size_t>(2 * sk.depth(j)), ' ') + joint.name;
+    out += "  " + tree_indent(sk.depth(j)) + joint.name;
     if (!joint.channels.empty()) {
       out += "  [";
       for (std::size_t c = 0; c < joint.channels.size(); ++c) {

@@ -97,7 +97,8 @@ void run_skeleton(const ServerOptions& s, const std::string& motion) {
       if (!channels.empty()) channels += ' ';
       channels += channel_name(ch);
     }
-    std::printf("%*s%s  offset %s %s %s%s%s\n", 2 * sk.depth(j), "", jt.name.c_str(), format_double(jt.offset.x()).c_str(),
+    std::printf("%s%s  offset %s %s %s%s%s\n", tree_indent(sk.depth(j)).c_str(), jt.name.c_str(),
+                format_double(jt.offset.x()).c_str(),
                 format_double(jt.offset.y()).c_str(), format_double(jt.offset.z()).c_str(),
                 channels.empty() ? "" : "  channels ", channels.c_str());
   }

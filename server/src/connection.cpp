@@ -10,7 +10,7 @@
 namespace gmr::server {
 
 Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits)
-    : socket_(std::move(socket)), id_(id), limits_(limits), watchdog_(io), read_gate_(io) {
+    : socket_(std::move(socket)), id_(id), limits_(limits), watchdog_(io) {
   boost::system::error_code ec;
   auto ep = socket_.remote_endpoint(ec);
   peer_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
@@ -26,7 +26,7 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
   }
   last_read_ = last_write_ = Clock::now();
   spdlog::info("conn {}: connected from {}", id_, peer_);
-  net::co_spawn(socket_.get_executor(), read_loop(shared_from_this()), net::detached);
+  read_prefix();
   arm_watchdog();
 }
 
@@ -43,7 +43,6 @@ void Connection::stop(const std::string& reason) {
   socket_.shutdown(tcp::socket::shutdown_both, ec);
   socket_.close(ec);
   watchdog_.cancel();
-  read_gate_.cancel();
   if (on_closed_) on_closed_(id_);
 }
 
@@ -159,7 +158,10 @@ void Connection::flush() {
       return;
     }
     self->last_write_ = Clock::now();
-    if (self->reply_bytes_ <= self->limits_.max_reply_queue_bytes) self->read_gate_.cancel();
+    if (self->read_paused_ && self->reply_bytes_ <= self->limits_.max_reply_queue_bytes) {
+      self->read_paused_ = false;
+      self->read_prefix();
+    }
     self->flush();
   });
 }
@@ -194,43 +196,47 @@ void Connection::arm_watchdog() {
   });
 }
 
-net::awaitable<void> Connection::read_loop(std::shared_ptr<Connection> self) {
-  std::array<std::uint8_t, wire::kLengthPrefixBytes> prefix{};
-  std::string body;
-  for (;;) {
-    boost::system::error_code ec;
-    // Back-pressure: a client that sends requests faster than it reads the
-    // replies waits here; its replies never pile up beyond the cap.
-    while (!stopped_ && reply_bytes_ > limits_.max_reply_queue_bytes) {
-      read_gate_.expires_at(Clock::time_point::max());
-      co_await read_gate_.async_wait(net::redirect_error(net::use_awaitable, ec));
-    }
-    if (stopped_) co_return;
-    co_await net::async_read(socket_, net::buffer(prefix), net::redirect_error(net::use_awaitable, ec));
-    if (stopped_) co_return;
-    if (ec) {
-      stop(ec == net::error::eof ? std::string("the client closed the connection") : "read failed: " + ec.message());
-      co_return;
-    }
-    last_read_ = Clock::now();
-    const std::uint32_t length = wire::read_length_prefix(prefix);
-    if (auto s = wire::check_length(length, limits_.max_message_bytes); !s.ok()) {
-      spdlog::warn("conn {}: bad length prefix: {}; closing", id_, s.error().message);
-      stop("bad length prefix");
-      co_return;
-    }
-    body.resize(length);
-    const std::size_t got =
-        co_await net::async_read(socket_, net::buffer(body), net::redirect_error(net::use_awaitable, ec));
-    if (stopped_) co_return;
-    if (ec) {
-      spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, got, length);
-      stop(ec == net::error::eof ? std::string("truncated message") : "read failed: " + ec.message());
-      co_return;
-    }
-    last_read_ = Clock::now();
-    handler_->on_message(body);
+void Connection::read_prefix() {
+  if (stopped_) return;
+  // Back-pressure: a client that sends requests faster than it reads the
+  // replies is not read until they drain; its replies never pile up beyond the cap.
+  if (reply_bytes_ > limits_.max_reply_queue_bytes) {
+    read_paused_ = true;
+    return;
   }
+  static_assert(std::tuple_size_v<decltype(prefix_)> == wire::kLengthPrefixBytes);
+  net::async_read(socket_, net::buffer(prefix_), [self = shared_from_this()](const boost::system::error_code& ec,
+                                                                             std::size_t) { self->on_prefix(ec); });
+}
+
+void Connection::on_prefix(const boost::system::error_code& ec) {
+  if (stopped_) return;
+  if (ec) {
+    stop(ec == net::error::eof ? std::string("the client closed the connection") : "read failed: " + ec.message());
+    return;
+  }
+  last_read_ = Clock::now();
+  const std::uint32_t length = wire::read_length_prefix(prefix_);
+  if (auto s = wire::check_length(length, limits_.max_message_bytes); !s.ok()) {
+    spdlog::warn("conn {}: bad length prefix: {}; closing", id_, s.error().message);
+    stop("bad length prefix");
+    return;
+  }
+  body_.resize(length);
+  net::async_read(socket_, net::buffer(body_), [self = shared_from_this()](const boost::system::error_code& e,
+                                                                           std::size_t got) { self->on_body(e, got); });
+}
+
+void Connection::on_body(const boost::system::error_code& ec, std::size_t got) {
+  if (stopped_) return;
+  if (ec) {
+    spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, got, body_.size());
+    stop(ec == net::error::eof ? std::string("truncated message") : "read failed: " + ec.message());
+    return;
+  }
+  last_read_ = Clock::now();
+  handler_->on_message(body_);
+  read_prefix();
 }
 
 }  // namespace gmr::server

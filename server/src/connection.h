@@ -3,7 +3,7 @@
 // one write in flight, and watches the link. It knows nothing of views,
 // streams or the protocol's requests.
 //
-//   socket --read loop--> Handler::on_message(body)
+//   socket --reads--> Handler::on_message(body)
 //   send(reply) -------+
 //   push_frame(key) ---+--> outbox --one async_write at a time--> socket
 //                          replies in order, then frames; per key at most
@@ -15,6 +15,7 @@
 // frames are latest-wins per key. Everything runs on the I/O thread.
 #pragma once
 
+#include <array>
 #include <deque>
 #include <functional>
 #include <map>
@@ -82,7 +83,12 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
     std::shared_ptr<const std::string> body;
   };
 
-  net::awaitable<void> read_loop(std::shared_ptr<Connection> self);
+  // The read chain: prefix, then body, then the handler, then the next
+  // prefix; it pauses while replies wait above max_reply_queue_bytes and
+  // flush() resumes it.
+  void read_prefix();
+  void on_prefix(const boost::system::error_code& ec);
+  void on_body(const boost::system::error_code& ec, std::size_t got);
   void flush();
   void arm_watchdog();
   std::uint64_t queued_bytes() const;
@@ -96,6 +102,9 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   std::function<void(std::uint64_t)> on_closed_;
   bool stopped_ = false;
   bool close_after_flush_ = false;
+  bool read_paused_ = false;
+  std::array<std::uint8_t, 4> prefix_{};
+  std::string body_;
 
   std::deque<std::shared_ptr<const std::string>> replies_;
   std::uint64_t reply_bytes_ = 0;
@@ -106,7 +115,6 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   std::vector<std::string> hold_heads_;
   Clock::time_point write_started_{}, last_read_{}, last_write_{};
   net::steady_timer watchdog_;
-  net::steady_timer read_gate_;
   ConnectionCounters counters_;
 };
 

@@ -43,9 +43,11 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
   const std::size_t stride = static_cast<std::size_t>(skeleton.value_count());
   std::unordered_map<std::string, int> index;
   std::vector<std::size_t> offset(skeleton.bones.size());
+  std::size_t next_offset = 0;  // value_offset(b), summed as we go (it is linear in b)
   for (std::size_t b = 0; b < skeleton.bones.size(); ++b) {
     index.emplace(to_lower(skeleton.bones[b].name), static_cast<int>(b));
-    offset[b] = static_cast<std::size_t>(skeleton.value_offset(static_cast<int>(b)));
+    offset[b] = next_offset;
+    next_offset += skeleton.bones[b].dofs.size();
   }
   // Each frame costs stride values even when the file lists few bones; bound
   // the total by the text size so a file of bare frame numbers cannot make us

@@ -42,15 +42,24 @@ Result<Skeleton> Skeleton::create(std::vector<Joint> joints) {
   Skeleton s;
   s.joints_ = std::move(joints);
   s.channel_offsets_.resize(static_cast<std::size_t>(n));
+  s.depth_.resize(static_cast<std::size_t>(n));
+  s.root_.resize(static_cast<std::size_t>(n));
   std::vector<int> child_count(static_cast<std::size_t>(n), 0);
+  // Parents come before children, so one pass gives every depth and root.
   for (int j = 0; j < n; ++j) {
-    const Joint& joint = s.joints_[static_cast<std::size_t>(j)];
-    s.channel_offsets_[static_cast<std::size_t>(j)] = s.channel_count_;
+    const auto u = static_cast<std::size_t>(j);
+    const Joint& joint = s.joints_[u];
+    s.channel_offsets_[u] = s.channel_count_;
     s.channel_count_ += static_cast<int>(joint.channels.size());
     if (joint.parent == kNoParent) {
       s.roots_.push_back(j);
+      s.depth_[u] = 0;
+      s.root_[u] = j;
     } else {
-      ++child_count[static_cast<std::size_t>(joint.parent)];
+      const auto p = static_cast<std::size_t>(joint.parent);
+      ++child_count[p];
+      s.depth_[u] = s.depth_[p] + 1;
+      s.root_[u] = s.root_[p];
     }
   }
   s.child_begin_.assign(static_cast<std::size_t>(n) + 1, 0);
@@ -77,19 +86,9 @@ std::span<const int> Skeleton::children(int j) const {
   return std::span<const int>(child_list_).subspan(b, e - b);
 }
 
-int Skeleton::root_of(int j) const {
-  while (joint(j).parent != kNoParent) j = joint(j).parent;
-  return j;
-}
+int Skeleton::root_of(int j) const { return root_[static_cast<std::size_t>(j)]; }
 
-int Skeleton::depth(int j) const {
-  int d = 0;
-  while (joint(j).parent != kNoParent) {
-    j = joint(j).parent;
-    ++d;
-  }
-  return d;
-}
+int Skeleton::depth(int j) const { return depth_[static_cast<std::size_t>(j)]; }
 
 Result<std::vector<int>> find_joints(const Skeleton& skeleton, std::span<const std::string> names) {
   std::vector<int> out;

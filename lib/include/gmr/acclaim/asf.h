@@ -63,7 +63,8 @@ struct AsfSkeleton {
   int find(std::string_view name) const;
   // Number of AMC values per frame (sum of every bone's dof count).
   int value_count() const;
-  // Index of bone b's first value within one AMC frame.
+  // Index of bone b's first value within one AMC frame (linear in b: loops
+  // over bones sum dof counts instead).
   int value_offset(int b) const;
 };
 

@@ -59,9 +59,9 @@ class Skeleton {
   const std::vector<int>& roots() const { return roots_; }
   // Children of j, in index order.
   std::span<const int> children(int j) const;
-  // The root of the tree that holds j.
+  // The root of the tree that holds j (constant time).
   int root_of(int j) const;
-  // Number of edges from j up to its root.
+  // Number of edges from j up to its root (constant time).
   int depth(int j) const;
 
   // Index of j's first channel within one frame's values; channels of joint j
@@ -74,6 +74,8 @@ class Skeleton {
   std::vector<Joint> joints_;
   std::vector<int> roots_;
   std::vector<int> channel_offsets_;
+  std::vector<int> depth_;  // per joint: edges up to its root
+  std::vector<int> root_;   // per joint: the root of its tree
   std::vector<int> child_begin_;  // CSR: children of j are child_list_[child_begin_[j] .. child_begin_[j+1])
   std::vector<int> child_list_;
   int channel_count_ = 0;
