@@ -96,13 +96,16 @@ struct ConvertOptions {
   std::string in;
   std::string out;
   std::string asf;
+  bool force = false;  // .amc output: replace an .asf beside it that holds another skeleton
 };
 
 void run_convert(const ConvertOptions& o) {
   if (is_marker_file(o.in)) return run_marker_convert(o.in, o.out);  // markers -> .trc: cmd_markers.cpp
   Warnings warnings;
   const Motion m = load(o.in, o.asf, warnings);
-  check(save_motion(m, o.out));
+  LoadOptions save;
+  save.replace_asf = o.force;
+  check(save_motion(m, o.out, save));
   print_warnings(warnings);
 }
 
@@ -167,6 +170,7 @@ void add_file_commands(CLI::App& app) {
     cmd->add_option("IN", o->in, "Input motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
     cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr); .trc for marker input")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc input (default: the single .asf beside it)");
+    cmd->add_flag("--force", o->force, "For .amc output: replace an existing .asf that holds another skeleton");
     cmd->callback([o] { run_convert(*o); });
   }
   {

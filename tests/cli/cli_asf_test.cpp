@@ -86,6 +86,32 @@ TEST_F(CliAsf, ConvertToGmrAndToAmc) {
   }
 }
 
+// An .amc output is written with its .asf as a pair: an .asf beside it that
+// holds another skeleton is kept unless --force, and a failure writes neither.
+TEST_F(CliAsf, AmcOutputNeverClobbersAnotherSkeletonOrHalfWritesThePair) {
+  GMR_REQUIRE_DATA();
+  const std::string in = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
+  ASSERT_TRUE(write_file_atomic(dir_ / "run.asf", ":version 1.10\n# another subject's skeleton\n").ok());
+  expect_one_line_error("convert " + in + " " + path("run.amc"), "holds another skeleton");
+  EXPECT_EQ(read_file(dir_ / "run.asf").value(), ":version 1.10\n# another subject's skeleton\n");
+  EXPECT_FALSE(fs::exists(dir_ / "run.amc"));
+  ASSERT_EQ(gmr("convert " + in + " " + path("run.amc") + " --force").status, 0);
+  const std::string written = read_file(dir_ / "run.asf").value();
+  EXPECT_NE(written.find(":bonedata"), std::string::npos);
+  // The same skeleton again needs no --force.
+  const Outcome again = gmr("convert " + in + " " + path("run.amc"));
+  EXPECT_EQ(again.status, 0) << again.err;
+  EXPECT_EQ(read_file(dir_ / "run.asf").value(), written);
+
+  // The .amc cannot be written (a folder stands there): no .asf appears either.
+  fs::create_directories(dir_ / "blocked.amc");
+  expect_one_line_error("convert " + in + " " + path("blocked.amc"), "blocked.amc");
+  EXPECT_FALSE(fs::exists(dir_ / "blocked.asf"));
+  for (const auto& e : fs::directory_iterator(dir_)) {
+    EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos) << "temporary left: " << e.path();
+  }
+}
+
 // A 40,000-bone chain: reading it and printing its tree are linear (they
 // once took 15 s and printed 1.6 GB of indentation).
 TEST_F(CliAsf, ADeepChainLoadsAndPrintsInLinearSize) {

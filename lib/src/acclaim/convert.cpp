@@ -247,15 +247,30 @@ Result<AcclaimModel> gmr_to_acclaim(const Motion& motion) {
 }
 
 
-Status write_asf_amc(const Motion& motion, const std::filesystem::path& asf, const std::filesystem::path& amc) {
+Status write_asf_amc(const Motion& motion, const std::filesystem::path& asf, const std::filesystem::path& amc,
+                     bool replace_other_asf) {
   auto model = gmr_to_acclaim(motion);
   if (!model) return model.error();
   // Format both before writing either, so a failure leaves no half-written pair.
   const std::string asf_text = format_asf(model->skeleton);
   auto amc_text = format_amc(model->skeleton, model->motion);
   if (!amc_text) return amc_text.error();
-  if (auto s = write_file_atomic(asf, asf_text); !s) return s;
-  return write_file_atomic(amc, *amc_text);
+  if (!replace_other_asf) {
+    std::error_code ec;
+    if (std::filesystem::exists(asf, ec)) {
+      auto old = read_file(asf);
+      if (!old || *old != asf_text) {
+        return Error{asf.string(), 0, 0,
+                     "exists and holds another skeleton (other .amc files may use it): not replaced; write the "
+                     "skeleton elsewhere, or replace it on purpose",
+                     ErrorKind::kFailedPrecondition};
+      }
+    }
+  }
+  // The skeleton is renamed into place first: an .amc never stands beside a
+  // skeleton older than itself.
+  const FileContent pair[] = {{asf, asf_text}, {amc, *amc_text}};
+  return write_files_atomic(pair);
 }
 
 

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <vector>
 
 #include "core/number_format.h"
 
@@ -63,12 +64,16 @@ Result<std::string> read_file(const fs::path& path) {
   return bytes;
 }
 
-Status write_file_atomic(const fs::path& path, std::string_view bytes) {
+namespace {
+
+// Phase one of an atomic write: `bytes` in a synced temporary beside `path`
+// (same directory, so the rename is atomic), with the permissions of the file
+// it will replace. Nothing at `path` changes.
+Result<fs::path> write_temporary(const fs::path& path, std::string_view bytes) {
   static std::atomic<unsigned> counter{0};
   if (path.empty() || !path.has_filename()) return file_error(path, "cannot write file", EINVAL);
   const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
-  // The temporary lives in the target's directory so that rename() is atomic
-  // (same file system); its name is unique per process and call.
+  // Unique per process and call.
   std::string tmp_name = ".";
   tmp_name += path.filename().string();
   tmp_name += ".tmp.";
@@ -85,7 +90,7 @@ Status write_file_atomic(const fs::path& path, std::string_view bytes) {
   Fd f;
   f.fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, mode);
   if (f.fd < 0) return file_error(path, "cannot create temporary file in " + dir.string(), errno);
-  auto fail = [&](std::string_view what, int err) -> Status {
+  auto fail = [&](std::string_view what, int err) -> Error {
     ::close(f.fd);
     f.fd = -1;
     ::unlink(tmp.c_str());
@@ -109,15 +114,48 @@ Status write_file_atomic(const fs::path& path, std::string_view bytes) {
     return file_error(path, "cannot close file", err);
   }
   f.fd = -1;
+  return tmp;
+}
+
+// Phase two: the temporary replaces `path` (or is removed on failure).
+Status rename_into_place(const fs::path& tmp, const fs::path& path) {
   if (::rename(tmp.c_str(), path.c_str()) != 0) {
     const int err = errno;
     ::unlink(tmp.c_str());
     return file_error(path, "cannot replace file", err);
   }
   // Make the rename itself durable; failure here leaves a complete file, so it is not reported.
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
   Fd d;
   d.fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (d.fd >= 0) (void)::fsync(d.fd);
+  return Ok{};
+}
+
+}  // namespace
+
+Status write_file_atomic(const fs::path& path, std::string_view bytes) {
+  auto tmp = write_temporary(path, bytes);
+  if (!tmp) return tmp.error();
+  return rename_into_place(*tmp, path);
+}
+
+Status write_files_atomic(std::span<const FileContent> files) {
+  std::vector<fs::path> temporaries;
+  for (const FileContent& f : files) {
+    auto tmp = write_temporary(f.path, f.bytes);
+    if (!tmp) {
+      for (const auto& t : temporaries) ::unlink(t.c_str());
+      return tmp.error();
+    }
+    temporaries.push_back(std::move(tmp).value());
+  }
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    if (auto s = rename_into_place(temporaries[i], files[i].path); !s) {
+      for (std::size_t k = i + 1; k < files.size(); ++k) ::unlink(temporaries[k].c_str());
+      return s;
+    }
+  }
   return Ok{};
 }
 

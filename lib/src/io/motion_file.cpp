@@ -115,7 +115,7 @@ Status save_motion(const Motion& motion, const std::filesystem::path& path, cons
       // The skeleton goes to options.asf, else beside the motion with the same stem.
       std::filesystem::path asf = options.asf;
       if (asf.empty()) asf = std::filesystem::path(path).replace_extension(".asf");
-      return write_asf_amc(*pre, asf, path);
+      return write_asf_amc(*pre, asf, path, options.replace_asf);
     }
     // ---- .gmrb (GMR binary: gmr/io/gmrb.h)
     return write_gmrb(*pre, path);

@@ -147,6 +147,28 @@ TEST(FormatDouble, ShortestRoundTrip) {
   }
 }
 
+// A pair is written whole or not at all: when the second file cannot be
+// written, the first keeps its old content and no temporary is left.
+TEST(WriteFilesAtomic, APairIsWrittenWholeOrNotAtAll) {
+  TempDir tmp;
+  const auto a = tmp.path / "a.asf";
+  const auto b = tmp.path / "b.amc";
+  ASSERT_TRUE(write_file_atomic(a, "old").ok());
+  std::filesystem::create_directories(b);  // b cannot be replaced by a file
+  const FileContent bad[] = {{a, "new a"}, {b, "new b"}};
+  const Status s = write_files_atomic(bad);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().to_string().find("b.amc"), std::string::npos) << s.error().to_string();
+  EXPECT_EQ(read_file(a).value(), "old");
+  EXPECT_EQ(tmp.entries(), 2u);  // a.asf and the folder b.amc: no temporary left
+  std::filesystem::remove(b);
+  const FileContent good[] = {{a, "new a"}, {b, "new b"}};
+  ASSERT_TRUE(write_files_atomic(good).ok());
+  EXPECT_EQ(read_file(a).value(), "new a");
+  EXPECT_EQ(read_file(b).value(), "new b");
+  EXPECT_EQ(tmp.entries(), 2u);
+}
+
 TEST(LowerExtension, LowerCasesTheExtensionWithItsDot) {
   EXPECT_EQ(lower_extension("a/B.BVH"), ".bvh");
   EXPECT_EQ(lower_extension("walk.Gmrb"), ".gmrb");

@@ -60,7 +60,12 @@ struct AcclaimModel {
 // whitespace, `,()#`, a leading ':').
 Result<AcclaimModel> gmr_to_acclaim(const Motion& motion);
 
-// gmr_to_acclaim, then writes both files atomically.
-Status write_asf_amc(const Motion& motion, const std::filesystem::path& asf, const std::filesystem::path& amc);
+// gmr_to_acclaim, then writes both files as a pair (write_files_atomic: both
+// temporaries first, then the .asf renamed into place, then the .amc). With
+// replace_other_asf false, an existing `asf` whose content differs from the
+// new skeleton is an error (kFailedPrecondition) and nothing is written:
+// other .amc files may use it.
+Status write_asf_amc(const Motion& motion, const std::filesystem::path& asf, const std::filesystem::path& amc,
+                     bool replace_other_asf = true);
 
 }  // namespace gmr

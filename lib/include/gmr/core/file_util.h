@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -21,6 +22,18 @@ Result<std::string> read_file(const std::filesystem::path& path);
 // left as it was, and the Error names `path` and the system's reason. A
 // symbolic link at `path` is replaced, not written through.
 Status write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
+
+// Several files that belong together (an ASF/AMC pair): every one is first
+// written to its own synced temporary, and only when all are ready are they
+// renamed into place, in the order given. A failure before the renames
+// changes nothing at any path; a rename that fails (rare: the temporaries
+// are complete and beside their targets) leaves the earlier files replaced
+// and the later ones as they were, and the Error names the path.
+struct FileContent {
+  std::filesystem::path path;
+  std::string_view bytes;
+};
+Status write_files_atomic(std::span<const FileContent> files);
 
 // Shortest decimal text that reads back to exactly `v`: the same bytes as
 // std::to_chars(first, last, v), only faster for short decimals. E.g.

@@ -18,6 +18,9 @@ namespace gmr {
 
 struct LoadOptions {
   std::filesystem::path asf;  // skeleton for .amc input; empty: look for it in the same folder (above)
+  // Saving .amc: an existing skeleton file with other content is replaced
+  // only when this is true (otherwise the save fails and writes nothing).
+  bool replace_asf = false;
 };
 
 // The motion as the file holds it: BVH stays post-rotation, GMR is
@@ -27,7 +30,9 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
 
 // Saves by extension, converting between conventions as needed (.bvh wants
 // post-rotation; .gmr, .gmrb and .amc pre-rotation). Atomic. For .amc the
-// skeleton is written to options.asf, else beside it with the extension .asf.
+// skeleton is written to options.asf, else beside it with the extension .asf,
+// the two as a pair (write_asf_amc); an existing skeleton that differs is
+// kept, and the save refused, unless options.replace_asf.
 Status save_motion(const Motion& motion, const std::filesystem::path& path, const LoadOptions& options = {});
 
 }  // namespace gmr
