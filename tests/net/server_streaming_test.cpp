@@ -186,6 +186,7 @@ TEST(Streaming, SharedStreamsComputeAndEncodeOncePerTick) {
 // frame carries its own view's version.
 TEST(Streaming, SharedStreamsNeverMixSkeletonVersions) {
   TestServer s;
+  Sink sa, sb;  // declared before the clients: their threads call into these until they close
   auto a = s.connect();
   auto b = s.connect();
   ASSERT_TRUE(a && b);
@@ -199,7 +200,6 @@ TEST(Streaming, SharedStreamsNeverMixSkeletonVersions) {
   o.shared = true;
   o.loop = true;
   o.rate_hz = 500;
-  Sink sa, sb;
   sa.until = [](const ReceivedFrame& f) { return f.sequence >= 3; };
   sb.until = [](const ReceivedFrame& f) { return f.sequence >= 3; };
   auto suba = a->subscribe(va->id, o, sa.on_frame(), sa.on_end());
@@ -212,6 +212,8 @@ TEST(Streaming, SharedStreamsNeverMixSkeletonVersions) {
   ASSERT_TRUE(sb.reached.wait().has_value());
   for (const auto& f : sa.copy()) EXPECT_EQ(f.skeleton_version, edited->skeleton_version);
   for (const auto& f : sb.copy()) EXPECT_EQ(f.skeleton_version, vb->skeleton_version);
+  EXPECT_TRUE(a->unsubscribe(suba->id).ok());
+  EXPECT_TRUE(b->unsubscribe(subb->id).ok());
 }
 
 TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {

@@ -34,6 +34,7 @@ std::size_t padded_frames(std::size_t frames) {
 // True when the joint's rotation channels (indices `channel` within its
 // channels) are multiples of 360 degrees in every frame.
 bool all_identity(const Motion& motion, int joint, const int* channel, int count) {
+  if (motion.frame_count == 0) return true;  // and values.data() may be null: no pointer arithmetic on it
   const std::size_t stride = motion.stride();
   const std::size_t first = static_cast<std::size_t>(motion.skeleton.channel_offset(joint));
   for (int r = 0; r < count; ++r) {
