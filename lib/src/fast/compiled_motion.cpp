@@ -103,7 +103,8 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
       const std::size_t stride = motion.stride();
       const std::size_t a0 = static_cast<std::size_t>(sk.channel_offset(static_cast<int>(j)));
       const std::size_t b0 = static_cast<std::size_t>(sk.channel_offset(static_cast<int>(i)));
-      for (int r = 0; r < p.rotation_count && same; ++r) {
+      // (No frames: twins vacuously, and no pointer into the possibly null values.)
+      for (int r = 0; r < p.rotation_count && same && motion.frame_count > 0; ++r) {
         const double* a = motion.values.data() + a0 + static_cast<std::size_t>(rotation_channel[r]);
         const double* b = motion.values.data() + b0 + static_cast<std::size_t>(other_channel[r]);
         for (std::size_t f = 0; f < motion.frame_count && same; ++f) same = a[f * stride] == b[f * stride];
@@ -177,7 +178,7 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
       } else {
         s = p.offset_stream[static_cast<int>(axis_of(c))];
       }
-      if (s == kNoStream) continue;
+      if (s == kNoStream || motion.frame_count == 0) continue;  // no frames: values.data() may be null
       float* dst = out.streams_.get() + static_cast<std::size_t>(s) * out.frame_stride_;
       const double* src = motion.values.data() + first + i;
       // Angles are reduced to [-180, 180] in double before rounding to float,
