@@ -60,8 +60,6 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   // Graceful: drop waiting frames, write the waiting replies, then stop.
   void finish();
 
-  const std::string& peer() const { return peer_; }
-
   // Outbox (outbox.h). A key holds at most frames_per_key frames; the frames
   // of send_frames_now go into the reply queue, so an end notice follows its
   // last frames.

@@ -23,10 +23,6 @@ void Stream::remove(const Target* target) {
   std::erase_if(targets_, [&](const Entry& e) { return e.target.get() == target; });
 }
 
-bool Stream::has(const Target* target) const {
-  return std::any_of(targets_.begin(), targets_.end(), [&](const Entry& e) { return e.target.get() == target; });
-}
-
 double Stream::step() const {
   return settings_.schedule.speed / (settings_.schedule.rate * content_->motion->frame_time);
 }

@@ -72,7 +72,6 @@ class Stream : public std::enable_shared_from_this<Stream> {
   // ends after that many (0: no limit).
   void add(std::shared_ptr<Target> target, std::uint64_t max_frames);
   void remove(const Target* target);
-  bool has(const Target* target) const;
 
   void start();
   void pause();

@@ -20,16 +20,4 @@ std::string Error::to_string() const {
   return out;
 }
 
-const char* error_kind_name(ErrorKind kind) {
-  switch (kind) {
-    case ErrorKind::kInvalidData: return "invalid data";
-    case ErrorKind::kInvalidArgument: return "invalid argument";
-    case ErrorKind::kNotFound: return "not found";
-    case ErrorKind::kFailedPrecondition: return "failed precondition";
-    case ErrorKind::kResourceExhausted: return "resource exhausted";
-    case ErrorKind::kIo: return "i/o error";
-  }
-  return "unknown";
-}
-
 }  // namespace gmr

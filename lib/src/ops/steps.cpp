@@ -97,24 +97,14 @@ Result<Motion> split_many(const Motion& motion, const std::vector<int>& joints) 
   return w.to_motion();
 }
 
-// Tree index of every joint (its root) in a motion.
-std::vector<int> tree_of(const Skeleton& s) {
-  std::vector<int> tree(s.size());
-  for (int j = 0; j < static_cast<int>(s.size()); ++j) {
-    tree[static_cast<std::size_t>(j)] = s.is_root(j) ? j : tree[static_cast<std::size_t>(s.joint(j).parent)];
-  }
-  return tree;
-}
-
 // Joins every root of `roots` under its soft parent in one pass (world
 // transforms read from `motion`). Checks each join and that they form no cycle.
 Result<Motion> join_many(const Motion& motion, const std::vector<int>& roots, std::vector<JoinReport>* out_reports) {
   const Skeleton& s = motion.skeleton;
-  const std::vector<int> tree = tree_of(s);
   // Cycle check on trees: following soft links from a tree must end at a tree
   // that is not being joined.
   std::vector<int> link(s.size(), kNoParent);  // tree -> tree it joins into
-  for (int r : roots) link[static_cast<std::size_t>(r)] = tree[static_cast<std::size_t>(s.joint(r).soft_parent)];
+  for (int r : roots) link[static_cast<std::size_t>(r)] = s.root_of(s.joint(r).soft_parent);
   for (int r : roots) {
     int t = r;
     for (std::size_t steps = 0; link[static_cast<std::size_t>(t)] != kNoParent; ++steps) {

@@ -22,8 +22,6 @@ Status check_joint(const Motion& m, int j, const char* op);
 void swap_root(Work& w, int j0, int j1);
 // Splits every joint of `joints` (non-roots) in one pass.
 Result<Motion> split_many(const Motion& motion, const std::vector<int>& joints);
-// Tree index of every joint (its root).
-std::vector<int> tree_of(const Skeleton& s);
 // Joins every root of `roots` under its soft parent in one pass; checks each
 // join and that they form no cycle.
 Result<Motion> join_many(const Motion& motion, const std::vector<int>& roots, std::vector<JoinReport>* out_reports);

@@ -26,9 +26,6 @@ enum class ErrorKind : std::uint8_t {
   kIo,                  // the system refused (open, read, write, rename)
 };
 
-// "invalid data", "not found", ... (for logs and messages).
-const char* error_kind_name(ErrorKind kind);
-
 // One problem found in a file, a request or a call. line and column are
 // 1-based; 0 means "not known / not applicable".
 struct Error {
