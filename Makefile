@@ -6,7 +6,7 @@ ASAN_BUILD ?= build-sanitize
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: setup configure build run test test-unit test-sanitize clean
+.PHONY: setup configure build run test test-unit test-sanitize fuzz clean
 
 setup:
 	@scripts/install-deps.sh
@@ -34,7 +34,13 @@ test-sanitize: setup
 	@cmake --build $(ASAN_BUILD) -j $(JOBS) --target gmr_sanitize_tests
 	@cd $(ASAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize
 
-test: test-unit test-sanitize
+# Coverage-guided fuzzing (libFuzzer, clang, ASan/UBSan) of every reader and
+# the wire decoders, FUZZ_SECONDS each (default 60), seeded from ../shared/data
+# (scripts/fuzz.sh; longer runs' figures are in docs/reliability.md).
+fuzz: setup
+	@scripts/fuzz.sh
+
+test: test-unit test-sanitize fuzz
 
 clean:
-	rm -rf $(BUILD) $(ASAN_BUILD)
+	rm -rf $(BUILD) $(ASAN_BUILD) build-fuzz

@@ -1,8 +1,16 @@
 # GMR_SANITIZE=ON builds everything with ASan and UBSan; any report aborts the
 # process so a test that trips one fails. GMR_SANITIZED tells the code (the
 # same with GCC and clang, which spell their own macros differently).
-if(GMR_SANITIZE)
+if(GMR_SANITIZE OR GMR_FUZZ)
   add_compile_options(-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer -g)
   add_link_options(-fsanitize=address,undefined)
   add_compile_definitions(GMR_SANITIZED=1)
+endif()
+# GMR_FUZZ: every object is instrumented for libFuzzer's coverage; the
+# harnesses (fuzz/) link its main.
+if(GMR_FUZZ)
+  if(NOT CMAKE_CXX_COMPILER_ID MATCHES "Clang")
+    message(FATAL_ERROR "GMR_FUZZ needs clang (libFuzzer): -DCMAKE_CXX_COMPILER=clang++")
+  endif()
+  add_compile_options(-fsanitize=fuzzer-no-link)
 endif()

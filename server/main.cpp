@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   long long idle_ms = cfg.idle_timeout.count();
   long long heartbeat_ms = cfg.heartbeat_interval.count();
   long long write_ms = cfg.write_timeout.count();
+  long long handshake_ms = cfg.handshake_timeout.count();
   app.add_option("--library", library_dir, "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library)");
   app.add_option("--port", cfg.port, "TCP port (0: any free port)")->capture_default_str();
   app.add_option("--udp-port", cfg.udp_port, "UDP port (default: the TCP port number, or any free port with --port 0; 0: any free port)");
@@ -36,10 +37,43 @@ int main(int argc, char** argv) {
   app.add_option("--max-message-bytes", cfg.max_message_bytes, "Largest message either way")->capture_default_str();
   app.add_option("--max-connections", cfg.max_connections, "Connections served at once")->capture_default_str();
   app.add_option("--max-views", cfg.max_views_per_connection, "Views per connection")->capture_default_str();
+  app.add_option("--max-connections-per-address", cfg.max_connections_per_address,
+                 "Connections from one IP address (0: no limit; load tests on one host need 0)")
+      ->capture_default_str();
+  app.add_option("--max-pending-handshakes", cfg.max_pending_handshakes,
+                 "Connections waiting for their Hello at once (a new one pushes out the oldest)")
+      ->capture_default_str();
+  app.add_option("--handshake-timeout-ms", handshake_ms, "Close a connection that has not said Hello by then")
+      ->capture_default_str();
   app.add_option("--max-subscriptions", cfg.max_subscriptions_per_connection, "Subscriptions per connection")
       ->capture_default_str();
   app.add_option("--frames-per-subscription", cfg.frames_per_subscription,
                  "Frames queued per subscription before the oldest is dropped (latest wins)")
+      ->capture_default_str();
+  // Memory (docs/protocol.md, "Memory budget").
+  MotionLimits motion_limits;
+  app.add_option("--max-motion-joint-frames", motion_limits.max_joint_frames,
+                 "Largest motion served, frames x joints (larger files are rejected at load)")
+      ->capture_default_str();
+  app.add_option("--max-motion-bytes", motion_limits.max_value_bytes,
+                 "Largest motion served, bytes of channel values (larger files are rejected at load)")
+      ->capture_default_str();
+  app.add_option("--max-reply-queue-bytes", cfg.max_reply_queue_bytes,
+                 "Replies held per connection before its requests wait")
+      ->capture_default_str();
+  app.add_option("--max-frame-bytes", cfg.max_frame_bytes_per_connection,
+                 "Frames waiting per connection, all subscriptions (the oldest give way)")
+      ->capture_default_str();
+  app.add_option("--max-buffered-bytes", cfg.max_buffered_bytes,
+                 "Bytes all connections may hold together (0: no server-wide limit)")
+      ->capture_default_str();
+  app.add_option("--max-view-bytes", cfg.max_view_bytes, "Motion bytes all edited views may own together")
+      ->capture_default_str();
+  app.add_option("--max-view-bytes-per-connection", cfg.max_view_bytes_per_connection,
+                 "Motion bytes one connection's edited views may own")
+      ->capture_default_str();
+  app.add_option("--socket-send-buffer", cfg.socket_send_buffer,
+                 "SO_SNDBUF per connection in bytes (0: the kernel's autotuning)")
       ->capture_default_str();
   app.add_option("--idle-timeout-ms", idle_ms, "Close a connection silent for this long")->capture_default_str();
   app.add_option("--heartbeat-ms", heartbeat_ms, "Send a heartbeat after this long without writing")->capture_default_str();
@@ -54,18 +88,20 @@ int main(int argc, char** argv) {
   }
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e %^%l%$ %v");
-  if (idle_ms <= 0 || heartbeat_ms <= 0 || write_ms <= 0) {
+  if (idle_ms <= 0 || heartbeat_ms <= 0 || write_ms <= 0 || handshake_ms <= 0) {
     std::fprintf(stderr, "gmr-server: timeouts must be positive\n");
     return 1;
   }
   if (cfg.max_message_bytes < 4096 || cfg.max_connections == 0 || cfg.max_views_per_connection == 0 ||
-      cfg.max_subscriptions_per_connection == 0 || cfg.frames_per_subscription == 0) {
+      cfg.max_subscriptions_per_connection == 0 || cfg.frames_per_subscription == 0 ||
+      cfg.max_pending_handshakes == 0) {
     std::fprintf(stderr, "gmr-server: --max-message-bytes must be at least 4096 and the other limits at least 1\n");
     return 1;
   }
   cfg.idle_timeout = std::chrono::milliseconds(idle_ms);
   cfg.heartbeat_interval = std::chrono::milliseconds(heartbeat_ms);
   cfg.write_timeout = std::chrono::milliseconds(write_ms);
+  cfg.handshake_timeout = std::chrono::milliseconds(handshake_ms);
 
   try {
     std::vector<LibraryEntry> library;
@@ -74,12 +110,14 @@ int main(int argc, char** argv) {
       spdlog::info("built-in demo library: {} motions", library.size());
     } else {
       spdlog::info("loading {}", library_dir);
-      auto loaded = load_library(library_dir, threads, [](std::size_t done, std::size_t total,
-                                                          const std::filesystem::path& file, const std::string* why) {
-        // Rejections are listed once, sorted, when loading is done.
-        if (!why) spdlog::debug("loaded {}", file.string());
-        if (done == total || done % 10 == 0) spdlog::info("loading: {}/{} files", done, total);
-      });
+      auto loaded = load_library(
+          library_dir, threads,
+          [](std::size_t done, std::size_t total, const std::filesystem::path& file, const std::string* why) {
+            // Rejections are listed once, sorted, when loading is done.
+            if (!why) spdlog::debug("loaded {}", file.string());
+            if (done == total || done % 10 == 0) spdlog::info("loading: {}/{} files", done, total);
+          },
+          motion_limits);
       if (!loaded.ok()) {
         std::fprintf(stderr, "gmr-server: %s\n", loaded.error().to_string().c_str());
         return 1;

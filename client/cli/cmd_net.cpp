@@ -179,6 +179,7 @@ void run_stream(const StreamOptions& o) {
     bool done = false;
     std::string end_reason;
     std::uint64_t frames = 0, gaps = 0, last_sequence = 0, last_frame = 0;
+    std::uint64_t dropped = 0, skipped = 0;  // from the end notice: the client was slow / the server was late
     std::int64_t latency_sum_ns = 0, latency_max_ns = 0;
     std::uint64_t window_frames = 0;
     std::int64_t window_latency_sum = 0, window_latency_max = 0;
@@ -215,6 +216,8 @@ void run_stream(const StreamOptions& o) {
     std::lock_guard lock(st->mutex);
     st->done = true;
     st->end_reason = e.reason;
+    st->dropped = e.frames_dropped;
+    st->skipped = e.frames_skipped;
     st->cv.notify_all();
   };
   // Row order must be known before the first frame prints: take it from the
@@ -255,13 +258,21 @@ void run_stream(const StreamOptions& o) {
   const auto frames = st->frames;
   const auto gaps = st->gaps;
   const auto reason = st->end_reason;
+  const auto dropped = st->dropped, skipped = st->skipped;
   const double avg = frames ? static_cast<double>(st->latency_sum_ns) / static_cast<double>(frames) / 1e6 : 0.0;
   const double max = static_cast<double>(st->latency_max_ns) / 1e6;
   lock.unlock();
   std::cout.flush();
   if (o.summary) {
-    std::printf("done: %llu frames (%s), %llu lost in transit, latency avg %.3f ms, max %.3f ms\n",
-                static_cast<unsigned long long>(frames), reason.c_str(), static_cast<unsigned long long>(gaps), avg, max);
+    // Gaps in the sequence numbers: frames this client read too slowly (the
+    // server dropped them), ticks the server skipped being late, and the rest,
+    // lost on the way (UDP).
+    const std::uint64_t server_side = dropped + skipped;
+    std::printf("done: %llu frames (%s), %llu gaps: %llu dropped for a slow reader, %llu skipped by a late server, "
+                "%llu lost in transit; latency avg %.3f ms, max %.3f ms\n",
+                static_cast<unsigned long long>(frames), reason.c_str(), static_cast<unsigned long long>(gaps),
+                static_cast<unsigned long long>(dropped), static_cast<unsigned long long>(skipped),
+                static_cast<unsigned long long>(gaps > server_side ? gaps - server_side : 0), avg, max);
   }
   if (!std::cout) throw CommandError("cannot write to standard output");
 }

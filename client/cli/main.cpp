@@ -4,14 +4,18 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <exception>
+#include <new>
 
 #include "cli_util.h"
+#include "gmr/core/file_util.h"
 #include "commands.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"gmr: General Motion Representation tools"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "gmr 0.1.0");
+  // An interrupted `gmr convert` leaves no temporary behind.
+  gmr::remove_temporaries_on_signals();
   gmr::cli::add_file_commands(app);
   gmr::cli::add_ops_commands(app);
   gmr::cli::add_net_commands(app);
@@ -24,6 +28,12 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const gmr::cli::CommandError& e) {
     std::fprintf(stderr, "gmr: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    // Readers bound what a file may declare (docs/gmr-format.md, "Limits"),
+    // so this is a real shortage, not a file's say-so.
+    std::fprintf(stderr, "gmr: %s: out of memory (the input needs more than this process may use)\n",
+                 app.get_subcommands().empty() ? "gmr" : app.get_subcommands().front()->get_name().c_str());
     return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "gmr: %s\n", e.what());

@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   std::vector<std::int64_t> all;
-  std::uint64_t frames = 0, gaps = 0, server_dropped = 0, server_sent = 0;
+  std::uint64_t frames = 0, gaps = 0, server_dropped = 0, server_sent = 0, server_skipped = 0;
   for (auto& r : runs) {
     {
       std::lock_guard lock(r->mutex);
@@ -134,6 +134,7 @@ int main(int argc, char** argv) {
     }
     if (auto st = r->client->stats(); st.ok()) {
       server_dropped += st->frames_dropped;
+      server_skipped += st->frames_skipped;
       server_sent += st->frames_sent;
     }
     (void)r->client->unsubscribe(r->subscription);
@@ -156,6 +157,8 @@ int main(int argc, char** argv) {
               max_ms);
   std::printf("drops            %.2f/s seen by clients (sequence gaps), %llu dropped by the server in all\n",
               static_cast<double>(gaps) / elapsed, static_cast<unsigned long long>(server_dropped));
+  std::printf("server late      %llu ticks skipped in all (the server could not keep the rate)\n",
+              static_cast<unsigned long long>(server_skipped));
   std::printf("server work      %llu FK runs, %llu encodings, %llu frames sent (whole run)\n",
               static_cast<unsigned long long>(computed), static_cast<unsigned long long>(encoded),
               static_cast<unsigned long long>(server_sent));

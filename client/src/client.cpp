@@ -3,6 +3,7 @@
 #include <atomic>
 #include <boost/asio.hpp>
 #include <condition_variable>
+#include <cstring>
 #include <deque>
 #include <future>
 #include <map>
@@ -35,7 +36,7 @@ ServerHello hello_of(const pb::HelloReply& h) {
   ServerHello s;
   s.protocol_version = h.protocol_version();
   s.server_name = h.server_name();
-  s.session_token = h.session_token();
+  if (h.udp_token().size() == s.udp_token.size()) std::memcpy(s.udp_token.data(), h.udp_token().data(), s.udp_token.size());
   s.udp_port = static_cast<std::uint16_t>(h.udp_port());
   s.max_message_bytes = h.max_message_bytes();
   s.heartbeat_interval_ms = h.heartbeat_interval_ms();
@@ -44,7 +45,7 @@ ServerHello hello_of(const pb::HelloReply& h) {
 }
 
 SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
-  return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason()};
+  return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason(), e.frames_skipped()};
 }
 
 }  // namespace
@@ -151,7 +152,15 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
                                     if (ec == net::error::operation_aborted || !self->open) return;
                                     // Only datagrams from the server's address count.
                                     if (!ec && self->udp_sender == self->server_udp) {
-                                      if (auto msg = self->reassembler.add(std::string_view(self->udp_buffer.data(), n))) {
+                                      const std::string_view d(self->udp_buffer.data(), n);
+                                      if (auto cookie = wire::parse_challenge_datagram(d)) {
+                                        // The server asks this address to prove it registered: echo.
+                                        wire::UdpToken token;
+                                        std::memcpy(token.data(), self->hello.udp_token.data(), token.size());
+                                        const std::string confirm = wire::make_confirm_datagram(token, *cookie);
+                                        boost::system::error_code send_ec;
+                                        self->udp_socket.send_to(net::buffer(confirm), self->server_udp, 0, send_ec);
+                                      } else if (auto msg = self->reassembler.add(d)) {
                                         pb::ServerMessage m;
                                         if (m.ParseFromString(*msg) && m.has_frame()) self->on_message(m, true);
                                       }
@@ -520,7 +529,9 @@ Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::
 Status Client::register_udp() {
   auto& d = *impl_;
   if (!d.udp_socket.is_open() || d.hello.udp_port == 0) return make_error("the server offers no UDP");
-  const std::string datagram = wire::make_register_datagram(d.hello.session_token);
+  wire::UdpToken token;
+  std::memcpy(token.data(), d.hello.udp_token.data(), token.size());
+  const std::string datagram = wire::make_register_datagram(token);
   const auto deadline = std::chrono::steady_clock::now() + d.options.timeout;
   std::unique_lock lock(d.mutex);
   // Registration datagrams can be lost like any other: resend until the
@@ -636,6 +647,8 @@ Result<ServerCounters> Client::stats() {
   c.frames_encoded = s.frames_encoded();
   c.frames_sent = s.frames_sent();
   c.frames_dropped = s.frames_dropped();
+  c.frames_skipped = s.frames_skipped();
+  c.frames_skipped_total = s.frames_skipped_total();
   c.queued_bytes = s.queued_bytes();
   c.max_queued_bytes = s.max_queued_bytes();
   return c;

@@ -9,11 +9,38 @@
 
 namespace gmr::server {
 
-Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits)
-    : socket_(std::move(socket)), id_(id), limits_(limits), watchdog_(io) {
+namespace {
+// A request body is read in chunks that start at kFirstChunk and double as
+// bytes arrive (at most kBodyChunk): the buffer is never more than about
+// twice what arrived, whatever length the prefix announced.
+constexpr std::size_t kFirstChunk = 4096;
+constexpr std::size_t kBodyChunk = 256 * 1024;
+}  // namespace
+
+Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
+                       BufferBudget* budget)
+    : socket_(std::move(socket)), id_(id), limits_(limits), budget_(budget), watchdog_(io) {
   boost::system::error_code ec;
   auto ep = socket_.remote_endpoint(ec);
-  peer_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
+  peer_address_ = ec ? std::string("?") : ep.address().to_string();
+  peer_ = ec ? std::string("?") : peer_address_ + ":" + std::to_string(ep.port());
+}
+
+Connection::~Connection() {
+  if (budget_ != nullptr) budget_->held -= accounted_;
+}
+
+void Connection::account() {
+  if (budget_ == nullptr) return;
+  const std::uint64_t now = queued_bytes() + body_.size();
+  budget_->held = budget_->held - accounted_ + now;
+  budget_->max_held = std::max(budget_->max_held, budget_->held);
+  accounted_ = now;
+}
+
+bool Connection::may_read() const {
+  return reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
+         !(budget_ != nullptr && budget_->over() && accounted_ > budget_->fair_share);
 }
 
 void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std::uint64_t)> on_closed) {
@@ -37,8 +64,12 @@ void Connection::stop(const std::string& reason) {
                counters_.frames_dropped);
   if (handler_) handler_->on_stop();
   frames_.clear();
+  frame_bytes_ = 0;
   replies_.clear();
   reply_bytes_ = 0;
+  std::string().swap(body_);
+  body_received_ = 0;
+  account();
   boost::system::error_code ec;
   socket_.shutdown(tcp::socket::shutdown_both, ec);
   socket_.close(ec);
@@ -54,6 +85,8 @@ void Connection::finish() {
 void Connection::close_after_reply() {
   close_after_flush_ = true;
   frames_.clear();
+  frame_bytes_ = 0;
+  account();
 }
 
 void Connection::send(std::string framed) {
@@ -61,44 +94,80 @@ void Connection::send(std::string framed) {
   reply_bytes_ += framed.size();
   replies_.push_back(std::make_shared<const std::string>(std::move(framed)));
   note_queue();
+  account();
   flush();
+}
+
+void Connection::pop_frame(std::deque<PendingFrame>& queue) {
+  frame_bytes_ -= queue.front().head.size() + queue.front().body->size();
+  queue.pop_front();
+  ++counters_.frames_dropped;
 }
 
 bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) {
   if (closing()) return true;
+  const std::uint64_t size = head.size() + body->size();
+  // With no write in flight the frame goes out at once; otherwise it waits,
+  // within this connection's bounds and the server's budget.
+  if (writing_ && budget_ != nullptr && budget_->over()) {
+    ++counters_.frames_dropped;
+    return false;
+  }
   bool kept_all = true;
   auto& queue = frames_[key];
   if (queue.size() >= std::max<std::size_t>(1, limits_.frames_per_key)) {
-    queue.pop_front();
-    ++counters_.frames_dropped;
+    pop_frame(queue);
     kept_all = false;
   }
+  if (writing_ && limits_.max_frame_bytes != 0) {
+    // The oldest of this key give way; a frame that would still not fit
+    // beside the other keys' frames is dropped.
+    while (!queue.empty() && frame_bytes_ + size > limits_.max_frame_bytes) {
+      pop_frame(queue);
+      kept_all = false;
+    }
+    if (frame_bytes_ != 0 && frame_bytes_ + size > limits_.max_frame_bytes) {
+      if (queue.empty()) frames_.erase(key);
+      ++counters_.frames_dropped;
+      return false;
+    }
+  }
   queue.push_back(PendingFrame{std::move(head), std::move(body)});
+  frame_bytes_ += size;
   note_queue();
+  account();
   flush();
   return kept_all;
 }
 
-void Connection::discard_frames(std::uint32_t key) { frames_.erase(key); }
+bool Connection::congested(std::uint32_t key) const {
+  if (!writing_ || stopped_) return false;
+  if (budget_ != nullptr && budget_->over()) return true;
+  auto it = frames_.find(key);
+  if (it == frames_.end() || it->second.empty()) return false;
+  return Clock::now() - write_started_ > limits_.congested_after;
+}
+
+void Connection::discard_frames(std::uint32_t key) {
+  auto it = frames_.find(key);
+  if (it == frames_.end()) return;
+  for (const auto& f : it->second) frame_bytes_ -= f.head.size() + f.body->size();
+  frames_.erase(it);
+  account();
+}
 
 void Connection::send_frames_now(std::uint32_t key) {
   auto it = frames_.find(key);
   if (it == frames_.end()) return;
   for (const auto& frame : it->second) {
     auto bytes = std::make_shared<const std::string>(frame.head + *frame.body);
+    frame_bytes_ -= frame.head.size() + frame.body->size();
     reply_bytes_ += bytes->size();
     replies_.push_back(std::move(bytes));
     ++counters_.frames_sent;
   }
   frames_.erase(it);
-}
-
-std::uint64_t Connection::queued_bytes() const {
-  std::uint64_t n = reply_bytes_ + in_flight_bytes_;
-  for (const auto& [key, queue] : frames_) {
-    for (const auto& f : queue) n += f.head.size() + f.body->size();
-  }
-  return n;
+  account();
 }
 
 void Connection::note_queue() { counters_.max_queued_bytes = std::max(counters_.max_queued_bytes, queued_bytes()); }
@@ -146,19 +215,22 @@ void Connection::flush() {
     buffers.push_back(net::buffer(*hold_[i]));
   }
   frames_.clear();
+  frame_bytes_ = 0;
   writing_ = true;
   write_started_ = Clock::now();
+  account();
   net::async_write(socket_, buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
     self->writing_ = false;
     self->hold_.clear();
     self->hold_heads_.clear();
     self->in_flight_bytes_ = 0;
+    self->account();
     if (ec) {
       if (ec != net::error::operation_aborted) self->stop("write failed: " + ec.message());
       return;
     }
     self->last_write_ = Clock::now();
-    if (self->read_paused_ && self->reply_bytes_ <= self->limits_.max_reply_queue_bytes) {
+    if (self->read_paused_ && self->may_read()) {
       self->read_paused_ = false;
       self->read_prefix();
     }
@@ -169,12 +241,19 @@ void Connection::flush() {
 void Connection::arm_watchdog() {
   using std::chrono::milliseconds;
   const auto& l = limits_;
-  const auto period = std::max(milliseconds(10), std::min({l.heartbeat_interval, l.idle_timeout, l.write_timeout}) / 4);
+  auto shortest = std::min({l.heartbeat_interval, l.idle_timeout, l.write_timeout});
+  if (!established_ && l.handshake_timeout.count() > 0) shortest = std::min(shortest, l.handshake_timeout);
+  const auto period = std::max(milliseconds(10), shortest / 4);
   watchdog_.expires_after(period);
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     if (ec || self->stopped_) return;
     const auto now = Clock::now();
     const auto& lim = self->limits_;
+    if (!self->established_ && lim.handshake_timeout.count() > 0 && now - self->started_ > lim.handshake_timeout) {
+      spdlog::warn("conn {}: no Hello within {} ms", self->id_, lim.handshake_timeout.count());
+      self->stop("no Hello in time");
+      return;
+    }
     if (now - self->last_read_ > lim.idle_timeout) {
       spdlog::warn("conn {}: idle for more than {} ms", self->id_, lim.idle_timeout.count());
       self->stop("idle timeout");
@@ -185,6 +264,11 @@ void Connection::arm_watchdog() {
                    lim.write_timeout.count());
       self->stop("write timeout");
       return;
+    }
+    // Reads paused for the server-wide budget resume once it allows.
+    if (self->read_paused_ && self->may_read()) {
+      self->read_paused_ = false;
+      self->read_prefix();
     }
     if (!self->writing_ && now - self->last_write_ > lim.heartbeat_interval) {
       pb::ServerMessage hb;
@@ -199,8 +283,10 @@ void Connection::arm_watchdog() {
 void Connection::read_prefix() {
   if (stopped_) return;
   // Back-pressure: a client that sends requests faster than it reads the
-  // replies is not read until they drain; its replies never pile up beyond the cap.
-  if (reply_bytes_ > limits_.max_reply_queue_bytes) {
+  // replies is not read until they drain; its replies never pile up beyond
+  // the cap. While the server's buffers are over budget, nor is a connection
+  // that holds more than its share of them.
+  if (!may_read()) {
     read_paused_ = true;
     return;
   }
@@ -222,20 +308,43 @@ void Connection::on_prefix(const boost::system::error_code& ec) {
     stop("bad length prefix");
     return;
   }
-  body_.resize(length);
-  net::async_read(socket_, net::buffer(body_), [self = shared_from_this()](const boost::system::error_code& e,
-                                                                           std::size_t got) { self->on_body(e, got); });
+  body_expected_ = length;
+  body_received_ = 0;
+  body_.clear();
+  read_body();
+}
+
+void Connection::read_body() {
+  // Grows as bytes arrive (a declared length alone reserves nothing).
+  const std::size_t chunk =
+      std::min({kBodyChunk, std::max(kFirstChunk, body_received_), body_expected_ - body_received_});
+  body_.resize(body_received_ + chunk);
+  account();
+  net::async_read(socket_, net::buffer(body_.data() + body_received_, chunk),
+                  [self = shared_from_this()](const boost::system::error_code& e, std::size_t got) {
+                    self->on_body(e, got);
+                  });
 }
 
 void Connection::on_body(const boost::system::error_code& ec, std::size_t got) {
   if (stopped_) return;
+  body_received_ += got;
   if (ec) {
-    spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, got, body_.size());
+    spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_,
+                 body_expected_);
     stop(ec == net::error::eof ? std::string("truncated message") : "read failed: " + ec.message());
     return;
   }
   last_read_ = Clock::now();
+  if (body_received_ < body_expected_) {
+    read_body();
+    return;
+  }
   handler_->on_message(body_);
+  body_received_ = 0;
+  body_.clear();
+  if (body_.capacity() > kBodyChunk) std::string().swap(body_);  // a large request's buffer is not kept
+  account();
   read_prefix();
 }
 

@@ -10,9 +10,14 @@
 //                          frames_per_key waiting (the oldest gives way)
 //   watchdog: idle timeout, stuck write, heartbeat when nothing was written
 //
-// Bounded: replies waiting above max_reply_queue_bytes stop the read loop
-// until they drain (a client that sends faster than it reads waits);
-// frames are latest-wins per key. Everything runs on the I/O thread.
+// Bounded: replies held (waiting or being written) above
+// max_reply_queue_bytes stop the read loop until they drain (a client that
+// sends faster than it reads waits); frames are latest-wins per key, at most
+// max_frame_bytes in all; a request body grows as its bytes arrive (a length
+// prefix reserves nothing). Every byte held counts in the server-wide
+// BufferBudget: above its limit, connections holding more than their share
+// are not read and frames that would wait are dropped. Everything runs on
+// the I/O thread.
 #pragma once
 
 #include <array>
@@ -28,11 +33,29 @@
 
 namespace gmr::server {
 
+// The bytes all connections hold for their clients (replies, frames, writes
+// in flight, request bodies being read), against one limit.
+struct BufferBudget {
+  std::uint64_t limit = 0;  // 0: none
+  std::uint64_t held = 0;
+  std::uint64_t max_held = 0;  // high-water mark
+  // Over the limit, a connection holding more than this is not read (one
+  // holding less, say a new client, still is: stuck clients cannot lock
+  // everyone out).
+  std::uint64_t fair_share = 0;
+  bool over() const { return limit != 0 && held > limit; }
+};
+
 struct ConnectionLimits {
   std::uint32_t max_message_bytes = 0;    // a longer length prefix closes the connection
   std::size_t max_reply_queue_bytes = 0;  // above it, requests are not read until replies drain
   std::size_t frames_per_key = 1;         // frames waiting per key (subscription)
+  std::size_t max_frame_bytes = 0;        // frames waiting, all keys (0: no limit but frames_per_key)
+  // While a write has been in flight this long with a key's frames waiting
+  // in full, that key is congested (streams skip computing its frames).
+  std::chrono::milliseconds congested_after{50};
   std::chrono::milliseconds idle_timeout{0};
+  std::chrono::milliseconds handshake_timeout{0};  // 0: none
   std::chrono::milliseconds heartbeat_interval{0};
   std::chrono::milliseconds write_timeout{0};
   int socket_send_buffer = 0;             // SO_SNDBUF; 0: the system's default
@@ -50,7 +73,10 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
     virtual void on_stop() = 0;
   };
 
-  Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits);
+  // `budget` (may be null) outlives the connection.
+  Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
+             BufferBudget* budget = nullptr);
+  ~Connection() override;
 
   // Starts reading and the watchdog. `on_closed` runs once when it stopped.
   void start(std::shared_ptr<Handler> handler, std::function<void(std::uint64_t id)> on_closed);
@@ -68,11 +94,17 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   bool closing() const override { return stopped_ || close_after_flush_; }
   void send(std::string framed) override;
   bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) override;
+  bool congested(std::uint32_t key) const override;
   void discard_frames(std::uint32_t key) override;
   void send_frames_now(std::uint32_t key) override;
   void close_after_reply() override;
+  void established() override { established_ = true; }
+  bool is_established() const { return established_; }
+  Clock::time_point started() const { return started_; }
+  const std::string& peer_address() const { return peer_address_; }
   void count_frame_sent() override { ++counters_.frames_sent; }
-  void count_frame_dropped() override { ++counters_.frames_dropped; }
+  void count_frame_dropped(std::uint64_t n = 1) override { counters_.frames_dropped += n; }
+  void count_frame_skipped(std::uint64_t n) override { counters_.frames_skipped += n; }
   ConnectionCounters counters() const override;
 
  private:
@@ -86,27 +118,41 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   // flush() resumes it.
   void read_prefix();
   void on_prefix(const boost::system::error_code& ec);
+  void read_body();
   void on_body(const boost::system::error_code& ec, std::size_t got);
   void flush();
   void arm_watchdog();
-  std::uint64_t queued_bytes() const;
+  std::uint64_t queued_bytes() const { return reply_bytes_ + frame_bytes_ + in_flight_bytes_; }
+  // Bytes held now (queued plus the request body being read) into the budget.
+  void account();
   void note_queue();
+  // Reading may go on: replies and the budget allow it.
+  bool may_read() const;
+  void pop_frame(std::deque<PendingFrame>& queue);
 
   tcp::socket socket_;
   std::uint64_t id_;
   ConnectionLimits limits_;
   std::string peer_;
+  std::string peer_address_;  // the IP address alone
+  bool established_ = false;
+  Clock::time_point started_ = Clock::now();
   std::shared_ptr<Handler> handler_;
   std::function<void(std::uint64_t)> on_closed_;
   bool stopped_ = false;
   bool close_after_flush_ = false;
   bool read_paused_ = false;
+  BufferBudget* budget_;
+  std::uint64_t accounted_ = 0;  // what this connection added to budget_->held
   std::array<std::uint8_t, 4> prefix_{};
   std::string body_;
+  std::size_t body_expected_ = 0;  // bytes the length prefix announced
+  std::size_t body_received_ = 0;
 
   std::deque<std::shared_ptr<const std::string>> replies_;
   std::uint64_t reply_bytes_ = 0;
   std::map<std::uint32_t, std::deque<PendingFrame>> frames_;  // per key, oldest first
+  std::uint64_t frame_bytes_ = 0;                             // heads and bodies in frames_
   bool writing_ = false;
   std::uint64_t in_flight_bytes_ = 0;
   std::vector<std::shared_ptr<const std::string>> hold_;  // what the write in flight points into

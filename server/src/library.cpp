@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <mutex>
+#include <new>
 #include <system_error>
 #include <thread>
 
@@ -17,10 +18,23 @@ namespace {
 
 struct Job {
   fs::path path;
+  MotionLimits limits;
   LoadOptions options;
   std::string name;
   std::string source;  // the path relative to the library folder: clients never see the server's own paths
 };
+
+Result<LibraryEntry> load_one(const Job& job);
+
+// A file too large for this machine is rejected like any other bad file (a
+// worker thread must not end the process with std::bad_alloc).
+Result<LibraryEntry> load_one_guarded(const Job& job) {
+  try {
+    return load_one(job);
+  } catch (const std::bad_alloc&) {
+    return Error{job.path.string(), 0, 0, "out of memory while loading it"};
+  }
+}
 
 Result<LibraryEntry> load_one(const Job& job) {
   auto loaded = load_motion(job.path, job.options);
@@ -30,12 +44,35 @@ Result<LibraryEntry> load_one(const Job& job) {
   if (auto s = pre->validate(); !s.ok()) return s.error();
   if (pre->frame_count == 0) return Error{job.path.string(), 0, 0, "the motion has no frames"};
   if (!(pre->frame_time > 0.0)) return Error{job.path.string(), 0, 0, "the motion has no frame time"};
+  if (auto s = check_motion_limits(*pre, job.limits); !s.ok()) return Error{job.path.string(), 0, 0, s.error().message};
   return LibraryEntry{job.name, job.source, std::make_shared<const Motion>(std::move(pre).value())};
 }
 
 }  // namespace
 
-Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const LoadProgress& progress) {
+Status check_motion_limits(const Motion& m, const MotionLimits& limits) {
+  const std::uint64_t joints = m.skeleton.size();
+  const std::uint64_t frames = m.frame_count;
+  // Each product fits in 64 bits: frames and channels are below 2^40 and 2^16.
+  const std::uint64_t joint_frames = frames * joints;
+  const std::uint64_t value_bytes = frames * m.stride() * sizeof(double);
+  if (joint_frames > limits.max_joint_frames) {
+    return make_error(ErrorKind::kResourceExhausted,
+                      "too large to serve: " + std::to_string(frames) + " frames x " + std::to_string(joints) +
+                          " joints = " + std::to_string(joint_frames) + " joint-frames, above the server's limit of " +
+                          std::to_string(limits.max_joint_frames) + " (--max-motion-joint-frames)");
+  }
+  if (value_bytes > limits.max_value_bytes) {
+    return make_error(ErrorKind::kResourceExhausted,
+                      "too large to serve: " + std::to_string(frames) + " frames x " + std::to_string(m.stride()) +
+                          " channels take " + std::to_string(value_bytes) + " bytes, above the server's limit of " +
+                          std::to_string(limits.max_value_bytes) + " (--max-motion-bytes)");
+  }
+  return Ok{};
+}
+
+Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const LoadProgress& progress,
+                                 const MotionLimits& limits) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return Error{dir.string(), 0, 0, "not a readable folder"};
 
@@ -54,7 +91,7 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
     // symbolic link and name its target). An .amc's skeleton is found by
     // load_motion: the .asf of its folder, or of its subject among several.
     const fs::path relative = f.lexically_relative(dir);
-    Job job{f, {}, fs::path(relative).replace_extension().generic_string(), relative.generic_string()};
+    Job job{f, limits, {}, fs::path(relative).replace_extension().generic_string(), relative.generic_string()};
     if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") {
       jobs.push_back(std::move(job));
     } else {
@@ -70,7 +107,7 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
   std::mutex mutex;
   auto worker = [&] {
     for (std::size_t i; (i = next.fetch_add(1)) < jobs.size();) {
-      results[i] = load_one(jobs[i]);
+      results[i] = load_one_guarded(jobs[i]);
       std::lock_guard lock(mutex);
       ++done;
       if (progress) {

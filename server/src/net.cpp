@@ -1,5 +1,7 @@
 #include "net.h"
 
+#include <algorithm>
+
 #include "gmr/wire/convert.h"
 
 namespace gmr::server {
@@ -7,6 +9,46 @@ namespace gmr::server {
 std::int64_t now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
       .count();
+}
+
+std::string printable(std::string_view text, std::size_t max) {
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out = "\"";
+  const std::size_t shown = std::min(text.size(), max);
+  for (std::size_t i = 0; i < shown; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c == '\n') {
+      out += "\\n";
+    } else if (c == '"' || c == '\\') {
+      out += '\\';
+      out += static_cast<char>(c);
+    } else if (c < 0x20 || c > 0x7e) {
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  out += '"';
+  if (text.size() > shown) out += " (and " + std::to_string(text.size() - shown) + " more bytes)";
+  return out;
+}
+
+bool LogLimiter::allow(std::uint64_t& suppressed) {
+  const auto now = Clock::now();
+  if (now - window_start_ >= period_) {
+    window_start_ = now;
+    in_window_ = 0;
+  }
+  if (in_window_ >= burst_) {
+    ++suppressed_;
+    return false;
+  }
+  ++in_window_;
+  suppressed = suppressed_;
+  suppressed_ = 0;
+  return true;
 }
 
 Refusal refusal(const Error& error) { return Refusal{wire::error_code_for(error.kind), error.to_string()}; }

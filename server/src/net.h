@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <variant>
 
 #include "gmr/core/error.h"
@@ -31,6 +32,32 @@ struct Refusal {
 // What a request gets: its reply, or a refusal (errors are values, never
 // thrown).
 using Reply = std::variant<pb::ServerMessage, Refusal>;
+
+// A client-supplied string as it may go into a log line: in double quotes,
+// with control characters, quotes, backslashes and bytes above 0x7e escaped
+// (\n, \", \x1b), and at most `max` bytes of it followed by how many more
+// there were. Client text can neither forge a log line, nor drive a
+// terminal, nor flood the log.
+std::string printable(std::string_view text, std::size_t max = 64);
+
+// Rate limit for the log lines one client can cause: at most `burst` per
+// `period`; the others are counted, and the next line logged reports them.
+class LogLimiter {
+ public:
+  explicit LogLimiter(std::size_t burst = 5, Clock::duration period = std::chrono::seconds(10))
+      : burst_(burst), period_(period) {}
+  // True when a line may be logged now. `suppressed` is then the number of
+  // lines left out since the last one logged (reported with it).
+  bool allow(std::uint64_t& suppressed);
+  std::uint64_t pending() const { return suppressed_; }
+
+ private:
+  std::size_t burst_;
+  Clock::duration period_;
+  Clock::time_point window_start_{};
+  std::size_t in_window_ = 0;
+  std::uint64_t suppressed_ = 0;
+};
 
 // A refusal whose code follows the error's kind (wire::error_code_for).
 Refusal refusal(const Error& error);

@@ -13,6 +13,7 @@ namespace gmr::server {
 struct ConnectionCounters {
   std::uint64_t frames_sent = 0;
   std::uint64_t frames_dropped = 0;    // a newer frame replaced it, or (UDP) over the datagram bound
+  std::uint64_t frames_skipped = 0;    // the server was late and skipped the tick
   std::uint64_t queued_bytes = 0;      // replies and frames waiting or being written
   std::uint64_t max_queued_bytes = 0;  // high-water mark
 };
@@ -32,15 +33,22 @@ class Outbox {
   // shared `body`. False when the key already had its share of frames
   // waiting and the oldest was dropped to make room (counted).
   virtual bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) = 0;
+  // True while frames for `key` cannot go out soon: its share of frames is
+  // waiting behind a write that has been in flight for a while (the client
+  // is not reading). Streams then skip computing frames for it.
+  virtual bool congested(std::uint32_t key) const { return (void)key, false; }
   // Forgets the frames waiting for `key`.
   virtual void discard_frames(std::uint32_t key) = 0;
   // Moves the frames waiting for `key` ahead of the next reply.
   virtual void send_frames_now(std::uint32_t key) = 0;
+  // The client completed its handshake (the handshake deadline no longer applies).
+  virtual void established() {}
   // Closes once the next reply (queued after this call) is out.
   virtual void close_after_reply() = 0;
   // Frames sent or dropped elsewhere (UDP) count with this client.
   virtual void count_frame_sent() = 0;
-  virtual void count_frame_dropped() = 0;
+  virtual void count_frame_dropped(std::uint64_t n = 1) = 0;
+  virtual void count_frame_skipped(std::uint64_t n) = 0;
   virtual ConnectionCounters counters() const = 0;
 };
 

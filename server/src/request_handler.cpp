@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
+#include <new>
 
 #include "gmr/view/viewpoint.h"
 #include "gmr/wire/convert.h"
@@ -25,8 +26,12 @@ void RequestHandler::start() {
 
 void RequestHandler::on_stop() {
   stopped_ = true;
+  if (log_limit_.pending() > 0) {
+    spdlog::warn("conn {}: {} more lines about its requests were suppressed", connection_id_, log_limit_.pending());
+  }
   for (auto& [id, sub] : subs_) sub.stream->remove(sub.target.get());
   subs_.clear();
+  for (const auto& [id, v] : views_) forget_view(*v);
   views_.clear();
   server_.udp.remove_session(token_);
 }
@@ -45,14 +50,28 @@ void RequestHandler::send(const pb::ServerMessage& m) {
 void RequestHandler::on_message(const std::string& body) {
   pb::ClientMessage req;
   if (!req.ParseFromString(body)) {
-    spdlog::warn("conn {}: a {}-byte message is not a ClientMessage", connection_id_, body.size());
+    if (std::uint64_t suppressed = 0; log_limit_.allow(suppressed)) {
+      spdlog::warn("conn {}: a {}-byte message is not a ClientMessage{}", connection_id_, body.size(),
+                   suppressed ? " (" + std::to_string(suppressed) + " more such lines suppressed)" : std::string());
+    }
     send(error_message(0, pb::ERROR_CODE_BAD_REQUEST, "cannot parse the message as a gmr.stream.v1.ClientMessage"));
     return;
   }
   if (req.body_case() == pb::ClientMessage::kHeartbeat) return;  // the connection counted it as a read
-  Reply reply = dispatch(req);
+  Reply reply;
+  try {
+    reply = dispatch(req);
+  } catch (const std::bad_alloc&) {
+    // The budgets (docs/protocol.md) make this rare; the server goes on.
+    spdlog::error("conn {}: out of memory answering request {}", connection_id_, req.request_id());
+    reply = Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "the server ran out of memory answering this request"};
+  }
   if (auto* refused = std::get_if<Refusal>(&reply)) {
-    spdlog::debug("conn {}: request {} refused: {}", connection_id_, req.request_id(), refused->message);
+    if (std::uint64_t suppressed = 0; spdlog::should_log(spdlog::level::debug) && log_limit_.allow(suppressed)) {
+      spdlog::debug("conn {}: request {} refused: {}{}", connection_id_, req.request_id(),
+                    printable(refused->message, 200),
+                    suppressed ? " (" + std::to_string(suppressed) + " more lines suppressed)" : std::string());
+    }
     send(error_message(req.request_id(), refused->code, std::move(refused->message)));
     return;
   }
@@ -122,13 +141,14 @@ Reply RequestHandler::hello(const pb::Hello& h) {
                                                         std::to_string(wire::kProtocolVersion)};
   }
   handshaked_ = true;
-  spdlog::info("conn {}: hello from '{}'", connection_id_, h.client_name());
+  if (auto c = connection_.lock()) c->established();
+  spdlog::info("conn {}: hello from {}", connection_id_, printable(h.client_name()));
   const ServerConfig& cfg = server_.cfg;
   pb::ServerMessage out;
   auto* r = out.mutable_hello();
   r->set_protocol_version(wire::kProtocolVersion);
   r->set_server_name(cfg.server_name);
-  r->set_session_token(token_);
+  r->set_udp_token(std::string(reinterpret_cast<const char*>(token_.data()), token_.size()));
   r->set_udp_port(server_.udp.port());
   r->set_max_message_bytes(cfg.max_message_bytes);
   r->set_heartbeat_interval_ms(static_cast<std::uint32_t>(cfg.heartbeat_interval.count()));
@@ -182,6 +202,7 @@ Reply RequestHandler::close_view(const pb::CloseView& r) {
     if (sub.view_id == v->id()) ids.push_back(id);
   }
   for (auto id : ids) drop_subscription(id);
+  forget_view(*v);
   views_.erase(v->id());
   pb::ServerMessage out;
   out.mutable_ack();
@@ -194,10 +215,29 @@ template <class Edit>
 Reply RequestHandler::edit_view(std::uint32_t view_id, Edit&& edit) {
   View* v = find_view(view_id);
   if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(view_id)};
+  const auto before = v->content();
+  const std::uint64_t old_bytes = owned_bytes(*v);
   if (Status s = edit(*v); !s.ok()) {
     const bool unknown = s.error().kind == ErrorKind::kNotFound;
     return Refusal{unknown ? pb::ERROR_CODE_NOT_FOUND : pb::ERROR_CODE_FAILED_PRECONDITION, s.error().to_string()};
   }
+  // The view budget: an edit whose copy would pass it is undone and refused.
+  const std::uint64_t new_bytes = owned_bytes(*v);
+  const ServerConfig& cfg = server_.cfg;
+  const std::uint64_t mine = view_bytes_ - old_bytes + new_bytes;
+  const std::uint64_t all = server_.view_bytes - old_bytes + new_bytes;
+  if (new_bytes > old_bytes && (mine > cfg.max_view_bytes_per_connection || all > cfg.max_view_bytes)) {
+    v->restore(before);
+    const bool own = mine > cfg.max_view_bytes_per_connection;
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "the edited view would hold " + std::to_string(new_bytes) + " bytes of motion; views " +
+                       (own ? "of this connection" : "of all connections") + " would then hold " +
+                       std::to_string(own ? mine : all) + " bytes, above the server's limit of " +
+                       std::to_string(own ? cfg.max_view_bytes_per_connection : cfg.max_view_bytes) +
+                       ": close views you no longer use"};
+  }
+  view_bytes_ = mine;
+  server_.view_bytes = all;
   view_changed(*v);
   pb::ServerMessage out;
   *out.mutable_view() = view_info(*v);
@@ -269,9 +309,26 @@ Reply RequestHandler::stats() {
   st->set_frames_encoded(server_.counters.frames_encoded);
   st->set_frames_sent(own.frames_sent);
   st->set_frames_dropped(own.frames_dropped);
+  st->set_frames_skipped(own.frames_skipped);
+  st->set_frames_skipped_total(server_.counters.frames_skipped);
   st->set_queued_bytes(own.queued_bytes);
   st->set_max_queued_bytes(own.max_queued_bytes);
   return out;
+}
+
+std::uint64_t RequestHandler::owned_bytes(const View& v) const {
+  auto it = server_.by_name.find(v.motion_name());
+  const Motion* own = &v.motion();
+  if (it != server_.by_name.end() && server_.library[it->second].motion.get() == own) return 0;
+  // The copy (double) and, once a float32 stream uses it, its float form: the
+  // values as floats and the one-frame kernel's frame-major copy of the angles.
+  return own->values.size() * (sizeof(double) + 2 * sizeof(float));
+}
+
+void RequestHandler::forget_view(const View& v) {
+  const std::uint64_t bytes = owned_bytes(v);
+  view_bytes_ -= bytes;
+  server_.view_bytes -= bytes;
 }
 
 View* RequestHandler::find_view(std::uint32_t id) const {

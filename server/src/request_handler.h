@@ -60,6 +60,9 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   Reply edit_view(std::uint32_t view_id, Edit&& edit);
   Reply query(const pb::QueryFrames& r) const;
   Reply stats();
+  // Bytes of motion view `v` owns beyond the library's (docs/protocol.md).
+  std::uint64_t owned_bytes(const View& v) const;
+  void forget_view(const View& v);
 
   // subscriptions.cpp: subscriptions and their streams.
   Reply subscribe(const pb::Subscribe& r);
@@ -83,12 +86,14 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   Server::Impl& server_;
   std::weak_ptr<Outbox> connection_;
   std::uint64_t connection_id_ = 0;
-  std::uint64_t token_ = 0;
+  wire::UdpToken token_{};
   std::shared_ptr<UdpPublisher::Registration> udp_;
   bool handshaked_ = false;
   bool stopped_ = false;
+  LogLimiter log_limit_;  // lines this client's bad requests may put in the log
 
   std::map<std::uint32_t, std::unique_ptr<View>> views_;
+  std::uint64_t view_bytes_ = 0;  // owned_bytes of views_, also counted in server_.view_bytes
   std::uint32_t next_view_ = 1;
   std::map<std::uint32_t, Subscription> subs_;
   std::uint32_t next_sub_ = 1;

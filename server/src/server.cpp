@@ -19,8 +19,10 @@ ConnectionLimits Server::Impl::connection_limits() const {
   ConnectionLimits l;
   l.max_message_bytes = cfg.max_message_bytes;
   l.max_reply_queue_bytes = cfg.max_reply_queue_bytes;
+  l.max_frame_bytes = cfg.max_frame_bytes_per_connection;
   l.frames_per_key = cfg.frames_per_subscription;
   l.idle_timeout = cfg.idle_timeout;
+  l.handshake_timeout = cfg.handshake_timeout;
   l.heartbeat_interval = cfg.heartbeat_interval;
   l.write_timeout = cfg.write_timeout;
   l.socket_send_buffer = cfg.socket_send_buffer;
@@ -38,7 +40,10 @@ std::shared_ptr<const CompiledForm> Server::Impl::compiled_form(std::size_t entr
 }
 
 void Server::Impl::connection_closed(std::uint64_t id) {
-  connections.erase(id);
+  auto it = connections.find(id);
+  if (it == connections.end()) return;
+  if (auto n = per_address.find(it->second.address); n != per_address.end() && --n->second == 0) per_address.erase(n);
+  connections.erase(it);
   if (stopping && connections.empty() && grace_timer) grace_timer->cancel();
 }
 
@@ -50,29 +55,64 @@ void Server::Impl::accept_loop() {
       spdlog::warn("accept failed: {}", ec.message());
     } else if (stopping) {
       return;
-    } else if (connections.size() >= cfg.max_connections) {
-      ++connections_refused;
-      spdlog::warn("refusing a connection: {} connections open (--max-connections)", connections.size());
-      auto bytes = std::make_shared<std::string>(
-          wire::frame_message(error_message(0, pb::ERROR_CODE_RESOURCE_EXHAUSTED,
-                                            "the server has reached its limit of " +
-                                                std::to_string(cfg.max_connections) + " connections"))
-              .value());
-      auto sock = std::make_shared<tcp::socket>(std::move(socket));
-      net::async_write(*sock, net::buffer(*bytes), [sock, bytes](const boost::system::error_code&, std::size_t) {
-        boost::system::error_code ignored;
-        sock->shutdown(tcp::socket::shutdown_both, ignored);
-        sock->close(ignored);
-      });
     } else {
-      const std::uint64_t id = next_connection_id++;
-      auto c = std::make_shared<Connection>(io, std::move(socket), id, connection_limits());
-      auto handler = std::make_shared<RequestHandler>(*this, c);
-      handler->start();
-      connections[id] = ConnectionEntry{c, handler};
-      c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
+      boost::system::error_code peer_ec;
+      const auto peer = socket.remote_endpoint(peer_ec);
+      const std::string address = peer_ec ? std::string("?") : peer.address().to_string();
+      if (std::string why = admit(address); !why.empty()) {
+        refuse(std::move(socket), why);
+      } else {
+        const std::uint64_t id = next_connection_id++;
+        auto c = std::make_shared<Connection>(io, std::move(socket), id, connection_limits(), &buffers);
+        auto handler = std::make_shared<RequestHandler>(*this, c);
+        handler->start();
+        connections[id] = ConnectionEntry{c, handler, address};
+        ++per_address[address];
+        c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
+      }
     }
     accept_loop();
+  });
+}
+
+std::string Server::Impl::admit(const std::string& address) {
+  if (cfg.max_connections_per_address != 0) {
+    auto it = per_address.find(address);
+    if (it != per_address.end() && it->second >= cfg.max_connections_per_address) {
+      return "the server's limit of " + std::to_string(cfg.max_connections_per_address) +
+             " connections from one address (--max-connections-per-address)";
+    }
+  }
+  // Connections still waiting for their Hello: past the cap, the oldest of
+  // them gives way (it had its chance; a real client says Hello at once).
+  std::size_t pending = 0;
+  std::shared_ptr<Connection> oldest;
+  for (auto& [id, e] : connections) {
+    auto c = e.connection.lock();
+    if (!c || c->is_established() || c->stopped()) continue;
+    ++pending;
+    if (!oldest || c->started() < oldest->started()) oldest = c;
+  }
+  if (pending >= cfg.max_pending_handshakes && oldest) oldest->stop("made room for a new connection: no Hello yet");
+  if (connections.size() >= cfg.max_connections) {
+    return "the server's limit of " + std::to_string(cfg.max_connections) + " connections (--max-connections)";
+  }
+  return {};
+}
+
+void Server::Impl::refuse(tcp::socket socket, const std::string& why) {
+  ++connections_refused;
+  if (std::uint64_t suppressed = 0; refusal_log.allow(suppressed)) {
+    spdlog::warn("refusing a connection: {}{}", why,
+                 suppressed ? " (" + std::to_string(suppressed) + " more refusals not logged)" : std::string());
+  }
+  auto bytes = std::make_shared<std::string>(
+      wire::frame_message(error_message(0, pb::ERROR_CODE_RESOURCE_EXHAUSTED, "refused: " + why)).value());
+  auto sock = std::make_shared<tcp::socket>(std::move(socket));
+  net::async_write(*sock, net::buffer(*bytes), [sock, bytes](const boost::system::error_code&, std::size_t) {
+    boost::system::error_code ignored;
+    sock->shutdown(tcp::socket::shutdown_both, ignored);
+    sock->close(ignored);
   });
 }
 
@@ -106,8 +146,13 @@ ServerStats Server::Impl::snapshot() {
   st.frames_computed = counters.frames_computed;
   st.frames_computed_float = counters.frames_computed_float;
   st.frames_encoded = counters.frames_encoded;
+  st.frames_skipped = counters.frames_skipped;
   st.udp_rejected = udp.rejected();
+  st.udp_challenges = udp.challenges();
   st.connections_refused = connections_refused;
+  st.buffered_bytes = buffers.held;
+  st.max_buffered_bytes = buffers.max_held;
+  st.view_bytes = view_bytes;
   for (auto& [id, entry] : connections) {
     auto c = entry.connection.lock();
     if (!c) continue;
@@ -116,6 +161,7 @@ ServerStats Server::Impl::snapshot() {
     s.id = id;
     s.frames_sent = k.frames_sent;
     s.frames_dropped = k.frames_dropped;
+    s.frames_skipped = k.frames_skipped;
     s.queued_bytes = k.queued_bytes;
     s.max_queued_bytes = k.max_queued_bytes;
     auto h = entry.handler.lock();

@@ -8,6 +8,7 @@
 //                                 ^ kept and shared by StreamRegistry
 #pragma once
 
+#include <algorithm>
 #include <future>
 #include <map>
 #include <memory>
@@ -38,6 +39,12 @@ struct Server::Impl {
   std::vector<LibraryEntry> library;
   std::map<std::string, std::size_t, std::less<>> by_name;
 
+  // Declared before io: connections that io's handlers still hold at
+  // destruction give their bytes back to it.
+  BufferBudget buffers{cfg.max_buffered_bytes, 0, 0, cfg.max_buffered_bytes / std::max<std::size_t>(1, cfg.max_connections)};
+  // Bytes of motions that views own (edited copies, docs/protocol.md).
+  std::uint64_t view_bytes = 0;
+
   net::io_context io;
   tcp::acceptor acceptor{io};
   UdpPublisher udp{io, cfg.max_udp_datagrams_in_flight};
@@ -54,9 +61,12 @@ struct Server::Impl {
   struct ConnectionEntry {
     std::weak_ptr<Connection> connection;
     std::weak_ptr<RequestHandler> handler;
+    std::string address;  // the client's IP address
   };
   std::map<std::uint64_t, ConnectionEntry> connections;
+  std::map<std::string, std::size_t> per_address;  // open connections by IP address
   std::uint64_t connections_refused = 0;
+  LogLimiter refusal_log{5, std::chrono::seconds(10)};
   // Per library entry: the float form its unedited views share, while any
   // view holds it (compiled on first use by a float32 stream; freed with the
   // last view, so memory follows what is being streamed).
@@ -66,6 +76,10 @@ struct Server::Impl {
   // The connection limits of cfg.
   ConnectionLimits connection_limits() const;
   void accept_loop();
+  // Why a new connection from `address` is refused (empty: admit it). May
+  // close the oldest connection still waiting for its Hello to make room.
+  std::string admit(const std::string& address);
+  void refuse(tcp::socket socket, const std::string& why);
   void begin_stop();
   void connection_closed(std::uint64_t id);
   // The shared float form of library entry `entry` (made when no view holds one).

@@ -170,6 +170,19 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
   return body;
 }
 
+std::uint64_t Stream::congested_ticks() const {
+  // The ticks due before now + kCongestedBackoff, after this one; never past
+  // a target's max_frames (it ends on time).
+  const double ahead =
+      std::chrono::duration<double>(Clock::now() + kCongestedBackoff - base_time_).count() * settings_.schedule.rate;
+  const auto last = base_tick_ + static_cast<std::uint64_t>(std::max(0.0, ahead));
+  std::uint64_t n = last > tick_ + 1 ? last - tick_ - 1 : 0;
+  for (const auto& e : targets_) {
+    if (e.max_frames != 0) n = std::min(n, e.max_frames - std::min(e.max_frames, e.sent + 1));
+  }
+  return n;
+}
+
 void Stream::on_tick() {
   if (paused_ || targets_.empty()) return;
   const Schedule& sched = settings_.schedule;
@@ -189,15 +202,36 @@ void Stream::on_tick() {
                                                 static_cast<std::uint64_t>(length) - 1);
     const std::uint64_t frame = sched.start + offset;
     if (!(sched.skip_repeats && static_cast<std::int64_t>(frame) == last_frame_)) {
-      last_frame_ = static_cast<std::int64_t>(frame);
-      const auto body = encode(frame);
       // Copy the targets first: a target may end a subscription re-entrantly.
       const auto targets = targets_;
-      for (const auto& e : targets) {
-        if (e.target->alive()) e.target->deliver(id_, body);
+      auto& ready = ready_;
+      ready.assign(targets.size(), 0);
+      bool anyone = false;
+      for (std::size_t i = 0; i < targets.size(); ++i) {
+        ready[i] = targets[i].target->alive() && !targets[i].target->congested();
+        anyone = anyone || ready[i];
+      }
+      std::uint64_t ticks = 1;  // this one, and when nobody takes frames the skipped ones after it
+      if (anyone) {
+        last_frame_ = static_cast<std::int64_t>(frame);
+        const auto body = encode(frame);
+        for (std::size_t i = 0; i < targets.size(); ++i) {
+          if (ready[i]) {
+            targets[i].target->deliver(id_, body);
+          } else if (targets[i].target->alive()) {
+            targets[i].target->skipped(1);
+          }
+        }
+      } else {
+        ticks += congested_ticks();
+        sequence_ += ticks;
+        for (const auto& e : targets) {
+          if (e.target->alive()) e.target->skipped(ticks);
+        }
+        tick_ += ticks - 1;
       }
       for (auto& e : targets_) {
-        ++e.sent;
+        e.sent += ticks;
         if (e.max_frames != 0 && e.sent >= e.max_frames) ended.emplace_back(e.target, e.sent);
       }
     }
@@ -209,10 +243,26 @@ void Stream::on_tick() {
   // followed by the ones it delayed (no frame lost to scheduling jitter).
   // Only when the server fell far behind (a stall) does playback jump to the
   // tick due now rather than burst through the backlog.
+  // The ticks jumped over are not hidden: sequence numbers advance (clients
+  // see the gap) and each target counts them as skipped, apart from drops.
   const auto now = Clock::now();
   if (due(tick_) + std::max<Clock::duration>(period(), settings_.max_catch_up) < now) {
     const double behind = std::chrono::duration<double>(now - base_time_).count() * sched.rate;
-    tick_ = std::max(tick_, base_tick_ + static_cast<std::uint64_t>(behind));
+    const std::uint64_t to = std::max(tick_, base_tick_ + static_cast<std::uint64_t>(behind));
+    const std::uint64_t jumped = to - tick_;
+    tick_ = to;
+    if (jumped > 0 && !finished) {
+      sequence_ += jumped;
+      for (auto& e : targets_) {
+        if (e.target->alive()) {
+          e.target->late(jumped);
+          counters_.frames_skipped += jumped;
+        }
+        const bool was_done = e.max_frames != 0 && e.sent >= e.max_frames;
+        e.sent += jumped;
+        if (!was_done && e.max_frames != 0 && e.sent >= e.max_frames) ended.emplace_back(e.target, e.sent);
+      }
+    }
   }
   auto self = shared_from_this();  // ending targets may drop the last reference below
   for (auto& [target, sent] : ended) {

@@ -6,6 +6,12 @@
 // double reference path (gmr::view_frame).
 //
 // Frame k of the schedule is due at base_time + k / rate (drift-free).
+//
+// A slow client costs no computation: a tick whose targets are all congested
+// (their clients stopped reading) computes nothing, and the stream then skips
+// the ticks of the next kCongestedBackoff at once (each one a drop for each
+// target, the sequence numbers advancing so clients see the gap) instead of
+// waking at its full rate.
 #pragma once
 
 #include <Eigen/Core>
@@ -26,6 +32,13 @@ class Target {
   virtual bool alive() const = 0;
   // One frame: the shared Frame body (fields >= 16) of stream `stream_id`.
   virtual void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) = 0;
+  // True while a frame would only wait behind others the client is not
+  // reading: the stream then does not compute one for it.
+  virtual bool congested() const { return false; }
+  // `n` frames this target did not get because it was congested (counted as drops).
+  virtual void skipped(std::uint64_t n) = 0;
+  // `n` ticks the stream skipped because the server was late (counted apart).
+  virtual void late(std::uint64_t n) = 0;
   // The stream ended this target after `sent` frames ("end of motion",
   // "max_frames reached"); the stream has already forgotten it.
   virtual void ended(std::uint64_t sent, const std::string& reason) = 0;
@@ -36,6 +49,7 @@ struct StreamCounters {
   std::uint64_t frames_computed = 0;        // forward-kinematics runs
   std::uint64_t frames_computed_float = 0;  // of those, by the float path
   std::uint64_t frames_encoded = 0;         // encodings (one per tick that sends)
+  std::uint64_t frames_skipped = 0;         // ticks skipped because the server was late (per target)
 };
 
 class Stream : public std::enable_shared_from_this<Stream> {
@@ -55,6 +69,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
     Schedule schedule;
     std::chrono::milliseconds max_catch_up{250};
   };
+  static constexpr std::chrono::milliseconds kCongestedBackoff{20};
 
   Stream(net::io_context& io, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
          StreamCounters& counters);
@@ -97,6 +112,8 @@ class Stream : public std::enable_shared_from_this<Stream> {
   Clock::time_point due(std::uint64_t tick) const;
   void arm();
   void on_tick();
+  // Ticks to skip after one that no target could take.
+  std::uint64_t congested_ticks() const;
   // Computes and encodes frame `frame` (the shared body).
   std::shared_ptr<const std::string> encode(std::uint64_t frame);
 
@@ -124,6 +141,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   std::vector<double> positions_f64_, orientations_f64_;
   std::vector<float> fk_positions_, fk_orientations_, workspace_;  // float path
   std::vector<float> positions_f32_, orientations_f32_;
+  std::vector<char> ready_;  // per target, this tick: alive and not congested
 };
 
 }  // namespace gmr::server

@@ -191,6 +191,7 @@ void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, co
   m.mutable_subscription_ended()->set_subscription_id(id);
   m.mutable_subscription_ended()->set_frames_sent(sent);
   m.mutable_subscription_ended()->set_frames_dropped(s.target->dropped());
+  m.mutable_subscription_ended()->set_frames_skipped(s.target->late_skipped());
   m.mutable_subscription_ended()->set_reason(reason);
   // The frames still waiting go out before the end notice.
   if (auto c = connection_.lock()) c->send_frames_now(id);

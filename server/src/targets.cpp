@@ -15,6 +15,21 @@ void SubscriptionTarget::ended(std::uint64_t sent, const std::string& reason) {
   if (auto h = handler_.lock()) h->subscription_ended(subscription_, sent, reason);
 }
 
+void SubscriptionTarget::skipped(std::uint64_t n) {
+  dropped_ += n;
+  if (auto c = connection_.lock()) c->count_frame_dropped(n);
+}
+
+void SubscriptionTarget::late(std::uint64_t n) {
+  late_ += n;
+  if (auto c = connection_.lock()) c->count_frame_skipped(n);
+}
+
+bool TcpTarget::congested() const {
+  auto c = connection_.lock();
+  return c && c->congested(subscription_);
+}
+
 void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
   auto c = connection_.lock();
   if (!c || c->closing()) return;

@@ -22,9 +22,12 @@ class SubscriptionTarget : public Target {
 
   bool alive() const override;
   void ended(std::uint64_t sent, const std::string& reason) override;
+  void skipped(std::uint64_t n) override;
+  void late(std::uint64_t n) override;
 
   std::uint32_t subscription() const { return subscription_; }
   std::uint64_t dropped() const { return dropped_; }
+  std::uint64_t late_skipped() const { return late_; }
 
  protected:
   std::weak_ptr<RequestHandler> handler_;
@@ -32,6 +35,7 @@ class SubscriptionTarget : public Target {
   std::uint32_t subscription_;
   std::uint32_t view_;
   std::uint64_t dropped_ = 0;
+  std::uint64_t late_ = 0;
 };
 
 // Frames go into the connection's outbox (latest wins per subscription).
@@ -39,6 +43,7 @@ class TcpTarget final : public SubscriptionTarget {
  public:
   using SubscriptionTarget::SubscriptionTarget;
   void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  bool congested() const override;
 };
 
 // Frames go to the connection's registered UDP endpoint, as fragments.

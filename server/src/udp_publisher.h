@@ -1,7 +1,8 @@
 // UdpPublisher: the server's UDP socket. It takes registrations (a client
-// proves it holds a session's token by sending it from the address that is
-// to receive that session's frames) and sends frames as fragments
-// (gmr/wire/udp.h), with a bound on the datagrams in flight per registration.
+// proves it holds a session's token, then proves it owns the address that is
+// to receive that session's frames by echoing a challenge sent there) and
+// sends frames as fragments (gmr/wire/udp.h), with a bound on the datagrams
+// in flight per registration. Tokens are 128 bits from getrandom(2).
 #pragma once
 
 #include <array>
@@ -9,10 +10,10 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
-#include <random>
 #include <string_view>
 #include <unordered_map>
 
+#include "gmr/wire/udp.h"
 #include "net.h"
 
 namespace gmr::server {
@@ -37,31 +38,43 @@ class UdpPublisher {
   void start();
   void close();
 
-  // A fresh session token (never 0, unique among the live ones); a valid
-  // registration datagram carrying it calls `on_register` with its sender.
-  std::uint64_t add_session(OnRegister on_register);
-  void remove_session(std::uint64_t token);
+  // A fresh session token (random, unique among the live ones). A
+  // registration carrying it gets one challenge sent to its source address;
+  // the confirm echoing that challenge from that address calls `on_register`.
+  wire::UdpToken add_session(OnRegister on_register);
+  void remove_session(const wire::UdpToken& token);
 
   // Sends a whole ServerMessage to `to` as fragments. False, sending
   // nothing, when `to` is not registered or already has max_in_flight
   // datagrams in flight.
   bool send(const std::shared_ptr<Registration>& to, std::string_view message);
 
-  // Datagrams that were not a valid registration.
+  // Datagrams that were not a valid registration or confirm.
   std::uint64_t rejected() const { return rejected_; }
+  // Challenges sent (one per valid registration datagram).
+  std::uint64_t challenges() const { return challenges_; }
 
  private:
+  struct Session {
+    wire::UdpToken token{};
+    OnRegister on_register;
+    std::optional<udp::endpoint> challenged;  // the address a challenge went to, awaiting its confirm
+    wire::UdpToken cookie{};
+  };
   void receive();
+  void handle(std::string_view datagram);
+  // The live session holding `token` (constant-time compare), or null.
+  Session* find(const wire::UdpToken& token);
 
   udp::socket socket_;
   std::size_t max_in_flight_;
   std::uint16_t port_ = 0;
   bool closed_ = false;
-  std::unordered_map<std::uint64_t, OnRegister> sessions_;
-  std::mt19937_64 rng_{std::random_device{}()};
+  std::unordered_map<std::uint64_t, Session> sessions_;  // by the token's first 8 bytes
   std::array<char, 2048> buffer_{};
   udp::endpoint sender_;
   std::uint64_t rejected_ = 0;
+  std::uint64_t challenges_ = 0;
 };
 
 }  // namespace gmr::server

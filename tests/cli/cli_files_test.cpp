@@ -4,8 +4,10 @@
 
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <sys/wait.h>
 #include <map>
 #include <sstream>
 #include <filesystem>
@@ -77,6 +79,53 @@ TEST_F(CliFiles, MalformedFileGivesOneLineWithTheLocation) {
   EXPECT_EQ(fused.status, 1);
   EXPECT_EQ(lines(fused.err), 1u);
   EXPECT_THAT(fused.err, HasSubstr("TRUNC_02_01_in_hierarchy.bvh:"));
+}
+
+TEST_F(CliFiles, RunningOutOfMemoryIsOneClearLine) {
+  // A 38 MB BVH (31 joints, 100,000 frames) converted by a process allowed
+  // 200 MB of address space: the allocation fails, and the user reads what
+  // happened instead of "std::bad_alloc".
+  std::string text = "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation "
+                     "Xrotation Yrotation\n";
+  for (int j = 0; j < 30; ++j) {
+    text += " JOINT J" + std::to_string(j) + "\n {\n  OFFSET 0 1 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n";
+  }
+  text += "  End Site\n  {\n   OFFSET 0 1 0\n  }\n" + std::string(30, '}') + "\n}\nMOTION\nFrames: 100000\nFrame Time: 0.01\n";
+  std::string row;
+  for (int v = 0; v < 96; ++v) row += v == 0 ? "1.5" : " 1.5";
+  row += '\n';
+  text.reserve(text.size() + row.size() * 100000);
+  for (int f = 0; f < 100000; ++f) text += row;
+  ASSERT_TRUE(write_file_atomic(dir_ / "big.bvh", text).ok());
+  const std::string cmd = "ulimit -v 200000; exec " + shell_quote(GMR_CLI_PATH) + " convert " + path("big.bvh") + " " +
+                          path("big.gmr") + " 2>" + path("err");
+  const int raw = std::system(("sh -c " + shell_quote(cmd)).c_str());
+  ASSERT_TRUE(WIFEXITED(raw));
+  EXPECT_EQ(WEXITSTATUS(raw), 1);
+  const std::string err = read_file(dir_ / "err").value();
+  EXPECT_EQ(err, "gmr: convert: out of memory (the input needs more than this process may use)\n");
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "big.gmr"));
+}
+
+TEST_F(CliFiles, AWriteCutShortLeavesNoTemporary) {
+  // The file size limit stops `gmr convert` mid-write: one line, exit 1, and
+  // neither the output nor its temporary is left (without gmr's handling the
+  // limit's signal would end the process and leave the temporary).
+  std::string text = "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\n"
+                     "MOTION\nFrames: 20000\nFrame Time: 0.01\n";
+  for (int f = 0; f < 20000; ++f) text += "1.25 2.5 " + std::to_string(f) + "\n";
+  ASSERT_TRUE(write_file_atomic(dir_ / "in.bvh", text).ok());
+  const std::string cmd = "ulimit -f 64; exec " + shell_quote(GMR_CLI_PATH) + " convert " + path("in.bvh") + " " +
+                          path("out.gmr") + " 2>" + path("err");
+  const int raw = std::system(("sh -c " + shell_quote(cmd)).c_str());
+  ASSERT_TRUE(WIFEXITED(raw)) << "ended by a signal";
+  EXPECT_EQ(WEXITSTATUS(raw), 1);
+  const std::string err = read_file(dir_ / "err").value();
+  EXPECT_THAT(err, StartsWith("gmr: " + (dir_ / "out.gmr").string() + ": cannot write file: File too large")) << err;
+  std::vector<std::string> left;
+  for (const auto& e : std::filesystem::directory_iterator(dir_)) left.push_back(e.path().filename().string());
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{"err", "in.bvh"}));
 }
 
 TEST_F(CliFiles, WarningsGoToStderrAndTheCommandSucceeds) {

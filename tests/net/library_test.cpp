@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <fstream>
 
 #include "gmr/server/library.h"
 #include "test_data.h"
@@ -68,6 +69,54 @@ TEST(Library, NamesFilesAsFoundAndPicksEachAmcsSkeleton) {
   std::sort(names.begin(), names.end());
   EXPECT_EQ(names, (std::vector<std::string>{"acclaim/07_05-walk", "acclaim/09_06-run", "walks/cmu_walk"}));
   EXPECT_TRUE(lib->rejected.empty()) << lib->rejected.front().reason;
+}
+
+// Forty roots without channels and `frames` frames: about 2 KB of BVH.
+std::string channel_less_roots(const std::string& frames) {
+  std::string s = "HIERARCHY\n";
+  for (int j = 0; j < 40; ++j) {
+    s += "ROOT r" + std::to_string(j) + "\n{\n  OFFSET " + std::to_string(j) + " 1 0\n  CHANNELS 0\n}\n";
+  }
+  return s + "MOTION\nFrames: " + frames + "\nFrame Time: 0.01\n";
+}
+
+TEST(Library, AMotionAboveTheLimitsIsRejectedAtLoadWithItsFigures) {
+  TempDir d;
+  // 2^20 frames: the most a reader takes without channels (gmr/core/limits.h).
+  std::ofstream(d.path / "huge.bvh") << channel_less_roots("1048576");
+  std::ofstream(d.path / "small.bvh") << channel_less_roots("3");
+  EXPECT_LT(std::filesystem::file_size(d.path / "huge.bvh"), 2000u);
+  auto lib = server::load_library(d.path, 2);
+  ASSERT_TRUE(lib.ok()) << lib.error().to_string();
+  ASSERT_EQ(lib->entries.size(), 1u);
+  EXPECT_EQ(lib->entries[0].name, "small");
+  ASSERT_EQ(lib->rejected.size(), 1u);
+  EXPECT_EQ(lib->rejected[0].path.filename(), "huge.bvh");
+  EXPECT_NE(lib->rejected[0].reason.find("huge.bvh"), std::string::npos) << lib->rejected[0].reason;
+  EXPECT_NE(lib->rejected[0].reason.find("too large to serve: 1048576 frames x 40 joints = 41943040 joint-frames, "
+                                         "above the server's limit of 33554432 (--max-motion-joint-frames)"),
+            std::string::npos)
+      << lib->rejected[0].reason;
+
+  // The value bytes limit.
+  server::MotionLimits tight;
+  tight.max_value_bytes = 1000;
+  EXPECT_TRUE(server::check_motion_limits(*lib->entries[0].motion, tight).ok()) << "no channels: no values";
+  const auto walk = server::builtin_library().front().motion;
+  auto refused = server::check_motion_limits(*walk, tight);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().message,
+            "too large to serve: " + std::to_string(walk->frame_count) + " frames x " + std::to_string(walk->stride()) +
+                " channels take " + std::to_string(walk->values.size() * 8) +
+                " bytes, above the server's limit of 1000 (--max-motion-bytes)");
+
+  // Limits raised by the operator.
+  server::MotionLimits raised;
+  raised.max_joint_frames = std::uint64_t{1} << 28;
+  auto again = server::load_library(d.path, 1, {}, raised);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->entries.size(), 2u);
+  EXPECT_TRUE(again->rejected.empty());
 }
 
 TEST(Library, AMissingFolderIsAnError) {

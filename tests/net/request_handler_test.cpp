@@ -31,7 +31,8 @@ class RecordingOutbox final : public server::Outbox {
   void send_frames_now(std::uint32_t) override {}
   void close_after_reply() override { closing_ = true; }
   void count_frame_sent() override {}
-  void count_frame_dropped() override {}
+  void count_frame_dropped(std::uint64_t) override {}
+  void count_frame_skipped(std::uint64_t) override {}
   server::ConnectionCounters counters() const override { return {}; }
 
   std::deque<pb::ServerMessage> replies;
@@ -93,7 +94,8 @@ TEST_F(RequestHandlerTest, RefusesEverythingButHelloFirstThenAnswers) {
   EXPECT_EQ(ask(list, 5).error().code(), pb::ERROR_CODE_HANDSHAKE_REQUIRED);
   const auto h = hello();
   ASSERT_TRUE(h.has_hello());
-  EXPECT_NE(h.hello().session_token(), 0u);
+  EXPECT_EQ(h.hello().udp_token().size(), 16u);
+  EXPECT_NE(h.hello().udp_token(), std::string(16, '\0'));
   const auto r = ask(list, 6);
   ASSERT_TRUE(r.has_motions());
   EXPECT_EQ(static_cast<std::size_t>(r.motions().motions_size()), server_.library.size());

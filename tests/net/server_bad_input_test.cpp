@@ -7,6 +7,8 @@
 #include <spdlog/sinks/ostream_sink.h>
 #include <spdlog/spdlog.h>
 
+#include <atomic>
+#include <cstring>
 #include <sstream>
 
 #include <arpa/inet.h>
@@ -100,6 +102,42 @@ TEST(BadInput, TruncatedMessageLogNamesTheBytesReceived) {
   }  // the server stops: everything it logged is in
   spdlog::set_default_logger(previous);
   EXPECT_THAT(log.str(), ::testing::HasSubstr("truncated message: 3 of 32 bytes announced; closing"));
+}
+
+// Client text cannot forge a log line, drive a terminal or flood the log.
+TEST(BadInput, ClientTextIsEscapedAndBadRequestsCannotFloodTheLog) {
+  std::ostringstream log;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("capture", sink));
+  const std::string forged = "evil\n2026-11-23T07:00:00.000 info conn 99: hello from 'admin'\x1b[31m";
+  {
+    TestServer s;
+    spdlog::set_level(spdlog::level::info);
+    RawConnection c(s.port());
+    pb::ClientMessage hello = request(1);
+    hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+    hello.mutable_hello()->set_client_name(forged + std::string(1 << 20, 'x'));
+    c.send(hello);
+    ASSERT_TRUE(c.reply().has_value());
+    // 1,000 bad requests (about 1 MB) in a burst.
+    for (int i = 0; i < 1000; ++i) c.send_bytes(wire::frame_bytes(std::string(1000, '\xff')));
+    for (int i = 0; i < 1000; ++i) ASSERT_EQ(error_of(c.reply()), pb::ERROR_CODE_BAD_REQUEST);
+  }  // the server stops: everything it logged is in
+  spdlog::set_level(spdlog::level::warn);
+  spdlog::set_default_logger(previous);
+  const std::string text = log.str();
+  // One line per event: no line starts with the forged timestamp, no escape byte.
+  EXPECT_EQ(text.find("\n2026-11-23T07:00:00.000"), std::string::npos) << text;
+  EXPECT_EQ(text.find('\x1b'), std::string::npos);
+  EXPECT_THAT(text, ::testing::HasSubstr("hello from \"evil\\n2026-11-23T07:00:00.000 info conn 99: hello from "
+                                         "'admin'\\x1b[3\" (and 1048578 more bytes)"));
+  // The flood: a few lines, then one that counts the rest.
+  std::size_t not_a_message = 0;
+  for (std::size_t p = 0; (p = text.find("is not a ClientMessage", p)) != std::string::npos; ++p) ++not_a_message;
+  EXPECT_LE(not_a_message, 10u);
+  EXPECT_THAT(text, ::testing::HasSubstr("lines about its requests were suppressed"));
+  EXPECT_LT(text.size(), 16u * 1024) << "1 MB of bad requests once wrote 16 MB of log";
 }
 
 TEST(BadInput, WellFramedGarbageGetsAnErrorAndTheConnectionStays) {
@@ -284,28 +322,58 @@ TEST(BadInput, UnknownTransportOrPrecisionIsABadRequest) {
   }
 }
 
+// A UDP socket on loopback with a receive deadline.
+struct UdpSocket {
+  int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in server{};
+  explicit UdpSocket(std::uint16_t port) {
+    server.sin_family = AF_INET;
+    server.sin_port = htons(port);
+    server.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    timeval tv{0, 300 * 1000};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  }
+  ~UdpSocket() { ::close(fd); }
+  void send(const std::string& d) { ::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&server), sizeof server); }
+  // Every datagram that arrives within `window`.
+  std::vector<std::string> receive_for(std::chrono::milliseconds window) {
+    std::vector<std::string> got;
+    const auto until = std::chrono::steady_clock::now() + window;
+    char buf[2048];
+    while (std::chrono::steady_clock::now() < until) {
+      const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+      if (n >= 0) got.emplace_back(buf, static_cast<std::size_t>(n));
+    }
+    return got;
+  }
+};
+
+wire::UdpToken token_of(const client::Client& c) {
+  wire::UdpToken t;
+  std::copy(c.hello().udp_token.begin(), c.hello().udp_token.end(), t.begin());
+  return t;
+}
+
 TEST(BadInput, UdpDatagramsWithWrongTokensAreIgnored) {
   TestServer s;
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
-  const std::uint64_t token = c->hello().session_token;
-  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(s.server.udp_port());
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  for (const std::string& d : {wire::make_register_datagram(token + 1), wire::make_register_datagram(0),
-                               std::string("garbage"), wire::make_register_datagram(token).substr(0, 12)}) {
-    ::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+  const wire::UdpToken token = token_of(*c);
+  wire::UdpToken off_by_one_bit = token;
+  off_by_one_bit[15] ^= 1;
+  UdpSocket u(s.server.udp_port());
+  std::string v1(16, '\0');  // a version 1 registration (8-byte token)
+  std::memcpy(v1.data(), "GMRU\x01\x01\0\0", 8);
+  for (const std::string& d : {wire::make_register_datagram(off_by_one_bit), wire::make_register_datagram({}),
+                               std::string("garbage"), wire::make_register_datagram(token).substr(0, 12), v1,
+                               wire::make_confirm_datagram(token, {})}) {
+    u.send(d);
   }
-  // The datagrams are handled in order on the server's I/O thread; a TCP
-  // round trip after them... is not ordered with UDP, so wait on the counter.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  server::ServerStats st;
-  do {
-    st = s.server.stats();
-  } while (st.udp_rejected < 4 && std::chrono::steady_clock::now() < deadline);
-  EXPECT_EQ(st.udp_rejected, 4u);
+  // Nothing comes back to any of them: not even a challenge.
+  EXPECT_TRUE(u.receive_for(std::chrono::milliseconds(300)).empty());
+  server::ServerStats st = s.server.stats();
+  EXPECT_EQ(st.udp_rejected, 6u);
+  EXPECT_EQ(st.udp_challenges, 0u);
   ASSERT_EQ(st.sessions.size(), 1u);
   EXPECT_FALSE(st.sessions[0].udp_registered);
   // Without a registration a UDP subscription is refused with the reason.
@@ -319,14 +387,55 @@ TEST(BadInput, UdpDatagramsWithWrongTokensAreIgnored) {
   pb::ServerMessage reply;
   ASSERT_TRUE(reply.ParseFromString(*r));
   EXPECT_EQ(error_of(reply), pb::ERROR_CODE_FAILED_PRECONDITION);
-  // The right token registers this socket, and only this one.
-  const auto d = wire::make_register_datagram(token);
-  ::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+  // The right token gets one challenge, the size of the registration; the
+  // echo from the same socket registers it, and only it.
+  u.send(wire::make_register_datagram(token));
+  const auto got = u.receive_for(std::chrono::milliseconds(300));
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].size(), wire::kRegisterBytes);
+  const auto cookie = wire::parse_challenge_datagram(got[0]);
+  ASSERT_TRUE(cookie.has_value());
+  EXPECT_FALSE(s.server.stats().sessions[0].udp_registered);
+  u.send(wire::make_confirm_datagram(token, *cookie));
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
   do {
     st = s.server.stats();
   } while (!st.sessions[0].udp_registered && std::chrono::steady_clock::now() < deadline);
   EXPECT_TRUE(st.sessions[0].udp_registered);
-  ::close(fd);
+}
+
+// The reflection attack: a registration whose source address is forged (here:
+// sent from the victim's own socket, which never confirms) makes the server
+// send the victim one challenge of at most the registration's size per
+// registration datagram, and never a frame, while the session's real
+// endpoint keeps streaming.
+TEST(BadInput, AForgedRegistrationGetsOneSmallChallengeAndNoFrames) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  std::atomic<int> frames{0};
+  client::SubscribeOptions o;
+  o.udp = true;
+  o.loop = true;
+  o.rate_hz = 500;
+  ASSERT_TRUE(c->subscribe(v->id, o, [&](const client::ReceivedFrame&) { ++frames; }, nullptr).ok());
+
+  UdpSocket victim(s.server.udp_port());
+  const std::string forged = wire::make_register_datagram(token_of(*c));  // the worst case: the token leaked
+  for (int i = 0; i < 5; ++i) victim.send(forged);
+  const int before = frames.load();
+  const auto got = victim.receive_for(std::chrono::milliseconds(600));
+  std::size_t bytes = 0;
+  for (const auto& d : got) {
+    EXPECT_TRUE(wire::parse_challenge_datagram(d).has_value()) << "the victim got something other than a challenge";
+    bytes += d.size();
+  }
+  EXPECT_EQ(got.size(), 5u);
+  EXPECT_LE(bytes, 5 * forged.size()) << "amplification above 1";
+  EXPECT_GT(frames.load(), before) << "the real endpoint keeps its frames";
+  EXPECT_TRUE(s.server.stats().sessions[0].udp_registered);
 }
 
 }  // namespace

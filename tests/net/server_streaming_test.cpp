@@ -265,6 +265,62 @@ TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {
   EXPECT_EQ(good_stats.frames_dropped, 0u);
 }
 
+// A server that falls behind says so: the ticks it skips to catch up advance
+// the sequence numbers and are counted (SubscriptionEnded, Stats) apart from
+// the frames a slow client did not read, so every gap is accounted for.
+TEST(Streaming, TicksALateServerSkipsAreGapsAndAreCounted) {
+  server::ServerConfig cfg;
+  cfg.port = 0;
+  cfg.udp_port = 0;
+  cfg.max_catch_up = std::chrono::milliseconds(0);  // skip as soon as a tick is a period late
+  server::Server srv(cfg, test_library());
+  srv.start();
+  client::ClientOptions co;
+  co.host = "127.0.0.1";
+  co.port = srv.tcp_port();
+  auto c = client::Client::connect(co);
+  ASSERT_TRUE(c.ok()) << c.error().to_string();
+  auto v = (*c)->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Sink sink;
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 10000;  // a tick every 0.1 ms: a stall of the I/O thread longer than that is a skip
+  o.max_frames = 20000;
+  ASSERT_TRUE((*c)->subscribe(v->id, o, sink.on_frame(), sink.on_end()).ok());
+  // Stall the I/O thread with queries (each computes the whole motion) until the stream ends.
+  auto other = client::Client::connect(co);
+  ASSERT_TRUE(other.ok());
+  auto ov = (*other)->create_view("walk");
+  ASSERT_TRUE(ov.ok());
+  const auto all = static_cast<std::uint32_t>(std::min<std::uint64_t>(ov->frame_count, 1000));
+  for (int i = 0; i < 1000 && !sink.ended.wait(std::chrono::milliseconds(0)); ++i) {
+    ASSERT_TRUE((*other)->query(ov->id, 0, all, true).ok());
+  }
+  auto end = sink.ended.wait(std::chrono::seconds(30));
+  ASSERT_TRUE(end.has_value());
+  const auto frames = sink.copy();
+  std::uint64_t gaps = 0;
+  for (std::size_t k = 1; k < frames.size(); ++k) {
+    ASSERT_GT(frames[k].sequence, frames[k - 1].sequence);
+    gaps += frames[k].sequence - frames[k - 1].sequence - 1;
+  }
+  EXPECT_GT(end->frames_skipped, 0u) << "stalls of the I/O thread should have made the 10 kHz stream late";
+  // Every tick is a frame received, a skip or a drop (TCP loses nothing);
+  // the sequence numbers show each skip and drop as a gap, including those
+  // before the first frame received and after the last one.
+  ASSERT_FALSE(frames.empty());
+  EXPECT_EQ(frames.size() + end->frames_skipped + end->frames_dropped, end->frames_sent);
+  const std::uint64_t before_first = frames.front().sequence;
+  const std::uint64_t after_last = end->frames_sent - 1 - frames.back().sequence;
+  EXPECT_EQ(before_first + gaps + after_last, end->frames_skipped + end->frames_dropped)
+      << "every gap is a skip or a drop";
+  auto st = (*other)->stats();
+  ASSERT_TRUE(st.ok());
+  EXPECT_GE(st->frames_skipped_total, end->frames_skipped);
+  srv.stop();
+}
+
 TEST(Streaming, AStructureChangeMidStreamBumpsTheSkeletonVersion) {
   TestServer s;
   auto c = s.connect();

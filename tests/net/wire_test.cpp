@@ -96,20 +96,44 @@ TEST(UdpFragments, MalformedDatagramsAreCountedAndIgnored) {
   EXPECT_FALSE(r.add(bad_count));
   EXPECT_FALSE(r.add(bad_magic));
   EXPECT_FALSE(r.add("short"));
-  EXPECT_FALSE(r.add(gmr::wire::make_register_datagram(1)));
+  EXPECT_FALSE(r.add(gmr::wire::make_register_datagram({})));
   EXPECT_EQ(r.malformed(), 5u);
   EXPECT_EQ(r.completed(), 0u);
 }
 
 TEST(UdpRegister, RoundTripsAndRejectsOtherBytes) {
-  const auto d = gmr::wire::make_register_datagram(0x0123456789abcdefULL);
+  gmr::wire::UdpToken token, cookie;
+  for (std::size_t i = 0; i < token.size(); ++i) {
+    token[i] = static_cast<std::uint8_t>(i * 17 + 3);
+    cookie[i] = static_cast<std::uint8_t>(255 - i);
+  }
+  const auto d = gmr::wire::make_register_datagram(token);
   EXPECT_EQ(d.size(), gmr::wire::kRegisterBytes);
-  EXPECT_EQ(gmr::wire::parse_register_datagram(d), 0x0123456789abcdefULL);
+  EXPECT_EQ(gmr::wire::parse_register_datagram(d), token);
   EXPECT_FALSE(gmr::wire::parse_register_datagram(d.substr(1)));
   EXPECT_FALSE(gmr::wire::parse_register_datagram(d + "x"));
   std::string wrong_kind = d;
   wrong_kind[5] = 2;
   EXPECT_FALSE(gmr::wire::parse_register_datagram(wrong_kind));
+  std::string version_1 = d;
+  version_1[4] = 1;
+  EXPECT_FALSE(gmr::wire::parse_register_datagram(version_1));
+  // The challenge is no larger than the registration it answers.
+  const auto ch = gmr::wire::make_challenge_datagram(cookie);
+  EXPECT_LE(ch.size(), d.size());
+  EXPECT_EQ(gmr::wire::parse_challenge_datagram(ch), cookie);
+  EXPECT_FALSE(gmr::wire::parse_challenge_datagram(d));
+  const auto confirm = gmr::wire::parse_confirm_datagram(gmr::wire::make_confirm_datagram(token, cookie));
+  ASSERT_TRUE(confirm.has_value());
+  EXPECT_EQ(confirm->token, token);
+  EXPECT_EQ(confirm->cookie, cookie);
+  EXPECT_FALSE(gmr::wire::parse_confirm_datagram(ch));
+  EXPECT_TRUE(gmr::wire::same_token(token, token));
+  for (std::size_t i = 0; i < token.size(); ++i) {
+    auto other = token;
+    other[i] ^= 0x80;
+    EXPECT_FALSE(gmr::wire::same_token(token, other)) << i;
+  }
 }
 
 // The shared body after a subscriber's head is one length-prefixed

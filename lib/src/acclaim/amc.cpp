@@ -6,6 +6,7 @@
 #include "acclaim_text.h"
 #include "gmr/acclaim/amc.h"
 #include "gmr/core/file_util.h"
+#include "gmr/core/limits.h"
 
 namespace gmr {
 
@@ -114,6 +115,9 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
         }
         if (out.values.size() + stride > max_values) {
           return error_at(file, l.number, t0.column, "too many frames for the size of the file (frames list almost no bones)");
+        }
+        if (auto s = check_frame_count(out.frame_count + 1, stride); !s.ok()) {
+          return error_at(file, l.number, t0.column, "one frame too many: " + s.error().message);
         }
         out.frame_numbers.push_back(*n);
         out.values.resize(out.values.size() + stride, 0.0);

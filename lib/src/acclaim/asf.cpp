@@ -88,6 +88,7 @@ struct PendingBone {
   int begin_line = 0;
   bool has_name = false, has_direction = false, has_length = false;
   int limits_line = 0, limits_column = 0;
+  int length_line = 0, length_column = 0;
 };
 
 class AsfParser {
@@ -299,6 +300,8 @@ Status AsfParser::bone_field(const Line& l) {
     if (v[0] < 0.0) return err(l, l.tokens[1], "expected a length >= 0, found " + quote_text(l.tokens[1].text));
     b.length = v[0];
     pending_.has_length = true;
+    pending_.length_line = l.number;
+    pending_.length_column = l.tokens[1].column;
   } else if (kw == "axis") {
     double v[3];
     if (auto s = numbers(l, 1, 3, kw, v); !s) return s;
@@ -357,6 +360,11 @@ Status AsfParser::finish_bone(const Line& l) {
   if (!pending_.has_direction) return err(l, t, "expected a 'direction' for bone " + quote_text(pending_.bone.name));
   if (!pending_.has_length) return err(l, t, "expected a 'length' for bone " + quote_text(pending_.bone.name));
   AsfBone& b = pending_.bone;
+  // Each factor is finite, but their product (the bone's offset) can overflow.
+  if (!(b.direction * b.length).allFinite()) {
+    return error_at(file_, pending_.length_line, pending_.length_column,
+                    "bone " + quote_text(b.name) + ": direction times length is not finite (the offset overflows)");
+  }
   if (!b.limits.empty() && b.dofs.empty()) {
     // No dof is ever inferred from limits (fairmotion#59).
     if (warnings_ != nullptr) {

@@ -44,6 +44,10 @@ Result<Motion> acclaim_to_gmr(const AsfSkeleton& s, const AmcMotion& m, const Ac
     j.name = bone.parent < 0 ? "root" : bone.name;
     j.parent = bone.parent;
     j.offset = bone.parent < 0 ? Eigen::Vector3d(bone.position * scale) : Eigen::Vector3d(bone.direction * (bone.length * scale));
+    if (!j.offset.allFinite()) {
+      return make_error("ASF bone '" + bone.name + "': its offset times the length scale " + std::to_string(scale) +
+                        " is not finite");
+    }
     if (bone.parent < 0) {
       for (std::size_t i = 0; i < bone.dofs.size(); ++i) {
         if (is_translation_dof(bone.dofs[i])) {

@@ -1,6 +1,8 @@
 #include "gmr/core/file_util.h"
 
 #include <fcntl.h>
+#include <limits.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -66,6 +68,80 @@ Result<std::string> read_file(const fs::path& path) {
 
 namespace {
 
+// The temporaries being written, for a signal handler to remove: fixed
+// slots, since a handler may not allocate or lock. A slot is free (0),
+// being filled (1) or holds a live temporary's path (2).
+struct TemporarySlot {
+  std::atomic<int> state{0};
+  char path[PATH_MAX];
+};
+TemporarySlot g_temporaries[64];
+
+void track(const fs::path& tmp) {
+  const std::string& p = tmp.native();
+  if (p.size() >= PATH_MAX) return;  // not removable on a signal; the next write sweeps it
+  for (auto& slot : g_temporaries) {
+    int free = 0;
+    if (slot.state.compare_exchange_strong(free, 1, std::memory_order_acquire)) {
+      std::memcpy(slot.path, p.c_str(), p.size() + 1);
+      slot.state.store(2, std::memory_order_release);
+      return;
+    }
+  }
+}
+
+void untrack(const fs::path& tmp) {
+  for (auto& slot : g_temporaries) {
+    if (slot.state.load(std::memory_order_acquire) == 2 && tmp.native() == slot.path) {
+      slot.state.store(0, std::memory_order_release);
+      return;
+    }
+  }
+}
+
+void remove_and_untrack(const fs::path& tmp) {
+  ::unlink(tmp.c_str());
+  untrack(tmp);
+}
+
+// Only async-signal-safe calls: unlink, sigaction, raise.
+extern "C" void on_terminating_signal(int sig) {
+  for (auto& slot : g_temporaries) {
+    if (slot.state.load(std::memory_order_acquire) == 2) ::unlink(slot.path);
+  }
+  struct sigaction dfl {};
+  dfl.sa_handler = SIG_DFL;
+  ::sigaction(sig, &dfl, nullptr);
+  ::raise(sig);
+}
+
+// Removes ".<name>.tmp.<pid>.<n>" beside `path` when process <pid> is gone
+// and the file is over a minute old (a writer on another machine sharing the
+// folder has a pid this one cannot see: the age keeps its write safe).
+void sweep_stale_temporaries(const fs::path& dir, const std::string& name) {
+  const std::string prefix = "." + name + ".tmp.";
+  std::error_code ec;
+  const auto now = fs::file_time_type::clock::now();
+  for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
+    const std::string entry = it->path().filename().string();
+    if (entry.size() <= prefix.size() || entry.compare(0, prefix.size(), prefix) != 0) continue;
+    const char* p = entry.data() + prefix.size();
+    const char* end = entry.data() + entry.size();
+    long pid = 0;
+    unsigned long n = 0;
+    auto r = std::from_chars(p, end, pid);
+    if (r.ec != std::errc() || r.ptr == end || *r.ptr != '.' || pid <= 0) continue;
+    auto r2 = std::from_chars(r.ptr + 1, end, n);
+    if (r2.ec != std::errc() || r2.ptr != end) continue;
+    if (pid == ::getpid() || ::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;
+    std::error_code age_ec;
+    const auto written = fs::last_write_time(it->path(), age_ec);
+    if (age_ec || now - written < std::chrono::minutes(1)) continue;
+    if (!it->is_regular_file(age_ec)) continue;
+    fs::remove(it->path(), age_ec);
+  }
+}
+
 // Phase one of an atomic write: `bytes` in a synced temporary beside `path`
 // (same directory, so the rename is atomic), with the permissions of the file
 // it will replace. Nothing at `path` changes.
@@ -73,6 +149,7 @@ Result<fs::path> write_temporary(const fs::path& path, std::string_view bytes) {
   static std::atomic<unsigned> counter{0};
   if (path.empty() || !path.has_filename()) return file_error(path, "cannot write file", EINVAL);
   const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  sweep_stale_temporaries(dir, path.filename().string());
   // Unique per process and call.
   std::string tmp_name = ".";
   tmp_name += path.filename().string();
@@ -90,10 +167,11 @@ Result<fs::path> write_temporary(const fs::path& path, std::string_view bytes) {
   Fd f;
   f.fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, mode);
   if (f.fd < 0) return file_error(path, "cannot create temporary file in " + dir.string(), errno);
+  track(tmp);
   auto fail = [&](std::string_view what, int err) -> Error {
     ::close(f.fd);
     f.fd = -1;
-    ::unlink(tmp.c_str());
+    remove_and_untrack(tmp);
     return file_error(path, what, err);
   };
   if (replacing) (void)::fchmod(f.fd, mode);  // keep the replaced file's permissions (umask would drop some)
@@ -110,7 +188,7 @@ Result<fs::path> write_temporary(const fs::path& path, std::string_view bytes) {
   if (::close(f.fd) != 0) {
     f.fd = -1;
     const int err = errno;
-    ::unlink(tmp.c_str());
+    remove_and_untrack(tmp);
     return file_error(path, "cannot close file", err);
   }
   f.fd = -1;
@@ -121,9 +199,10 @@ Result<fs::path> write_temporary(const fs::path& path, std::string_view bytes) {
 Status rename_into_place(const fs::path& tmp, const fs::path& path) {
   if (::rename(tmp.c_str(), path.c_str()) != 0) {
     const int err = errno;
-    ::unlink(tmp.c_str());
+    remove_and_untrack(tmp);
     return file_error(path, "cannot replace file", err);
   }
+  untrack(tmp);
   // Make the rename itself durable; failure here leaves a complete file, so it is not reported.
   const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
   Fd d;
@@ -145,18 +224,29 @@ Status write_files_atomic(std::span<const FileContent> files) {
   for (const FileContent& f : files) {
     auto tmp = write_temporary(f.path, f.bytes);
     if (!tmp) {
-      for (const auto& t : temporaries) ::unlink(t.c_str());
+      for (const auto& t : temporaries) remove_and_untrack(t);
       return tmp.error();
     }
     temporaries.push_back(std::move(tmp).value());
   }
   for (std::size_t i = 0; i < files.size(); ++i) {
     if (auto s = rename_into_place(temporaries[i], files[i].path); !s) {
-      for (std::size_t k = i + 1; k < files.size(); ++k) ::unlink(temporaries[k].c_str());
+      for (std::size_t k = i + 1; k < files.size(); ++k) remove_and_untrack(temporaries[k]);
       return s;
     }
   }
   return Ok{};
+}
+
+void remove_temporaries_on_signals() {
+  struct sigaction sa {};
+  sa.sa_handler = on_terminating_signal;
+  sigemptyset(&sa.sa_mask);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) ::sigaction(sig, &sa, nullptr);
+  // Past RLIMIT_FSIZE, write() then fails with EFBIG and the write is undone.
+  struct sigaction ignore {};
+  ignore.sa_handler = SIG_IGN;
+  ::sigaction(SIGXFSZ, &ignore, nullptr);
 }
 
 std::string format_double(double v) {

@@ -201,8 +201,12 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
   out.build_frame_program();
 
   if (out.all_roots_) {
-    out.stored_positions_.resize(motion.frame_count * joints * 3);
-    for (std::size_t f = 0; f < motion.frame_count; ++f) {
+    // Without channels every frame is the same: one stored frame serves all,
+    // however many frames the motion declares.
+    const std::size_t stored = motion.stride() == 0 ? std::min<std::size_t>(motion.frame_count, 1) : motion.frame_count;
+    out.positions_per_frame_ = motion.stride() != 0;
+    out.stored_positions_.resize(stored * joints * 3);
+    for (std::size_t f = 0; f < stored; ++f) {
       for (std::size_t j = 0; j < joints; ++j) {
         const Eigen::Vector3d t = motion.local_offset(f, static_cast<int>(j));
         float* dst = out.stored_positions_.data() + (f * joints + j) * 3;
@@ -321,7 +325,11 @@ void CompiledMotion::build_frame_program() {
 }
 
 std::size_t CompiledMotion::bytes_per_frame() const {
-  return (stream_count_ + (all_roots_ ? joint_count() * 3 : 0)) * sizeof(float);
+  return (stream_count_ + (all_roots_ && positions_per_frame_ ? joint_count() * 3 : 0)) * sizeof(float);
+}
+
+const float* CompiledMotion::stored_positions(std::size_t frame) const {
+  return stored_positions_.data() + (positions_per_frame_ ? frame : 0) * joint_count_ * 3;
 }
 
 std::size_t CompiledMotion::bytes() const {

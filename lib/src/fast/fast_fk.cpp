@@ -100,7 +100,7 @@ void frame_chain(const CompiledMotion& m, std::size_t f, const float* sines, con
     }
   }
   if (out_pos != nullptr && m.all_roots()) {
-    std::memcpy(out_pos, m.stored_positions().data() + f * plans.size() * 3, plans.size() * 3 * sizeof(float));
+    std::memcpy(out_pos, m.stored_positions(f), plans.size() * 3 * sizeof(float));
   }
 }
 
@@ -168,12 +168,12 @@ bool FkRangeJob::run() const {
 
   if (m.all_roots()) {
     // The stored positions are the answer: a copy (frame-major) or a transpose.
-    const float* src = m.stored_positions().data() + begin * joints * 3;
-    if (layout == Layout::kFrameMajor) {
-      std::memcpy(out_positions.data(), src, (end - begin) * joints * 3 * sizeof(float));
-    } else {
-      for (std::size_t f = 0; f < end - begin; ++f) {
-        for (std::size_t k = 0; k < joints * 3; ++k) out_positions[k * args.stride + f] = src[f * joints * 3 + k];
+    for (std::size_t f = 0; f < end - begin; ++f) {
+      const float* src = m.stored_positions(begin + f);
+      if (layout == Layout::kFrameMajor) {
+        std::memcpy(out_positions.data() + f * joints * 3, src, joints * 3 * sizeof(float));
+      } else {
+        for (std::size_t k = 0; k < joints * 3; ++k) out_positions[k * args.stride + f] = src[k];
       }
     }
     if (args.orientations == nullptr) return true;
@@ -197,14 +197,12 @@ bool FkFrameJob::run() const {
   args.workspace = ws;
   args.padded_angles = padded;
   if (m.all_roots() && args.orientations == nullptr) {
-    std::memcpy(out_positions.data(), m.stored_positions().data() + frame * m.joint_count() * 3,
-                m.joint_count() * 3 * sizeof(float));
+    std::memcpy(out_positions.data(), m.stored_positions(frame), m.joint_count() * 3 * sizeof(float));
     return true;
   }
   if (detail::frame_kernel(args)) {
     if (m.all_roots()) {
-      std::memcpy(out_positions.data(), m.stored_positions().data() + frame * m.joint_count() * 3,
-                  m.joint_count() * 3 * sizeof(float));
+      std::memcpy(out_positions.data(), m.stored_positions(frame), m.joint_count() * 3 * sizeof(float));
     }
     return true;
   }

@@ -14,6 +14,7 @@
 #include <limits>
 
 #include "gmr/core/file_util.h"
+#include "gmr/core/limits.h"
 
 namespace gmr {
 namespace {
@@ -138,7 +139,7 @@ Result<Header> parse_header(std::string_view head, std::uint64_t file_size, std:
                              " channels, but the file holds " + std::to_string(data_bytes) + " data bytes (" +
                              std::to_string(have) + " whole frames): truncated or corrupt");
   }
-  if (h.channels == 0 && h.frames > (std::uint64_t{1} << 40)) return byte_error(label, 40, "implausible frame count");
+  if (auto s = check_frame_count(h.frames, h.channels * 8, data_bytes); !s.ok()) return byte_error(label, 40, s.error().message);
   return h;
 }
 

@@ -1,6 +1,7 @@
 #include "hierarchy_text.h"
 
 #include "gmr/core/file_util.h"
+#include "gmr/core/limits.h"
 
 #include "core/number_format.h"
 
@@ -545,8 +546,8 @@ Result<Motion> Parser::read_motion() {
   if (stride == 0) {
     while (p < end && is_space(*p)) ++p;
     if (p < end) return error_at(static_cast<std::size_t>(p - begin), "unexpected value after 'Frame Time:': the hierarchy has no channels");
-    // Without channels the frame count cannot be checked against the data; cap it.
-    if (declared > (1u << 24)) return error_at(count_offset, "frame count " + std::string(count_text) + " too large for a motion without channels");
+    // Without channels the frame count cannot be checked against the data: capped (gmr/core/limits.h).
+    if (auto s = check_frame_count(declared, 0); !s.ok()) return error_at(count_offset, s.error().message);
     m.frame_count = static_cast<std::size_t>(declared);
     return m;
   }
@@ -589,6 +590,9 @@ Result<Motion> Parser::read_motion() {
 
   const std::size_t frames = n / stride;
   const std::size_t partial = n % stride;
+  if (auto s = check_frame_count(frames, stride); !s.ok()) {
+    return error_at(frames_offset, "the file holds " + std::to_string(frames) + " frames: " + s.error().message);
+  }
   if (partial != 0) {
     return error_at(static_cast<std::size_t>(end - begin),
                     "file ends in frame " + std::to_string(frames) + " (counting from 0, starting at line " +

@@ -20,6 +20,7 @@
 #include <string_view>
 
 #include "gmr/core/file_util.h"
+#include "gmr/core/limits.h"
 #include "gmr/markers/c3d.h"
 #include "names.h"
 
@@ -30,7 +31,6 @@ constexpr std::size_t kBlock = 512;
 constexpr std::size_t kMaxDims = 7;
 // Frame counts beyond this are not believed even when the file could hold them
 // (a corrupt parameter); 2^28 frames is 25 days at 120 Hz.
-constexpr std::uint64_t kMaxFrames = std::uint64_t{1} << 28;
 constexpr std::size_t kMaxPoints = 65535;
 
 enum class Processor { kIntel, kDec, kMips };
@@ -351,11 +351,12 @@ Result<MarkerTrajectories> C3dReader::read() {
       }
     }
   }
-  if (frames > kMaxFrames) return byte_error(label_, 8, "implausible frame count " + std::to_string(frames));
   out.first_frame = first;
 
-  // Bound everything by the bytes present before allocating.
+  // Bound everything by the bytes present before allocating; frames without
+  // markers or analog samples carry no bytes and are capped (gmr/core/limits.h).
   const std::size_t frame_bytes = (points * 4 + analog_per_frame) * value_size;
+  if (auto s = check_frame_count(frames, frame_bytes); !s.ok()) return byte_error(label_, 8, s.error().message);
   if (frames > 0 && frame_bytes > 0) {
     if (data_start > bytes_.size()) {
       return byte_error(label_, 16, "data section at block " + std::to_string(data_block) + " (byte " +

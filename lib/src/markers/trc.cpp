@@ -14,6 +14,7 @@
 #include <limits>
 
 #include "gmr/core/file_util.h"
+#include "gmr/core/limits.h"
 #include "gmr/markers/trc.h"
 #include "names.h"
 
@@ -226,6 +227,9 @@ Result<MarkerTrajectories> parse_trc(std::string_view text, std::string_view lab
                 std::string(line.ended ? "row ends" : "file ends") + " after " + std::to_string(cells.size()) +
                     " of " + std::to_string(columns) + " values (Frame#, Time and 3 per marker)" +
                     (line.ended ? "" : ": truncated"));
+    }
+    if (auto s = check_frame_count(out.frame_count + 1, 3 * markers); !s.ok()) {
+      return at(label, line.number, cells[0].column, "one frame too many: " + s.error().message);
     }
     std::int64_t frame = 0;
     if (!parse_integer(cells[0].text, frame)) {

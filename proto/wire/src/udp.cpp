@@ -34,19 +34,54 @@ bool header_is(std::string_view d, DatagramKind kind) {
          static_cast<std::uint8_t>(d[4]) == kUdpVersion && static_cast<std::uint8_t>(d[5]) == static_cast<std::uint8_t>(kind);
 }
 
-}  // namespace
+void put_token(std::string& out, const UdpToken& t) { out.append(reinterpret_cast<const char*>(t.data()), t.size()); }
 
-std::string make_register_datagram(std::uint64_t token) {
+UdpToken get_token(std::string_view in, std::size_t at) {
+  UdpToken t;
+  std::memcpy(t.data(), in.data() + at, t.size());
+  return t;
+}
+
+std::string token_datagram(DatagramKind kind, const UdpToken& token) {
   std::string out;
-  out.reserve(kRegisterBytes);
-  put_header(out, DatagramKind::kRegister);
-  put_be(out, token);
+  out.reserve(kUdpHeaderBytes + kUdpTokenBytes);
+  put_header(out, kind);
+  put_token(out, token);
   return out;
 }
 
-std::optional<std::uint64_t> parse_register_datagram(std::string_view d) {
+}  // namespace
+
+std::string make_register_datagram(const UdpToken& token) { return token_datagram(DatagramKind::kRegister, token); }
+
+std::optional<UdpToken> parse_register_datagram(std::string_view d) {
   if (d.size() != kRegisterBytes || !header_is(d, DatagramKind::kRegister)) return std::nullopt;
-  return get_be<std::uint64_t>(d, kUdpHeaderBytes);
+  return get_token(d, kUdpHeaderBytes);
+}
+
+std::string make_challenge_datagram(const UdpToken& cookie) { return token_datagram(DatagramKind::kChallenge, cookie); }
+
+std::optional<UdpToken> parse_challenge_datagram(std::string_view d) {
+  if (d.size() != kChallengeBytes || !header_is(d, DatagramKind::kChallenge)) return std::nullopt;
+  return get_token(d, kUdpHeaderBytes);
+}
+
+std::string make_confirm_datagram(const UdpToken& token, const UdpToken& cookie) {
+  std::string out = token_datagram(DatagramKind::kConfirm, token);
+  put_token(out, cookie);
+  return out;
+}
+
+std::optional<UdpConfirm> parse_confirm_datagram(std::string_view d) {
+  if (d.size() != kConfirmBytes || !header_is(d, DatagramKind::kConfirm)) return std::nullopt;
+  return UdpConfirm{get_token(d, kUdpHeaderBytes), get_token(d, kUdpHeaderBytes + kUdpTokenBytes)};
+}
+
+bool same_token(const UdpToken& a, const UdpToken& b) {
+  // volatile: the compiler may not turn the loop into an early-exit compare.
+  volatile std::uint8_t diff = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) diff = static_cast<std::uint8_t>(diff | (a[i] ^ b[i]));
+  return diff == 0;
 }
 
 std::vector<std::string> fragment_message(std::uint32_t message_id, std::string_view message) {

@@ -330,6 +330,8 @@ TEST(BrokenInputGivesLineAndColumn, Asf) {
       {"cycle", "root hip back\n    hip knee", "root back\n    hip knee\n    knee hip", 13, 1, "'hip' is not connected"},
       {"no name", "     name knee\n", "", 31, 3, "expected a 'name'"},
       {"no length", "     length 2\n", "", 39, 3, "expected a 'length'"},
+      {"offset overflows", "direction 0 1 0\n     length 2", "direction 0 1e10 0\n     length 1e300", 37, 13,
+       "bone 'back': direction times length is not finite"},
       {"bone named root", "name back", "name Root", 35, 11, "may not be named"},
       {"bone named end", "name back", "name END", 35, 11, "a keyword of the hierarchy"},
       {"text before sections", ":version 1.10", "hello\n:version 1.10", 1, 1, "expected a section keyword"},

@@ -3,6 +3,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <charconv>
@@ -97,6 +100,79 @@ std::string to_chars_text(double v) {
 }
 
 // format_double has a fast path; it must write what std::to_chars writes.
+// A pid that no process has: a child that exited and was reaped.
+pid_t dead_pid() {
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  return child;
+}
+
+TEST(WriteFileAtomic, TheNextWriteSweepsTemporariesOfDeadWriters) {
+  TempDir d;
+  const auto old = fs::file_time_type::clock::now() - std::chrono::minutes(5);
+  const auto make = [&](const std::string& name, bool stale) {
+    ASSERT_TRUE(write_file_atomic(d.path / name, "partial").ok());
+    if (stale) fs::last_write_time(d.path / name, old);
+  };
+  const std::string dead = std::to_string(dead_pid());
+  const std::string alive = std::to_string(::getppid());
+  make(".out.gmr.tmp." + dead + ".0", true);      // a SIGKILLed writer of out.gmr: swept
+  make(".out.gmr.tmp." + dead + ".1", false);     // too recent (another machine's writer?): kept
+  make(".out.gmr.tmp." + alive + ".0", true);     // its writer is alive: kept
+  make(".other.gmr.tmp." + dead + ".0", true);    // another file's: kept until that file is written
+  make(".out.gmr.tmp." + dead + ".x", true);      // not our pattern: kept
+  ASSERT_EQ(d.entries(), 5u);
+  ASSERT_TRUE(write_file_atomic(d.path / "out.gmr", "whole").ok());
+  EXPECT_FALSE(fs::exists(d.path / (".out.gmr.tmp." + dead + ".0")));
+  EXPECT_EQ(d.entries(), 5u);  // out.gmr and the four kept
+  ASSERT_TRUE(write_file_atomic(d.path / "other.gmr", "whole").ok());
+  EXPECT_FALSE(fs::exists(d.path / (".other.gmr.tmp." + dead + ".0")));
+}
+
+TEST(WriteFileAtomic, ASignalDuringAWriteRemovesItsTemporary) {
+  // A child writes 4 MiB with a 64 KiB file size limit; the limit's SIGXFSZ
+  // is turned into SIGTERM, which must remove the temporary before the child
+  // dies of it (as SIGINT does to an interrupted `gmr convert`).
+  TempDir d;
+  const pid_t child = ::fork();
+  if (child == 0) {
+    remove_temporaries_on_signals();
+    struct sigaction to_term {};
+    to_term.sa_handler = [](int) { ::raise(SIGTERM); };
+    ::sigaction(SIGXFSZ, &to_term, nullptr);
+    struct rlimit limit {64 * 1024, 64 * 1024};
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    (void)write_file_atomic(d.path / "out.gmr", std::string(4 << 20, 'x'));
+    ::_exit(0);  // not reached: SIGTERM ends it
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "the child should die of the signal";
+  EXPECT_EQ(WTERMSIG(status), SIGTERM);
+  EXPECT_EQ(d.entries(), 0u) << "the temporary was left behind";
+}
+
+TEST(WriteFileAtomic, PastTheFileSizeLimitIsAnErrorWithNothingLeft) {
+  // With the signals handled as the tools do, a write past RLIMIT_FSIZE is
+  // an error (EFBIG), not the end of the process, and leaves nothing.
+  TempDir d;
+  const pid_t child = ::fork();
+  if (child == 0) {
+    remove_temporaries_on_signals();
+    struct rlimit limit {64 * 1024, 64 * 1024};
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    const Status s = write_file_atomic(d.path / "out.gmr", std::string(4 << 20, 'x'));
+    ::_exit(!s.ok() && s.error().message.find("File too large") != std::string::npos ? 3 : 4);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 3);
+  EXPECT_EQ(d.entries(), 0u);
+}
+
 TEST(FormatDouble, SameBytesAsToChars) {
   std::vector<double> values = {0.0, -0.0, 1.0, -1.0, 10, 100, 1200000, 1e15, 999999999999999.0, 1e16, 0.001, 0.0001,
                                 0.000123, 1e-5, 1.5e-6, 1e-6, 0.1, 0.3, 0.30000000000000004, 123456.789, 1.0 / 3.0,

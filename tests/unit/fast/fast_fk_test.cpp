@@ -427,16 +427,55 @@ TEST(FastAllRoots, StoredPositionsAreTheOutput) {
   ASSERT_TRUE(cm.ok());
   ASSERT_TRUE(cm->all_roots());
   const auto ref = reference_positions(m);
-  const auto view = cm->stored_positions();
-  ASSERT_EQ(view.size(), ref.size() * 3);
+  const std::size_t joints = m.skeleton.size();
   for (std::size_t i = 0; i < ref.size(); ++i) {
-    for (int a = 0; a < 3; ++a) EXPECT_EQ(view[i * 3 + static_cast<std::size_t>(a)], static_cast<float>(ref[i][a]));
+    const float* frame = cm->stored_positions(i / joints);
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(frame[(i % joints) * 3 + static_cast<std::size_t>(a)], static_cast<float>(ref[i][a]));
   }
   EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 0, m.frame_count), ref, 1e-6 * skeleton_size(m));
   EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 5, 17, Layout::kJointMajor),
                         std::vector<Eigen::Vector3d>(ref.begin() + 5 * static_cast<long>(m.skeleton.size()),
                                                      ref.begin() + 17 * static_cast<long>(m.skeleton.size())),
                         1e-6 * skeleton_size(m));
+}
+
+TEST(FastAllRoots, AMotionWithoutChannelsStoresOneFrameForAll) {
+  // 2^24 declared frames of roots without channels (a 300-byte file can say
+  // so): the compiled form holds one frame, not 2^24 copies of it.
+  std::vector<Joint> roots;
+  for (int j = 0; j < 10; ++j) {
+    Joint root;
+    root.name = "r" + std::to_string(j);
+    root.offset = Eigen::Vector3d(j, 2.0 * j, -j);
+    roots.push_back(root);
+  }
+  Motion m;
+  m.skeleton = Skeleton::create(std::move(roots)).value();
+  m.frame_count = std::size_t{1} << 24;
+  m.convention = Convention::kPreRotation;
+  auto cm = CompiledMotion::compile(m);
+  ASSERT_TRUE(cm.ok()) << cm.error().to_string();
+  ASSERT_TRUE(cm->all_roots());
+  EXPECT_LT(cm->bytes(), 4096u);
+  EXPECT_EQ(cm->bytes_per_frame(), 0u);
+  std::vector<float> pos(30), ws(fk_workspace_size(*cm));
+  for (std::size_t f : {std::size_t{0}, m.frame_count - 1}) {
+    FkFrameJob job{&*cm, f, pos, {}, ws};
+    ASSERT_TRUE(job.run());
+    for (int j = 0; j < 10; ++j) {
+      EXPECT_EQ(pos[static_cast<std::size_t>(j) * 3 + 1], 2.0f * static_cast<float>(j));
+    }
+  }
+  std::vector<float> range(3 * 30);
+  FkRangeJob r;
+  r.motion = &*cm;
+  r.begin = m.frame_count - 3;
+  r.end = m.frame_count;
+  r.out_positions = range;
+  std::vector<float> rws(fk_workspace_size(*cm));
+  r.workspace = rws;
+  ASSERT_TRUE(r.run());
+  for (int f = 0; f < 3; ++f) EXPECT_EQ(range[static_cast<std::size_t>(f) * 30 + 9 * 3], 9.0f);
 }
 
 TEST(FastDispatch, EveryCompiledTargetMatchesReference) {

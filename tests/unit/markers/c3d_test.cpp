@@ -290,6 +290,49 @@ TEST(ProcessorTypes, IntelMipsDecIntegerAndFloat) {
   }
 }
 
+TEST(Malformed, FramesWithoutMarkersAreCapped) {
+  // A 1.5 KB file without markers or analog whose TRIAL fields declare
+  // `last` frames (its header's 16-bit last frame overflowed): no bytes back
+  // those frames, so their count is capped (gmr/core/limits.h). It once
+  // declared 2^28 and a conversion to TRC ended in std::bad_alloc.
+  const auto build = [](std::uint32_t last) {
+    C3dBuilder b;
+    b.bytes[0] = 2;
+    b.bytes[1] = 0x50;
+    b.u16(2, 0);  // no points
+    b.u16(6, 1);
+    b.u16(8, 65535);
+    b.f32(12, -1.0f);
+    b.u16(16, 3);
+    b.f32(20, 50.0f);
+    b.bytes[512] = 1, b.bytes[513] = 0x50, b.bytes[514] = 2, b.bytes[515] = static_cast<char>(b.proc);
+    b.group("POINT", 1);
+    b.u16(b.param("USED", 1, 2, {}), 0);
+    b.f32(b.param("RATE", 1, 4, {}), 50.0f);
+    b.group("TRIAL", 2);
+    const std::size_t s = b.param("ACTUAL_START_FIELD", 2, 2, {2});
+    b.u16(s, 1);
+    b.u16(s + 2, 0);
+    const std::size_t e = b.param("ACTUAL_END_FIELD", 2, 2, {2});
+    b.u16(e, static_cast<std::uint16_t>(last & 0xffff));
+    b.u16(e + 2, static_cast<std::uint16_t>(last >> 16));
+    b.bytes[b.pos] = 0;
+    return b.bytes;
+  };
+  auto ok = parse_c3d(build(1u << 20), "x.c3d");
+  ASSERT_TRUE(ok.ok()) << ok.error().to_string();
+  EXPECT_EQ(ok->frame_count, 1u << 20);
+  EXPECT_TRUE(ok->positions.empty());
+  for (std::uint32_t last : {(1u << 20) + 1, 1u << 28}) {
+    auto r = parse_c3d(build(last), "x.c3d");
+    ASSERT_FALSE(r.ok()) << last;
+    EXPECT_NE(r.error().to_string().find("x.c3d: at byte 8: frame count " + std::to_string(last) +
+                                         " is above gmr's limit of "),
+              std::string::npos)
+        << r.error().to_string();
+  }
+}
+
 TEST(Malformed, SmallC3dErrorsAreLocated) {
   const std::string good = C3dBuilder().build(-1.0f);
   const auto error_of = [](std::string bytes) {

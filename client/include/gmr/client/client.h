@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <chrono>
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -44,8 +45,8 @@ struct ClientOptions {
 struct ServerHello {
   std::uint32_t protocol_version = 0;
   std::string server_name;
-  std::uint64_t session_token = 0;  // for UDP registration (register_udp does it)
-  std::uint16_t udp_port = 0;       // 0: no UDP
+  std::array<std::uint8_t, 16> udp_token{};  // for UDP registration (register_udp does it)
+  std::uint16_t udp_port = 0;                 // 0: no UDP
   std::uint32_t max_message_bytes = 0;
   std::uint32_t heartbeat_interval_ms = 0;
   std::uint32_t idle_timeout_ms = 0;
@@ -119,8 +120,9 @@ struct SubscriptionInfo {
 struct SubscriptionEnd {
   std::uint32_t subscription_id = 0;
   std::uint64_t frames_sent = 0;
-  std::uint64_t frames_dropped = 0;
+  std::uint64_t frames_dropped = 0;  // this client was slow (frames it did not read in time)
   std::string reason;
+  std::uint64_t frames_skipped = 0;  // the server was late (ticks skipped to catch up)
 };
 
 // The server's counters (GetStats); the frames_sent .. max_queued_bytes are
@@ -133,6 +135,8 @@ struct ServerCounters {
   std::uint64_t frames_encoded = 0;         // encodings (one per stream tick)
   std::uint64_t frames_sent = 0;
   std::uint64_t frames_dropped = 0;
+  std::uint64_t frames_skipped = 0;        // this connection: the server was late
+  std::uint64_t frames_skipped_total = 0;  // all streams
   std::uint64_t queued_bytes = 0;
   std::uint64_t max_queued_bytes = 0;
 };

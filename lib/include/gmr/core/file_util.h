@@ -21,6 +21,10 @@ Result<std::string> read_file(const std::filesystem::path& path);
 // bits are kept. On failure the temporary is removed, an existing `path` is
 // left as it was, and the Error names `path` and the system's reason. A
 // symbolic link at `path` is replaced, not written through.
+//
+// Temporaries are named ".<name>.tmp.<pid>.<n>". One left by a process that
+// died (a SIGKILL, a power cut) is removed by the next write to the same
+// `path`: when its process no longer exists and it is over a minute old.
 Status write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
 
 // Several files that belong together (an ASF/AMC pair): every one is first
@@ -34,6 +38,13 @@ struct FileContent {
   std::string_view bytes;
 };
 Status write_files_atomic(std::span<const FileContent> files);
+
+// Makes SIGINT, SIGTERM, SIGHUP and SIGQUIT remove the temporaries of the
+// writes in progress before the process ends as the signal says, and makes
+// a write past the file size limit (SIGXFSZ) an error instead of the end of
+// the process. For command-line tools: call once at start. (A SIGKILL cannot
+// be caught: the next write sweeps what it leaves.)
+void remove_temporaries_on_signals();
 
 // Shortest decimal text that reads back to exactly `v`: the same bytes as
 // std::to_chars(first, last, v), only faster for short decimals. E.g.

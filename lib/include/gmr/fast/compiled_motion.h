@@ -23,7 +23,7 @@
 //
 // When every joint is a root (the all-roots GMR form) the positions are the
 // joints' effective offsets: they are also stored frame-major, exactly as the
-// FK jobs write them, and stored_positions() is a zero-copy view of them.
+// FK jobs write them, and stored_positions(f) is a zero-copy view of them.
 #pragma once
 
 #include <cstddef>
@@ -77,9 +77,10 @@ class CompiledMotion {
 
   // True when every joint is a root.
   bool all_roots() const { return all_roots_; }
-  // All roots: the positions of every frame, frame-major (frame, joint, xyz),
-  // identical to what FkRangeJob writes. Empty otherwise.
-  std::span<const float> stored_positions() const { return stored_positions_; }
+  // All roots: the positions of `frame` (joint, xyz), identical to what
+  // FkRangeJob writes; a zero-copy view. A motion without channels stores
+  // one frame for all its frames. Only for all-roots motions.
+  const float* stored_positions(std::size_t frame) const;
 
   // Bytes held per frame (streams and stored positions, padding excluded;
   // not counting the one-frame kernel's frame-major angle copy,
@@ -107,6 +108,7 @@ class CompiledMotion {
   std::size_t joint_count_ = 0;
   std::unique_ptr<float[], AlignedFree> streams_;
   std::vector<float> stored_positions_;
+  bool positions_per_frame_ = true;  // false: stored_positions_ holds one frame for all
   std::vector<std::int32_t> rotation_offsets_;
   std::unique_ptr<detail::CompiledPlan> plan_;
 

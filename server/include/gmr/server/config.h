@@ -17,6 +17,14 @@ struct ServerConfig {
 
   std::uint32_t max_message_bytes = wire::kDefaultMaxMessageBytes;  // either direction
   std::size_t max_connections = 256;
+  // Admission (docs/protocol.md, "Admission"): a connection must complete its
+  // Hello within handshake_timeout (heartbeats do not count); at most
+  // max_pending_handshakes connections wait for their Hello at once (a new
+  // one past that pushes out the oldest); at most max_connections_per_address
+  // from one IP address (0: no limit), so one host cannot take every slot.
+  std::chrono::milliseconds handshake_timeout{5000};
+  std::size_t max_pending_handshakes = 64;
+  std::size_t max_connections_per_address = 64;
   std::size_t max_views_per_connection = 32;
   std::size_t max_subscriptions_per_connection = 32;
   // A connection that sends nothing (not even a heartbeat) for this long is closed.
@@ -25,10 +33,22 @@ struct ServerConfig {
   std::chrono::milliseconds heartbeat_interval{5000};
   // A write that makes no progress for this long means a dead client: closed.
   std::chrono::milliseconds write_timeout{20000};
-  // Replies waiting to be written, per connection: above this the server stops
-  // reading that connection's requests until they drain (frames are not counted:
-  // they are latest-frame-wins, one per subscription).
-  std::size_t max_reply_queue_bytes = 2 * static_cast<std::size_t>(wire::kDefaultMaxMessageBytes);
+  // Memory (docs/protocol.md, "Memory budget"). Replies held for a
+  // connection (waiting or being written): above this the server stops
+  // reading that connection's requests until they drain.
+  std::size_t max_reply_queue_bytes = 1u << 20;
+  // Frames waiting for a connection, all its subscriptions together (besides
+  // frames_per_subscription): the oldest give way.
+  std::size_t max_frame_bytes_per_connection = 1u << 20;
+  // Everything all connections hold (replies, frames, writes in flight,
+  // request bodies): above it no connection is read and frames that would
+  // wait are dropped, until it drains. 0: no server-wide limit.
+  std::size_t max_buffered_bytes = std::size_t{256} << 20;
+  // The motions views hold beyond the library's own: an edited view owns a
+  // copy (8 bytes per channel value, plus 8 for its float form). An edit
+  // that would pass either limit is refused with RESOURCE_EXHAUSTED.
+  std::size_t max_view_bytes_per_connection = std::size_t{64} << 20;
+  std::size_t max_view_bytes = std::size_t{1} << 30;
   // Frames waiting per subscription while a write is in flight; a newer frame
   // then replaces the oldest (latest wins) and the drop is counted. Small: it
   // only absorbs I/O-thread jitter, the kernel buffers absorb the rest.
@@ -36,9 +56,11 @@ struct ServerConfig {
   // UDP datagrams handed to the kernel and not yet sent, per connection; above
   // this a frame is dropped and counted.
   std::size_t max_udp_datagrams_in_flight = 512;
-  // SO_SNDBUF for accepted sockets; 0 keeps the system default. Tests shrink it
-  // so a client that never reads fills it quickly.
-  int socket_send_buffer = 0;
+  // SO_SNDBUF for accepted sockets (the kernel doubles it); a fixed size
+  // bounds what the kernel holds per connection (autotuning would let it
+  // grow to net.ipv4.tcp_wmem's maximum, 4 MiB). 0 keeps the system's
+  // autotuning. Tests shrink it so a client that never reads fills it quickly.
+  int socket_send_buffer = 256 * 1024;
   // How far a stream may fall behind its schedule (a stalled server) and
   // still catch up frame by frame; beyond it playback jumps to the frame due
   // now. Tests raise it so that a slow (sanitizer) build still sends every frame.

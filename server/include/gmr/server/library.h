@@ -28,6 +28,17 @@ struct LibraryLoad {
   std::size_t skipped = 0;            // files of other kinds (C3D, TRC, text, a lone .asf)
 };
 
+// What one motion may cost the server. Everything it serves scales with
+// frames x joints (positions, the float form) or with its values; a motion
+// above either limit is rejected at load with the figures, so that no request
+// can later make the server compute or allocate on its behalf beyond them.
+struct MotionLimits {
+  std::uint64_t max_joint_frames = std::uint64_t{1} << 25;    // frames x joints (CMU: 31 joints x 1 M frames)
+  std::uint64_t max_value_bytes = std::uint64_t{512} << 20;   // frames x channels x 8
+};
+// Ok, or an error with the figures and the limit passed.
+Status check_motion_limits(const Motion& m, const MotionLimits& limits);
+
 // Progress: called from worker threads (serialised) after each file.
 using LoadProgress = std::function<void(std::size_t done, std::size_t total, const std::filesystem::path& file,
                                         const std::string* rejection_reason)>;
@@ -36,9 +47,10 @@ using LoadProgress = std::function<void(std::size_t done, std::size_t total, con
 // one, or the one whose stem prefixes the .amc's) under `dir`, recursively, on
 // `threads` threads (0: hardware concurrency). Never stops at a bad file: it is
 // listed in `rejected` with the reason. Each motion is converted to
-// pre-rotation. Fails only when `dir` is not a readable folder.
+// pre-rotation and checked against `limits`. Fails only when `dir` is not a
+// readable folder.
 Result<LibraryLoad> load_library(const std::filesystem::path& dir, unsigned threads = 0,
-                                 const LoadProgress& progress = {});
+                                 const LoadProgress& progress = {}, const MotionLimits& limits = {});
 
 // The built-in demo library (gmr/demo/demo_library.h).
 std::vector<LibraryEntry> builtin_library();

@@ -25,6 +25,7 @@ struct SessionStats {
   std::uint64_t id = 0;
   std::uint64_t frames_sent = 0;
   std::uint64_t frames_dropped = 0;   // replaced by a newer frame before it was written, or UDP over its bound
+  std::uint64_t frames_skipped = 0;   // ticks the server skipped because it was late
   std::uint64_t queued_bytes = 0;     // now: replies + frames waiting or being written
   std::uint64_t max_queued_bytes = 0; // high-water mark
   bool udp_registered = false;
@@ -36,8 +37,13 @@ struct ServerStats {
   std::uint64_t frames_computed = 0;  // forward-kinematics runs for streams
   std::uint64_t frames_computed_float = 0;  // of those, by the float path (float32 streams)
   std::uint64_t frames_encoded = 0;   // shared encodings
-  std::uint64_t udp_rejected = 0;     // datagrams that were not a valid registration
+  std::uint64_t frames_skipped = 0;   // ticks skipped because the server was late, per subscriber
+  std::uint64_t udp_rejected = 0;     // datagrams that were not a valid registration or confirm
+  std::uint64_t udp_challenges = 0;   // challenges sent (one per valid registration datagram)
   std::uint64_t connections_refused = 0;
+  std::uint64_t buffered_bytes = 0;      // now: all connections' replies, frames, writes, request bodies
+  std::uint64_t max_buffered_bytes = 0;  // high-water mark of buffered_bytes
+  std::uint64_t view_bytes = 0;          // now: motion bytes views own (edited copies)
   std::vector<SessionStats> sessions;
 };
 

@@ -68,6 +68,8 @@ class View {
   std::uint32_t id() const { return id_; }
   const std::string& motion_name() const { return motion_name_; }
   const std::shared_ptr<const ViewContent>& content() const { return content_; }
+  // Puts back a content this view had (an edit the server then refused).
+  void restore(std::shared_ptr<const ViewContent> content) { content_ = std::move(content); }
   const Motion& motion() const { return *content_->motion; }
 
   // Each edit either applies and bumps skeleton_version, or fails and leaves

@@ -5,9 +5,14 @@
 //   | "GMRU"| version | kind | 0 0    |
 //   +-------+---------+------+--------+
 //
-// kind 1, register (client -> server), 16 bytes: header + session token
-//   (uint64, big-endian) that the client got in HelloReply over TCP. The
-//   server sends UDP frames only to an endpoint registered this way.
+// kind 1, register (client -> server), 24 bytes: header + the 16-byte
+//   session token the client got in HelloReply.udp_token over TCP.
+// kind 3, challenge (server -> the registering address), 24 bytes: header +
+//   a 16-byte random cookie. Never larger than the registration it answers:
+//   a forged source address gets at most as many bytes as the forger sent.
+// kind 4, confirm (client -> server), 40 bytes: header + token + cookie,
+//   from the address that was challenged. Only then does the server send
+//   that session's frames there (the QUIC/DTLS cookie idea).
 // kind 2, fragment (server -> client): header + message id (uint32), fragment
 //   index (uint16), fragment count (uint16), total size (uint32), then the
 //   fragment's bytes. The fragments of one message, in index order, are one
@@ -16,6 +21,7 @@
 //   dropped whole.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
@@ -26,9 +32,13 @@
 
 namespace gmr::wire {
 
-inline constexpr std::uint8_t kUdpVersion = 1;
+inline constexpr std::uint8_t kUdpVersion = 2;  // 1 had 8-byte tokens and no challenge
 inline constexpr std::size_t kUdpHeaderBytes = 8;
-inline constexpr std::size_t kRegisterBytes = kUdpHeaderBytes + 8;
+inline constexpr std::size_t kUdpTokenBytes = 16;
+using UdpToken = std::array<std::uint8_t, kUdpTokenBytes>;
+inline constexpr std::size_t kRegisterBytes = kUdpHeaderBytes + kUdpTokenBytes;
+inline constexpr std::size_t kChallengeBytes = kUdpHeaderBytes + kUdpTokenBytes;
+inline constexpr std::size_t kConfirmBytes = kUdpHeaderBytes + 2 * kUdpTokenBytes;
 inline constexpr std::size_t kFragmentHeaderBytes = kUdpHeaderBytes + 12;
 // Each datagram stays under the ~1280-byte IPv6 minimum MTU minus IP/UDP headers.
 inline constexpr std::size_t kMaxDatagramBytes = 1200;
@@ -36,12 +46,24 @@ inline constexpr std::size_t kMaxFragmentPayload = kMaxDatagramBytes - kFragment
 // Largest message a fragment header may announce (bounds reassembly memory).
 inline constexpr std::uint32_t kMaxUdpMessageBytes = 1u << 20;
 
-enum class DatagramKind : std::uint8_t { kRegister = 1, kFragment = 2 };
+enum class DatagramKind : std::uint8_t { kRegister = 1, kFragment = 2, kChallenge = 3, kConfirm = 4 };
 
-// The registration datagram for `token`.
-std::string make_register_datagram(std::uint64_t token);
-// The token of a well-formed registration datagram, else nothing.
-std::optional<std::uint64_t> parse_register_datagram(std::string_view datagram);
+// The registration datagram for `token`, and its token when well-formed.
+std::string make_register_datagram(const UdpToken& token);
+std::optional<UdpToken> parse_register_datagram(std::string_view datagram);
+// The challenge carrying `cookie`, and its cookie when well-formed.
+std::string make_challenge_datagram(const UdpToken& cookie);
+std::optional<UdpToken> parse_challenge_datagram(std::string_view datagram);
+// The confirmation of a challenge, and its two halves when well-formed.
+struct UdpConfirm {
+  UdpToken token{};
+  UdpToken cookie{};
+};
+std::string make_confirm_datagram(const UdpToken& token, const UdpToken& cookie);
+std::optional<UdpConfirm> parse_confirm_datagram(std::string_view datagram);
+// Equality in constant time: no early exit at the first differing byte, so
+// timing tells an attacker nothing about how much of a guess was right.
+bool same_token(const UdpToken& a, const UdpToken& b);
 
 // Splits `message` into datagrams (at least one, even for an empty message).
 // Requires message.size() <= kMaxUdpMessageBytes.

@@ -1,0 +1,118 @@
+// Fair admission (docs/protocol.md, "Admission"): connections that never say
+// Hello, or only send heartbeats, cannot hold the server's slots; one address
+// cannot take them all; a well-behaved client gets in during a flood.
+#include <gtest/gtest.h>
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "gmr/wire/framing.h"
+#include "net_test_util.h"
+
+namespace gmr::test {
+namespace {
+
+// A TCP connection to 127.0.0.1:port from the loopback address `from`
+// (127.0.0.2, ...: every 127/8 address is this machine), or -1.
+int connect_from(const char* from, std::uint16_t port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in src{};
+  src.sin_family = AF_INET;
+  ::inet_pton(AF_INET, from, &src.sin_addr);
+  sockaddr_in dst{};
+  dst.sin_family = AF_INET;
+  dst.sin_port = htons(port);
+  dst.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&src), sizeof src) != 0 ||
+      ::connect(fd, reinterpret_cast<sockaddr*>(&dst), sizeof dst) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+// True when the server closed `fd` within `timeout` (reads until EOF or reset).
+bool closed_within(int fd, std::chrono::milliseconds timeout) {
+  const auto until = std::chrono::steady_clock::now() + timeout;
+  char buf[4096];
+  while (std::chrono::steady_clock::now() < until) {
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, 50) > 0) {
+      const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+      if (n <= 0) return true;
+    }
+  }
+  return false;
+}
+
+TEST(Admission, ASilentFloodDoesNotLockOutAWellBehavedClient) {
+  server::ServerConfig cfg;
+  cfg.max_connections = 64;
+  cfg.max_connections_per_address = 8;
+  cfg.max_pending_handshakes = 16;
+  cfg.handshake_timeout = std::chrono::milliseconds(500);
+  TestServer s(cfg);
+
+  // 120 connections from 15 addresses that never say Hello, some of them
+  // sending heartbeats (which do not count as a handshake).
+  pb::ClientMessage heartbeat;
+  heartbeat.mutable_heartbeat();
+  const std::string beat = wire::frame_message(heartbeat).value();
+  std::vector<int> flood;
+  int still_open = 0;
+  for (int a = 2; a <= 16; ++a) {
+    const std::string from = "127.0.0." + std::to_string(a);
+    for (int k = 0; k < 8; ++k) {
+      const int fd = connect_from(from.c_str(), s.port());
+      ASSERT_GE(fd, 0) << from;
+      if (k % 2 == 0) ::send(fd, beat.data(), beat.size(), MSG_NOSIGNAL);
+      flood.push_back(fd);
+    }
+  }
+  // The well-behaved client gets in at once, and is served.
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto list = c->list_motions();
+  ASSERT_TRUE(list.ok()) << list.error().to_string();
+
+  // Every silent connection is closed: pushed out, or at its handshake deadline.
+  for (int fd : flood) {
+    if (!closed_within(fd, std::chrono::seconds(3))) ++still_open;
+    ::close(fd);
+  }
+  EXPECT_EQ(still_open, 0) << "silent connections still open after the handshake deadline";
+  const auto st = s.server.stats();
+  EXPECT_EQ(st.connections, 1u);  // the client
+  // And the client is still connected and served after the flood.
+  EXPECT_TRUE(c->list_motions().ok());
+}
+
+TEST(Admission, OneAddressCannotTakeEverySlot) {
+  server::ServerConfig cfg;
+  cfg.max_connections_per_address = 8;
+  TestServer s(cfg);
+  std::vector<int> eight;
+  for (int k = 0; k < 8; ++k) eight.push_back(connect_from("127.0.0.2", s.port()));
+  // Accepted in order: a round trip from another address orders this check after them.
+  ASSERT_NE(s.connect(), nullptr);
+  const int ninth = connect_from("127.0.0.2", s.port());
+  ASSERT_GE(ninth, 0);
+  // The ninth is told why, then closed.
+  char buf[512];
+  std::string got;
+  for (ssize_t n; (n = ::recv(ninth, buf, sizeof buf, 0)) > 0;) got.append(buf, static_cast<std::size_t>(n));
+  ASSERT_GT(got.size(), 4u);
+  pb::ServerMessage m;
+  ASSERT_TRUE(m.ParseFromString(got.substr(4)));
+  EXPECT_EQ(m.error().code(), pb::ERROR_CODE_RESOURCE_EXHAUSTED);
+  EXPECT_NE(m.error().message().find("8 connections from one address"), std::string::npos) << m.error().message();
+  EXPECT_EQ(s.server.stats().connections_refused, 1u);
+  ::close(ninth);
+  for (int fd : eight) ::close(fd);
+}
+
+}  // namespace
+}  // namespace gmr::test

@@ -1,0 +1,252 @@
+// What clients can make the server hold (docs/protocol.md, "Memory budget"):
+// 64 clients that edit views, subscribe at high rates and never read stay
+// within the server's stated budget, and a well-behaved client meanwhile
+// keeps its rate.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <mutex>
+
+#include "gmr/wire/framing.h"
+#include "net_test_util.h"
+#include "test_data.h"
+
+namespace gmr::test {
+namespace {
+
+// The resident set of this process, in bytes (0 when /proc is not there).
+std::uint64_t resident_bytes() {
+  std::ifstream in("/proc/self/status");
+  std::string key;
+  while (in >> key) {
+    if (key == "VmRSS:") {
+      std::uint64_t kb = 0;
+      in >> kb;
+      return kb * 1024;
+    }
+    std::string rest;
+    std::getline(in, rest);
+  }
+  return 0;
+}
+
+struct Refusals {
+  int views = 0;  // RESOURCE_EXHAUSTED edits
+};
+
+// One client that never reads frames: `views` views, each re-rooted (so each
+// would hold its own copy of the motion), then `subscriptions` subscriptions
+// over them at 2 kHz, float64 with orientations. It reads only the replies
+// to its edits (the frames pile up behind them).
+Refusals never_reading_client(RawConnection& c, const std::string& motion, const std::vector<std::string>& joints,
+                              int views, int subscriptions) {
+  Refusals out;
+  c.handshake();
+  std::uint64_t id = 10;
+  std::vector<std::uint32_t> view_ids;
+  for (int v = 0; v < views; ++v) {
+    auto m = request(id++);
+    m.mutable_create_view()->set_motion(motion);
+    c.send(m);
+    auto r = c.reply();
+    if (!r || !r->has_view()) {
+      ADD_FAILURE() << "create_view: " << (r ? r->DebugString() : "no reply");
+      return out;
+    }
+    view_ids.push_back(r->view().view_id());
+    auto shift = request(id++);
+    shift.mutable_shift_root()->set_view_id(view_ids.back());
+    shift.mutable_shift_root()->set_joint(joints[static_cast<std::size_t>(v) % joints.size()]);
+    c.send(shift);
+    auto e = c.reply();
+    if (e && e->has_error()) {
+      EXPECT_EQ(e->error().code(), pb::ERROR_CODE_RESOURCE_EXHAUSTED) << e->error().message();
+      if (e->error().code() == pb::ERROR_CODE_RESOURCE_EXHAUSTED) ++out.views;
+    } else {
+      EXPECT_TRUE(e && e->has_view());
+    }
+  }
+  for (int s = 0; s < subscriptions; ++s) {
+    auto sub = request(id++);
+    sub.mutable_subscribe()->set_view_id(view_ids[static_cast<std::size_t>(s) % view_ids.size()]);
+    sub.mutable_subscribe()->set_loop(true);
+    sub.mutable_subscribe()->set_rate_hz(2000);
+    sub.mutable_subscribe()->set_orientations(true);
+    sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
+    c.send(sub);
+  }
+  return out;
+}
+
+TEST(Memory, ClientsThatNeverReadStayWithinTheBudgetAndAGoodClientKeepsItsRate) {
+  GMR_REQUIRE_DATA();  // a real motion: CMU 02_01, 344 frames, 96 channels
+  // Sanitizer and Debug builds run an eighth of the clients, against a smaller
+  // view limit (the same refusals, a fraction of the time).
+  constexpr int kClients = kSlowBuild ? 8 : 64, kViews = kSlowBuild ? 8 : 32, kSubscriptions = kSlowBuild ? 8 : 32;
+  server::ServerConfig cfg;
+  cfg.max_view_bytes = kSlowBuild ? 4u << 20 : 24u << 20;
+  cfg.max_view_bytes_per_connection = 4u << 20;
+  cfg.max_buffered_bytes = 16u << 20;
+  cfg.max_connections_per_address = 0;  // every client is on 127.0.0.1
+  // The slow clients stay connected for the whole test: a slow build takes
+  // longer than the default write and idle timeouts to set them all up, and a
+  // client closed early would give its views back before they are counted.
+  cfg.write_timeout = std::chrono::minutes(10);
+  cfg.idle_timeout = std::chrono::minutes(10);
+  TestServer s(cfg);
+  const std::uint64_t before = resident_bytes();
+
+  std::vector<std::unique_ptr<RawConnection>> slow;
+  int refused = 0;
+  for (int i = 0; i < kClients; ++i) {
+    slow.push_back(std::make_unique<RawConnection>(s.port(), 4096));
+    refused += never_reading_client(*slow.back(), "cmu/02_01", {"Head", "LeftHand"}, kViews, kSubscriptions).views;
+  }
+  // Each edited view owns a copy of 344 frames (about 0.2 MB at 16 bytes a
+  // value): 20 fit in a connection's 4 MiB, the server's 24 MiB hold about
+  // 128 (its 4 MiB in slow builds, 20), and every other edit was refused.
+  const auto mid = s.server.stats();
+  EXPECT_LE(mid.view_bytes, cfg.max_view_bytes);
+  EXPECT_GT(mid.view_bytes, cfg.max_view_bytes - (1u << 20));
+  EXPECT_GT(refused, kClients * kViews / 2);
+
+  // The well-behaved client: 60 Hz for 3 s, every frame, on time.
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("cmu/02_01");
+  ASSERT_TRUE(v.ok());
+  std::mutex mu;
+  std::vector<std::uint64_t> seq;
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 60;
+  o.max_frames = 180;
+  Latch<client::SubscriptionEnd> ended;
+  const auto start = std::chrono::steady_clock::now();
+  ASSERT_TRUE(c->subscribe(
+                    v->id, o,
+                    [&](const client::ReceivedFrame& f) {
+                      std::lock_guard lock(mu);
+                      seq.push_back(f.sequence);
+                    },
+                    [&](const client::SubscriptionEnd& e) { ended.set(e); })
+                  .ok());
+  std::uint64_t peak = resident_bytes();
+  std::optional<client::SubscriptionEnd> end;
+  while (!(end = ended.wait(std::chrono::milliseconds(50)))) {
+    peak = std::max(peak, resident_bytes());
+    if (std::chrono::steady_clock::now() - start > std::chrono::seconds(30)) break;
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(end.has_value());
+  const auto st = s.server.stats();
+  std::uint64_t slow_dropped = 0;
+  for (const auto& ss : st.sessions) slow_dropped += ss.frames_dropped;
+  std::printf("RSS %.1f MB before, %.1f MB at the peak; views %.1f MB, buffers at most %.1f MB; "
+              "good client: %zu frames in %.2f s; slow clients: %llu frames dropped\n",
+              static_cast<double>(before) / 1e6, static_cast<double>(peak) / 1e6,
+              static_cast<double>(st.view_bytes) / 1e6, static_cast<double>(st.max_buffered_bytes) / 1e6, seq.size(),
+              seconds, static_cast<unsigned long long>(slow_dropped));
+
+  // The good client: every frame in order, none dropped, at its rate.
+  EXPECT_EQ(end->frames_dropped, 0u);
+  ASSERT_EQ(seq.size(), 180u);
+  for (std::size_t k = 0; k < seq.size(); ++k) EXPECT_EQ(seq[k], k);
+  if (!kSlowBuild) {
+    EXPECT_LT(seconds, 3.0 * 1.15) << "60 Hz for 180 frames is 3 s";
+  }
+  EXPECT_GT(slow_dropped, 0u);
+
+  // The budget: what the server accounts, and what the process holds.
+  EXPECT_LE(st.max_buffered_bytes, cfg.max_buffered_bytes + cfg.max_reply_queue_bytes + (1u << 20));
+  // Resident growth: views and buffers within their limits, plus per
+  // subscription state (docs/protocol.md: at most 64 KB each). Sanitizers
+  // add their own shadow memory and quarantine: checked in Release only.
+  const std::uint64_t budget = cfg.max_view_bytes + cfg.max_buffered_bytes +
+                               std::uint64_t{kClients} * kSubscriptions * 64 * 1024;
+  if (!kSlowBuild) {
+    EXPECT_LT(peak - before, budget) << "the server held more than its budget";
+  }
+}
+
+TEST(Memory, AFloatStreamOfChannelLessFramesComputesOneFrame) {
+  // Ten roots without channels declaring 2^24 frames (a 450-byte BVH, loaded
+  // here with the joint-frame limit raised): the first float32 subscription
+  // compiles one frame of positions, not 2 GB of copies of it.
+  std::vector<Joint> roots;
+  for (int j = 0; j < 10; ++j) {
+    Joint r;
+    r.name = "r";
+    r.name += std::to_string(j);  // (GCC 12's -Wrestrict misfires on "r" + std::to_string(j) here)
+    r.offset = Eigen::Vector3d(j, 1, 0);
+    roots.push_back(r);
+  }
+  auto m = std::make_shared<Motion>();
+  m->skeleton = Skeleton::create(std::move(roots)).value();
+  m->frame_count = std::size_t{1} << 24;
+  m->frame_time = 0.01;
+  TestServer s({}, {{"huge", "huge.bvh", m}});
+  const std::uint64_t before = resident_bytes();
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("huge");
+  ASSERT_TRUE(v.ok());
+  std::mutex mu;
+  std::vector<client::ReceivedFrame> frames;
+  Latch<client::SubscriptionEnd> ended;
+  client::SubscribeOptions o;
+  o.start_frame = static_cast<std::uint32_t>(m->frame_count - 3);
+  ASSERT_TRUE(c->subscribe(
+                    v->id, o,
+                    [&](const client::ReceivedFrame& f) {
+                      std::lock_guard lock(mu);
+                      frames.push_back(f);
+                    },
+                    [&](const client::SubscriptionEnd& e) { ended.set(e); })
+                  .ok());
+  ASSERT_TRUE(ended.wait().has_value());
+  ASSERT_EQ(frames.size(), 3u);
+  for (const auto& f : frames) {
+    ASSERT_EQ(f.positions.size(), 10u);
+    EXPECT_EQ(f.positions[9], Eigen::Vector3d(9, 1, 0));
+  }
+  EXPECT_GT(s.server.stats().frames_computed_float, 0u);
+  if (!kSlowBuild) {
+    EXPECT_LT(resident_bytes() - before, 64u << 20);
+  }
+}
+
+TEST(Memory, DeclaredLengthsReserveNothing) {
+  // 250 connections each announce a message just under the 4 MiB limit and
+  // send 10 bytes of it: the server holds what arrived, not what was announced.
+  server::ServerConfig cfg;
+  cfg.max_connections_per_address = 0;  // every client is on 127.0.0.1
+  cfg.max_pending_handshakes = 300;     // and none says Hello
+  TestServer s(cfg);
+  const std::uint64_t before = resident_bytes();
+  std::vector<std::unique_ptr<RawConnection>> conns;
+  const std::uint32_t length = wire::kDefaultMaxMessageBytes - 1;
+  std::string prefix(4, '\0');
+  for (int i = 0; i < 4; ++i) prefix[static_cast<std::size_t>(i)] = static_cast<char>(length >> (24 - 8 * i));
+  for (int i = 0; i < 250; ++i) {
+    conns.push_back(std::make_unique<RawConnection>(s.port()));
+    conns.back()->send_bytes(prefix + std::string(10, 'x'));
+  }
+  // A well-behaved client is still served, and sees all 251 connections.
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  ASSERT_TRUE(c->list_motions().ok());
+  const auto st = s.server.stats();
+  EXPECT_EQ(st.connections, 251u);
+  // (plus what the good client may have in flight)
+  EXPECT_LE(st.buffered_bytes, 250u * 4096 + 64 * 1024) << "bodies are held as they arrive";
+  const std::uint64_t grown = resident_bytes() - before;
+  std::printf("250 announced 4 MiB bodies: server buffers %llu bytes, RSS grew %.1f MB\n",
+              static_cast<unsigned long long>(st.buffered_bytes), static_cast<double>(grown) / 1e6);
+  if (!kSlowBuild) {
+    EXPECT_LT(grown, 16u << 20);
+  }
+}
+
+}  // namespace
+}  // namespace gmr::test
