@@ -13,6 +13,7 @@ packages=(
   nlohmann-json3-dev        # JSON output of the research harness (gmr-bench fk --json)
   libspdlog-dev libfmt-dev  # logging outside lib/
   libboost-dev libboost-system-dev # Boost.Asio for the server and client
+  libssl-dev                # OpenSSL: TLS (Asio's SSL), token digests, the tests' certificates
   libprotobuf-dev protobuf-compiler # the wire protocol
   gnuplot-nox               # the Figure 4 plot (gmr-bench figure4)
   python3                   # the layout check (tests/layout/check_layout.py)

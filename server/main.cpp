@@ -79,6 +79,17 @@ int main(int argc, char** argv) {
   app.add_option("--heartbeat-ms", heartbeat_ms, "Send a heartbeat after this long without writing")->capture_default_str();
   app.add_option("--write-timeout-ms", write_ms, "Close a connection whose write stalls this long")->capture_default_str();
   app.add_option("--load-threads", threads, "Threads loading the library (0: one per core)");
+  std::string auth_file, anonymous;
+  app.add_option("--auth-file", auth_file,
+                 "Tokens and their roles, one 'read TOKEN' or 'control TOKEN' per line (docs/security.md)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--anonymous", anonymous,
+                 "What clients without a token may do: none, read or control (default: read with --auth-file, "
+                 "control without)")
+      ->check(CLI::IsMember({"none", "read", "control"}));
+  app.add_option("--tls-cert", cfg.tls_certificate_file, "PEM certificate chain: the TCP port then speaks only TLS")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-key", cfg.tls_key_file, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
   app.add_option("--port-file", port_file, "Write the TCP port here once listening (for scripts using --port 0)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
   try {
@@ -102,6 +113,19 @@ int main(int argc, char** argv) {
   cfg.heartbeat_interval = std::chrono::milliseconds(heartbeat_ms);
   cfg.write_timeout = std::chrono::milliseconds(write_ms);
   cfg.handshake_timeout = std::chrono::milliseconds(handshake_ms);
+
+  if (!auth_file.empty()) {
+    std::string warning;
+    auto credentials = Credentials::load(auth_file, &warning);
+    if (!credentials.ok()) {
+      std::fprintf(stderr, "gmr-server: %s\n", credentials.error().to_string().c_str());
+      return 1;
+    }
+    if (!warning.empty()) spdlog::warn("{}", warning);
+    cfg.credentials = std::make_shared<const Credentials>(std::move(credentials).value());
+    cfg.anonymous = Role::kRead;
+  }
+  if (!anonymous.empty()) cfg.anonymous = parse_role(anonymous).value();
 
   try {
     std::vector<LibraryEntry> library;

@@ -16,6 +16,7 @@
 
 #include "cli_util.h"
 #include "cmd_ops.h"
+#include "connect_options.h"
 #include "gmr/client/client.h"
 #include "gmr/core/file_util.h"
 #include "gmr/io/positions_csv.h"
@@ -23,22 +24,11 @@
 namespace gmr::cli {
 namespace {
 
-struct ServerOptions {
-  std::string host = "127.0.0.1";
-  std::uint16_t port = 7400;
-};
+using ServerOptions = client::ClientOptions;
 
-void add_server_options(CLI::App& cmd, ServerOptions& o) {
-  cmd.add_option("--host", o.host, "Server address")->capture_default_str();
-  cmd.add_option("--port", o.port, "Server TCP port")->capture_default_str();
-}
-
-std::unique_ptr<client::Client> connect(const ServerOptions& o) {
-  client::ClientOptions c;
-  c.host = o.host;
-  c.port = o.port;
-  c.client_name = "gmr cli";
-  return take(client::Client::connect(c));
+std::unique_ptr<client::Client> connect(ServerOptions o) {
+  o.client_name = "gmr cli";
+  return take(client::Client::connect(o));
 }
 
 // Rows in the motion's own joint order (as `gmr positions` prints them):
@@ -283,7 +273,7 @@ void add_net_commands(CLI::App& app) {
   {
     auto o = std::make_shared<ServerOptions>();
     CLI::App* cmd = app.add_subcommand("ls", "List the motions a gmr-server serves");
-    add_server_options(*cmd, *o);
+    add_connect_options(*cmd, *o);
     cmd->callback([o] { run_ls(*o); });
   }
   {
@@ -291,7 +281,7 @@ void add_net_commands(CLI::App& app) {
     auto motion = std::make_shared<std::string>();
     CLI::App* cmd = app.add_subcommand("skeleton", "Show a served motion's joints, offsets and channels");
     cmd->add_option("motion", *motion, "Motion name (see gmr ls)")->required();
-    add_server_options(*cmd, *o);
+    add_connect_options(*cmd, *o);
     cmd->callback([o, motion] { run_skeleton(*o, *motion); });
   }
   {
@@ -301,7 +291,7 @@ void add_net_commands(CLI::App& app) {
     cmd->add_option("motion", o->motion, "Motion name (see gmr ls)")->required();
     cmd->add_option("--frames", o->frames, "Half-open frame range A:B (either side may be empty)")->capture_default_str();
     add_view_options(*cmd, o->view);
-    add_server_options(*cmd, o->server);
+    add_connect_options(*cmd, o->server);
     cmd->callback([o] { run_query(*o); });
   }
   {
@@ -317,7 +307,7 @@ void add_net_commands(CLI::App& app) {
     cmd->add_option("--joints", o->joints, "Only these joints, A,B,C");
     cmd->add_flag("--summary", o->summary, "Print a live summary twice a second instead of CSV rows");
     add_view_options(*cmd, o->view);
-    add_server_options(*cmd, o->server);
+    add_connect_options(*cmd, o->server);
     cmd->callback([o] { run_stream(*o); });
   }
 }

@@ -1,6 +1,6 @@
 // gmr-load: N clients subscribe to a gmr-server and measure what arrives.
 //
-//   gmr-load [--host H] [--port P] [--clients N] [--motion M] [--seconds S]
+//   gmr-load [--host H] [--port P] [--token T] [--tls-ca CA] [--clients N] [--motion M] [--seconds S]
 //            [--rate HZ] [--udp] [--shared] [--orientations] [--float64]
 //
 // Prints latency (server send time -> client receive time, both system_clock
@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "connect_options.h"
 #include "gmr/client/client.h"
 
 namespace {
@@ -43,16 +44,14 @@ double percentile(std::vector<std::int64_t>& v, double p) {
 
 int main(int argc, char** argv) {
   CLI::App app{"gmr-load: load-test a gmr-server with N streaming clients"};
-  std::string host = "127.0.0.1";
-  std::uint16_t port = 7400;
+  gmr::client::ClientOptions connect_options;
   int clients = 10;
   std::string motion = "walk";
   double seconds = 5.0;
   double warmup = 0.5;
   double rate = 0.0;
   bool udp = false, shared = false, orientations = false, float64 = false;
-  app.add_option("--host", host)->capture_default_str();
-  app.add_option("--port", port)->capture_default_str();
+  gmr::cli::add_connect_options(app, connect_options);
   app.add_option("--clients", clients, "Connections, one subscription each")->capture_default_str()->check(CLI::Range(1, 10000));
   app.add_option("--motion", motion, "Motion to stream (looped)")->capture_default_str();
   app.add_option("--seconds", seconds, "Measurement time")->capture_default_str()->check(CLI::PositiveNumber);
@@ -75,9 +74,7 @@ int main(int argc, char** argv) {
   double rate_in_effect = 0.0;
   for (int i = 0; i < clients; ++i) {
     auto run = std::make_unique<ClientRun>();
-    gmr::client::ClientOptions co;
-    co.host = host;
-    co.port = port;
+    gmr::client::ClientOptions co = connect_options;
     co.client_name = "gmr-load " + std::to_string(i);
     auto c = gmr::client::Client::connect(co);
     if (!c.ok()) {

@@ -15,6 +15,7 @@
 #include "gmr/wire/convert.h"
 #include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
+#include "gmr/wire/tls_socket.h"
 #include "gmr/wire/udp.h"
 
 namespace gmr::client {
@@ -41,6 +42,7 @@ ServerHello hello_of(const pb::HelloReply& h) {
   s.max_message_bytes = h.max_message_bytes();
   s.heartbeat_interval_ms = h.heartbeat_interval_ms();
   s.idle_timeout_ms = h.idle_timeout_ms();
+  s.role = h.role() == pb::ROLE_CONTROL ? Role::kControl : h.role() == pb::ROLE_READ ? Role::kRead : Role::kUnknown;
   return s;
 }
 
@@ -53,7 +55,8 @@ SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
 struct Client::Impl : std::enable_shared_from_this<Impl> {
   ClientOptions options;
   net::io_context io;
-  tcp::socket socket{io};
+  std::optional<net::ssl::context> tls_context;  // options.tls.enabled; outlives the socket
+  wire::TlsSocket socket{io};
   udp::socket udp_socket{io};
   udp::endpoint server_udp;
   net::steady_timer heartbeat{io};
@@ -118,26 +121,29 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   void write_next() {
     if (writing || write_queue.empty()) return;
     writing = true;
-    net::async_write(socket, net::buffer(write_queue.front()),
-                     [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
-                       self->writing = false;
-                       if (!self->write_queue.empty()) {
-                         self->write_queue_bytes -= self->write_queue.front().size();
-                         self->write_queue.pop_front();
-                       }
-                       if (ec) return self->fail("write failed: " + ec.message());
-                       self->write_next();
-                     });
+    socket.async_write(net::buffer(write_queue.front()),
+                       [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+                         self->writing = false;
+                         if (!self->write_queue.empty()) {
+                           self->write_queue_bytes -= self->write_queue.front().size();
+                           self->write_queue.pop_front();
+                         }
+                         if (ec) return self->fail("write failed: " + ec.message());
+                         self->write_next();
+                       });
   }
   void read_prefix() {
-    net::async_read(socket, net::buffer(prefix), [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
-      if (ec) return self->fail(ec == net::error::eof ? "the server closed the connection" : "read failed: " + ec.message());
+    socket.async_read(net::buffer(prefix), [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+      if (ec) {
+        return self->fail(wire::TlsSocket::peer_closed(ec) ? std::string("the server closed the connection")
+                                                           : "read failed: " + ec.message());
+      }
       const std::uint32_t n = wire::read_length_prefix(self->prefix);
       if (auto s = wire::check_length(n, self->options.max_message_bytes); !s.ok()) {
         return self->fail("bad length prefix from the server: " + s.error().message);
       }
       self->body.resize(n);
-      net::async_read(self->socket, net::buffer(self->body), [self](const boost::system::error_code& ec2, std::size_t) {
+      self->socket.async_read(net::buffer(self->body), [self](const boost::system::error_code& ec2, std::size_t) {
         if (ec2) return self->fail("read failed: " + ec2.message());
         pb::ServerMessage m;
         if (!m.ParseFromString(self->body)) return self->fail("the server sent a message that does not parse");
@@ -251,7 +257,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   void fail(const std::string& reason) {
     if (!open.exchange(false)) return;
     boost::system::error_code ec;
-    socket.close(ec);
+    socket.tcp().close(ec);
     udp_socket.close(ec);
     heartbeat.cancel();
     std::map<std::uint64_t, Pending> orphans;
@@ -296,6 +302,61 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     } catch (const std::exception& e) {
       return make_error(std::string("connection lost: ") + e.what());
     }
+  }
+
+  // The TLS handshake on the connected socket, within options.timeout: the
+  // server's certificate must chain to the CA and name the server.
+  Status start_tls(const std::string& where) {
+    const auto& t = options.tls;
+    const std::string name = t.server_name.empty() ? options.host : t.server_name;
+    boost::system::error_code ec;
+    tls_context.emplace(net::ssl::context::tls_client);
+    auto& ctx = *tls_context;
+    ctx.set_options(net::ssl::context::default_workarounds | net::ssl::context::no_sslv2 |
+                    net::ssl::context::no_sslv3 | net::ssl::context::no_tlsv1 | net::ssl::context::no_tlsv1_1);
+    if (t.ca_file.empty()) {
+      ctx.set_default_verify_paths(ec);
+    } else {
+      ctx.load_verify_file(t.ca_file, ec);
+    }
+    if (ec) {
+      return make_error(ErrorKind::kIo, "cannot load the TLS trust " +
+                                            (t.ca_file.empty() ? std::string("store") : "file " + t.ca_file) + ": " +
+                                            ec.message());
+    }
+    ctx.set_verify_mode(net::ssl::verify_peer);
+    auto name_matched = std::make_shared<bool>(true);
+    ctx.set_verify_callback([check = net::ssl::host_name_verification(name), name_matched](
+                                bool preverified, net::ssl::verify_context& v) {
+      const bool ok = check(preverified, v);
+      if (preverified && !ok) *name_matched = false;
+      return ok;
+    });
+    socket.use_tls(ctx);
+    // Server Name Indication for a name (never for an address).
+    net::ip::make_address(name, ec);
+    if (ec) SSL_set_tlsext_host_name(socket.tls_stream().native_handle(), name.c_str());
+    auto done = std::make_shared<std::promise<boost::system::error_code>>();
+    auto result = done->get_future();
+    net::post(io, [self = shared_from_this(), done] {
+      self->socket.tls_stream().async_handshake(net::ssl::stream_base::client,
+                                                [done](const boost::system::error_code& e) { done->set_value(e); });
+    });
+    if (result.wait_for(options.timeout) != std::future_status::ready) {
+      net::post(io, [self = shared_from_this()] { boost::system::error_code e; self->socket.tcp().close(e); });
+      result.wait();
+      return make_error("TLS handshake with " + where + ": timed out");
+    }
+    if (auto e = result.get()) {
+      std::string why = e.message();
+      if (!*name_matched) {
+        why += " (the certificate does not name '" + name + "')";
+      } else if (const long v = SSL_get_verify_result(socket.tls_stream().native_handle()); v != X509_V_OK) {
+        why += std::string(" (") + X509_verify_cert_error_string(v) + ")";
+      }
+      return make_error("TLS handshake with " + where + " failed: " + why);
+    }
+    return Ok{};
   }
 
   // A reply of the expected kind, or the server's Error as an Error.
@@ -350,16 +411,17 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   // Connect on the I/O thread so the timeout applies.
   std::promise<boost::system::error_code> connected;
   auto connected_future = connected.get_future();
-  d.socket.open(endpoints.begin()->endpoint().protocol(), ec);
-  if (options.receive_buffer > 0) d.socket.set_option(net::socket_base::receive_buffer_size(options.receive_buffer), ec);
-  net::async_connect(d.socket, endpoints, [&connected](const boost::system::error_code& e, const tcp::endpoint&) {
-    connected.set_value(e);
-  });
+  d.socket.tcp().open(endpoints.begin()->endpoint().protocol(), ec);
+  if (options.receive_buffer > 0) {
+    d.socket.tcp().set_option(net::socket_base::receive_buffer_size(options.receive_buffer), ec);
+  }
+  net::async_connect(d.socket.tcp(), endpoints,
+                     [&connected](const boost::system::error_code& e, const tcp::endpoint&) { connected.set_value(e); });
   d.guard.emplace(d.io.get_executor());
   d.thread = std::thread([impl = c->impl_] { impl->io.run(); });
   const std::string where = options.host + ":" + std::to_string(options.port);
   if (connected_future.wait_for(options.timeout) != std::future_status::ready) {
-    net::post(d.io, [impl = c->impl_] { boost::system::error_code e; impl->socket.close(e); });
+    net::post(d.io, [impl = c->impl_] { boost::system::error_code e; impl->socket.tcp().close(e); });
     connected_future.wait();
     c->close();
     return make_error("cannot connect to " + where + ": timed out");
@@ -368,20 +430,31 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
     c->close();
     return make_error("cannot connect to " + where + ": " + e.message());
   }
-  d.socket.set_option(tcp::no_delay(true), ec);
+  d.socket.tcp().set_option(tcp::no_delay(true), ec);
+  if (options.tls.enabled) {
+    if (auto s = d.start_tls(where); !s.ok()) {
+      c->close();
+      return s.error();
+    }
+  }
   d.open = true;
-  const auto remote = d.socket.remote_endpoint(ec);
+  const auto remote = d.socket.tcp().remote_endpoint(ec);
   net::post(d.io, [impl = c->impl_] { impl->read_prefix(); });
 
   pb::ClientMessage hello;
   hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
   hello.mutable_hello()->set_client_name(options.client_name);
+  hello.mutable_hello()->set_auth_token(options.auth_token);
   auto r = d.expect(hello, pb::ServerMessage::kHello);
   if (!r.ok()) {
     c->close();
-    return make_error("handshake with " + where + " failed: " + r.error().message);
+    // A TLS server closes a plain client's connection without a word.
+    const bool closed = r.error().message.find("closed the connection") != std::string::npos;
+    return make_error("handshake with " + where + " failed: " + r.error().message +
+                      (closed && !options.tls.enabled ? " (if the server speaks TLS, connect with TLS: --tls)" : ""));
   }
   d.hello = hello_of(r->hello());
+  d.hello.tls = d.socket.tls();
   d.server_udp = udp::endpoint(remote.address(), d.hello.udp_port);
   d.udp_socket.open(remote.address().is_v4() ? udp::v4() : udp::v6(), ec);
   if (!ec) d.udp_socket.bind(udp::endpoint(remote.address().is_loopback() ? remote.address() : net::ip::address(), 0), ec);
@@ -398,7 +471,10 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
 Client::~Client() { close(); }
 
 void Client::close() {
-  if (!impl_) return;
+  // Once the I/O thread is gone (joined, or detached and ending) nothing
+  // would run a posted handler, and one left queued in io would keep Impl,
+  // which owns io, alive for ever: a second close() does nothing.
+  if (!impl_ || !impl_->thread.joinable()) return;
   net::post(impl_->io, [impl = impl_] {
     impl->fail("closed by the client");
     impl->guard.reset();

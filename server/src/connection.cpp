@@ -18,10 +18,11 @@ constexpr std::size_t kBodyChunk = 256 * 1024;
 }  // namespace
 
 Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
-                       BufferBudget* budget)
+                       BufferBudget* budget, net::ssl::context* tls)
     : socket_(std::move(socket)), id_(id), limits_(limits), budget_(budget), watchdog_(io) {
+  if (tls != nullptr) socket_.use_tls(*tls);
   boost::system::error_code ec;
-  auto ep = socket_.remote_endpoint(ec);
+  auto ep = socket_.tcp().remote_endpoint(ec);
   peer_address_ = ec ? std::string("?") : ep.address().to_string();
   peer_ = ec ? std::string("?") : peer_address_ + ":" + std::to_string(ep.port());
 }
@@ -47,14 +48,28 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
   handler_ = std::move(handler);
   on_closed_ = std::move(on_closed);
   boost::system::error_code ec;
-  socket_.set_option(tcp::no_delay(true), ec);
+  socket_.tcp().set_option(tcp::no_delay(true), ec);
   if (limits_.socket_send_buffer > 0) {
-    socket_.set_option(net::socket_base::send_buffer_size(limits_.socket_send_buffer), ec);
+    socket_.tcp().set_option(net::socket_base::send_buffer_size(limits_.socket_send_buffer), ec);
   }
   last_read_ = last_write_ = Clock::now();
-  spdlog::info("conn {}: connected from {}", id_, peer_);
-  read_prefix();
+  spdlog::info("conn {}: connected from {}{}", id_, peer_, socket_.tls() ? " (TLS)" : "");
   arm_watchdog();
+  if (!socket_.tls()) {
+    read_prefix();
+    return;
+  }
+  // The handshake counts against the Hello deadline (the watchdog's).
+  socket_.tls_stream().async_handshake(net::ssl::stream_base::server,
+                                       [self = shared_from_this()](const boost::system::error_code& e) {
+                                         if (self->stopped_) return;
+                                         if (e) {
+                                           self->stop("TLS handshake failed: " + e.message());
+                                           return;
+                                         }
+                                         self->last_read_ = Clock::now();
+                                         self->read_prefix();
+                                       });
 }
 
 void Connection::stop(const std::string& reason) {
@@ -71,8 +86,8 @@ void Connection::stop(const std::string& reason) {
   body_received_ = 0;
   account();
   boost::system::error_code ec;
-  socket_.shutdown(tcp::socket::shutdown_both, ec);
-  socket_.close(ec);
+  socket_.tcp().shutdown(tcp::socket::shutdown_both, ec);
+  socket_.tcp().close(ec);
   watchdog_.cancel();
   if (on_closed_) on_closed_(id_);
 }
@@ -218,11 +233,22 @@ void Connection::flush() {
   frame_bytes_ = 0;
   writing_ = true;
   write_started_ = Clock::now();
+  if (socket_.tls()) {
+    // TLS writes one buffer at a time: given in one piece, the bytes go out
+    // in full records rather than one record (and one send) per buffer.
+    tls_out_.clear();
+    tls_out_.reserve(in_flight_bytes_);
+    for (const auto& b : buffers) tls_out_.append(static_cast<const char*>(b.data()), b.size());
+    buffers.assign(1, net::buffer(tls_out_));
+    hold_.clear();  // the copy is what is in flight now
+    hold_heads_.clear();
+  }
   account();
-  net::async_write(socket_, buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+  socket_.async_write(buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
     self->writing_ = false;
     self->hold_.clear();
     self->hold_heads_.clear();
+    if (self->tls_out_.capacity() > kBodyChunk) std::string().swap(self->tls_out_);
     self->in_flight_bytes_ = 0;
     self->account();
     if (ec) {
@@ -291,14 +317,17 @@ void Connection::read_prefix() {
     return;
   }
   static_assert(std::tuple_size_v<decltype(prefix_)> == wire::kLengthPrefixBytes);
-  net::async_read(socket_, net::buffer(prefix_), [self = shared_from_this()](const boost::system::error_code& ec,
-                                                                             std::size_t) { self->on_prefix(ec); });
+  socket_.async_read(net::buffer(prefix_),
+                     [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+                       self->on_prefix(ec);
+                     });
 }
 
 void Connection::on_prefix(const boost::system::error_code& ec) {
   if (stopped_) return;
   if (ec) {
-    stop(ec == net::error::eof ? std::string("the client closed the connection") : "read failed: " + ec.message());
+    stop(wire::TlsSocket::peer_closed(ec) ? std::string("the client closed the connection")
+                                          : "read failed: " + ec.message());
     return;
   }
   last_read_ = Clock::now();
@@ -320,10 +349,10 @@ void Connection::read_body() {
       std::min({kBodyChunk, std::max(kFirstChunk, body_received_), body_expected_ - body_received_});
   body_.resize(body_received_ + chunk);
   account();
-  net::async_read(socket_, net::buffer(body_.data() + body_received_, chunk),
-                  [self = shared_from_this()](const boost::system::error_code& e, std::size_t got) {
-                    self->on_body(e, got);
-                  });
+  socket_.async_read(net::buffer(body_.data() + body_received_, chunk),
+                     [self = shared_from_this()](const boost::system::error_code& e, std::size_t got) {
+                       self->on_body(e, got);
+                     });
 }
 
 void Connection::on_body(const boost::system::error_code& ec, std::size_t got) {
@@ -332,7 +361,7 @@ void Connection::on_body(const boost::system::error_code& ec, std::size_t got) {
   if (ec) {
     spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_,
                  body_expected_);
-    stop(ec == net::error::eof ? std::string("truncated message") : "read failed: " + ec.message());
+    stop(wire::TlsSocket::peer_closed(ec) ? std::string("truncated message") : "read failed: " + ec.message());
     return;
   }
   last_read_ = Clock::now();

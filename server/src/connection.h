@@ -16,8 +16,8 @@
 // max_frame_bytes in all; a request body grows as its bytes arrive (a length
 // prefix reserves nothing). Every byte held counts in the server-wide
 // BufferBudget: above its limit, connections holding more than their share
-// are not read and frames that would wait are dropped. Everything runs on
-// the I/O thread.
+// are not read and frames that would wait are dropped. With TLS, the
+// handshake comes before the first read. Everything runs on the I/O thread.
 #pragma once
 
 #include <array>
@@ -28,6 +28,7 @@
 #include <string>
 #include <vector>
 
+#include "gmr/wire/tls_socket.h"
 #include "net.h"
 #include "outbox.h"
 
@@ -73,9 +74,10 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
     virtual void on_stop() = 0;
   };
 
-  // `budget` (may be null) outlives the connection.
+  // `budget` and `tls` (either may be null) outlive the connection. With
+  // `tls` the connection speaks TLS: its handshake comes first.
   Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
-             BufferBudget* budget = nullptr);
+             BufferBudget* budget = nullptr, net::ssl::context* tls = nullptr);
   ~Connection() override;
 
   // Starts reading and the watchdog. `on_closed` runs once when it stopped.
@@ -130,7 +132,7 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   bool may_read() const;
   void pop_frame(std::deque<PendingFrame>& queue);
 
-  tcp::socket socket_;
+  wire::TlsSocket socket_;
   std::uint64_t id_;
   ConnectionLimits limits_;
   std::string peer_;
@@ -157,6 +159,7 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   std::uint64_t in_flight_bytes_ = 0;
   std::vector<std::shared_ptr<const std::string>> hold_;  // what the write in flight points into
   std::vector<std::string> hold_heads_;
+  std::string tls_out_;  // with TLS: the write in flight in one piece (one record per 16 KiB, not per buffer)
   Clock::time_point write_started_{}, last_read_{}, last_write_{};
   net::steady_timer watchdog_;
   ConnectionCounters counters_;

@@ -4,6 +4,7 @@
 #include <utility>  // std::exchange, which boost/asio/awaitable.hpp uses without including
 
 #include <boost/asio.hpp>
+#include <boost/asio/ssl.hpp>
 #include <chrono>
 #include <cstdint>
 #include <string>

@@ -88,6 +88,11 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req) {
                                                        std::to_string(wire::kProtocolVersion) + ")"};
   }
   if (!handshaked_) return Refusal{pb::ERROR_CODE_HANDSHAKE_REQUIRED, "send Hello first"};
+  if (role_ != Role::kControl && needs_control(req.body_case())) {
+    return Refusal{pb::ERROR_CODE_PERMISSION_DENIED,
+                   "this connection's role is '" + std::string(role_name(role_)) +
+                       "': structural view edits and statistics need a 'control' token (docs/security.md)"};
+  }
   switch (req.body_case()) {
     case C::kListMotions: return list_motions();
     case C::kGetSkeleton: return get_skeleton(req.get_skeleton());
@@ -130,6 +135,19 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req) {
   }
 }
 
+bool RequestHandler::needs_control(pb::ClientMessage::BodyCase request) {
+  using C = pb::ClientMessage;
+  switch (request) {
+    case C::kShiftRoot:
+    case C::kSplit:
+    case C::kJoin:
+    case C::kSetRoots:
+    case C::kStripDummies:
+    case C::kGetStats: return true;
+    default: return false;
+  }
+}
+
 Reply RequestHandler::hello(const pb::Hello& h) {
   if (h.protocol_version() != wire::kProtocolVersion) {
     spdlog::warn("conn {}: refused protocol version {} (this server speaks {})", connection_id_, h.protocol_version(),
@@ -140,10 +158,29 @@ Reply RequestHandler::hello(const pb::Hello& h) {
                                                         ", this server speaks version " +
                                                         std::to_string(wire::kProtocolVersion)};
   }
+  const ServerConfig& cfg = server_.cfg;
+  // The role: the token's, or the anonymous one. A token the server does not
+  // know is refused rather than taken as anonymous (a typo should show); a
+  // server without tokens takes every client as anonymous.
+  Role role = cfg.anonymous;
+  if (cfg.credentials && !h.auth_token().empty()) role = cfg.credentials->role_of(h.auth_token());
+  if (role == Role::kNone) {
+    const bool had_token = !h.auth_token().empty();
+    if (std::uint64_t suppressed = 0; server_.auth_log.allow(suppressed)) {
+      spdlog::warn("conn {}: refused at Hello: {}{}", connection_id_,
+                   had_token ? "unknown token" : "no token and anonymous clients may not connect",
+                   suppressed ? " (" + std::to_string(suppressed) + " more such lines suppressed)" : std::string());
+    }
+    ++server_.auth_refused;
+    if (auto c = connection_.lock()) c->close_after_reply();
+    return Refusal{pb::ERROR_CODE_UNAUTHENTICATED, had_token ? "the server does not know this token"
+                                                             : "this server needs a token (ClientOptions::auth_token, "
+                                                               "gmr --token or GMR_TOKEN)"};
+  }
+  role_ = role;
   handshaked_ = true;
   if (auto c = connection_.lock()) c->established();
-  spdlog::info("conn {}: hello from {}", connection_id_, printable(h.client_name()));
-  const ServerConfig& cfg = server_.cfg;
+  spdlog::info("conn {}: hello from {} ({})", connection_id_, printable(h.client_name()), role_name(role_));
   pb::ServerMessage out;
   auto* r = out.mutable_hello();
   r->set_protocol_version(wire::kProtocolVersion);
@@ -153,6 +190,7 @@ Reply RequestHandler::hello(const pb::Hello& h) {
   r->set_max_message_bytes(cfg.max_message_bytes);
   r->set_heartbeat_interval_ms(static_cast<std::uint32_t>(cfg.heartbeat_interval.count()));
   r->set_idle_timeout_ms(static_cast<std::uint32_t>(cfg.idle_timeout.count()));
+  r->set_role(role_ == Role::kControl ? pb::ROLE_CONTROL : pb::ROLE_READ);
   return out;
 }
 

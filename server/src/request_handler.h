@@ -50,6 +50,8 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   void send(const pb::ServerMessage& m);
   Reply dispatch(const pb::ClientMessage& m);
   Reply hello(const pb::Hello& r);
+  // Requests only a 'control' connection may make (docs/security.md).
+  static bool needs_control(pb::ClientMessage::BodyCase request);
 
   // request_handler.cpp: the library and views.
   Reply list_motions() const;
@@ -89,6 +91,7 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   wire::UdpToken token_{};
   std::shared_ptr<UdpPublisher::Registration> udp_;
   bool handshaked_ = false;
+  Role role_ = Role::kNone;  // set by Hello
   bool stopped_ = false;
   LogLimiter log_limit_;  // lines this client's bad requests may put in the log
 

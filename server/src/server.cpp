@@ -63,7 +63,7 @@ void Server::Impl::accept_loop() {
         refuse(std::move(socket), why);
       } else {
         const std::uint64_t id = next_connection_id++;
-        auto c = std::make_shared<Connection>(io, std::move(socket), id, connection_limits(), &buffers);
+        auto c = std::make_shared<Connection>(io, std::move(socket), id, connection_limits(), &buffers, tls.get());
         auto handler = std::make_shared<RequestHandler>(*this, c);
         handler->start();
         connections[id] = ConnectionEntry{c, handler, address};
@@ -150,6 +150,7 @@ ServerStats Server::Impl::snapshot() {
   st.udp_rejected = udp.rejected();
   st.udp_challenges = udp.challenges();
   st.connections_refused = connections_refused;
+  st.hellos_refused = auth_refused;
   st.buffered_bytes = buffers.held;
   st.max_buffered_bytes = buffers.max_held;
   st.view_bytes = view_bytes;
@@ -178,9 +179,38 @@ Server::Server(ServerConfig config, std::vector<LibraryEntry> library)
 
 Server::~Server() { stop(); }
 
+namespace {
+
+// The TLS context of the server's certificate and key: TLS 1.2 or newer.
+std::unique_ptr<net::ssl::context> make_tls_context(const ServerConfig& cfg) {
+  if (cfg.tls_certificate_file.empty() && cfg.tls_key_file.empty()) return nullptr;
+  if (cfg.tls_certificate_file.empty() || cfg.tls_key_file.empty()) {
+    throw std::runtime_error("TLS needs both a certificate (--tls-cert) and its private key (--tls-key)");
+  }
+  auto ctx = std::make_unique<net::ssl::context>(net::ssl::context::tls_server);
+  ctx->set_options(net::ssl::context::default_workarounds | net::ssl::context::no_sslv2 |
+                   net::ssl::context::no_sslv3 | net::ssl::context::no_tlsv1 | net::ssl::context::no_tlsv1_1 |
+                   net::ssl::context::single_dh_use);
+  boost::system::error_code ec;
+  ctx->use_certificate_chain_file(cfg.tls_certificate_file, ec);
+  if (ec) {
+    throw std::runtime_error("cannot use the TLS certificate " + cfg.tls_certificate_file + ": " + ec.message() +
+                             " (a PEM certificate chain is expected)");
+  }
+  ctx->use_private_key_file(cfg.tls_key_file, net::ssl::context::pem, ec);
+  if (ec) {
+    throw std::runtime_error("cannot use the TLS private key " + cfg.tls_key_file + ": " + ec.message() +
+                             " (a PEM private key matching the certificate is expected)");
+  }
+  return ctx;
+}
+
+}  // namespace
+
 void Server::start() {
   auto& d = *impl_;
   if (d.started) throw std::runtime_error("server already started");
+  d.tls = make_tls_context(d.cfg);
   boost::system::error_code ec;
   const auto address = net::ip::make_address(d.cfg.bind_address, ec);
   if (ec) throw std::runtime_error("bad bind address '" + d.cfg.bind_address + "': " + ec.message());
@@ -197,16 +227,26 @@ void Server::start() {
                                  : d.cfg.port == 0   ? std::uint16_t{0}
                                                      : d.tcp_port;
   d.udp.open(address, udp_port);
-  if (address.is_unspecified()) {
-    spdlog::warn("listening on every interface ({}): any host that can reach this machine can connect and "
-                 "subscribe; use --bind 127.0.0.1 (the default) to serve this machine only",
-                 d.cfg.bind_address);
+  if (!address.is_loopback()) {
+    if (!d.cfg.credentials || d.cfg.anonymous == Role::kControl) {
+      spdlog::warn("listening on {} without tokens: any host that can reach it may edit views and read "
+                   "statistics; give --auth-file (docs/security.md), or --bind 127.0.0.1 (the default)",
+                   d.cfg.bind_address);
+    }
+    if (!d.tls) {
+      spdlog::warn("listening on {} without TLS: requests, frames{} cross the network in the clear "
+                   "(--tls-cert and --tls-key, docs/security.md)",
+                   d.cfg.bind_address, d.cfg.credentials ? " and tokens" : "");
+    }
   }
   d.started = true;
   d.accept_loop();
   d.udp.start();
-  spdlog::info("serving {} motions on tcp {}:{} and udp {}:{}", d.library.size(), d.cfg.bind_address, d.tcp_port,
-               d.cfg.bind_address, d.udp.port());
+  spdlog::info("serving {} motions on tcp{} {}:{} and udp {}:{}{}", d.library.size(), d.tls ? " (TLS)" : "",
+               d.cfg.bind_address, d.tcp_port, d.cfg.bind_address, d.udp.port(),
+               d.cfg.credentials ? ", " + std::to_string(d.cfg.credentials->size()) + " tokens, anonymous clients " +
+                                       role_name(d.cfg.anonymous)
+                                 : std::string());
   d.thread = std::thread([impl = impl_] {
     try {
       impl->io.run();

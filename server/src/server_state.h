@@ -67,6 +67,11 @@ struct Server::Impl {
   std::map<std::string, std::size_t> per_address;  // open connections by IP address
   std::uint64_t connections_refused = 0;
   LogLimiter refusal_log{5, std::chrono::seconds(10)};
+  // Hello refused for its token (or for having none).
+  std::uint64_t auth_refused = 0;
+  LogLimiter auth_log{5, std::chrono::seconds(10)};
+  // TLS (cfg.tls_certificate_file): made by start(), used by every connection.
+  std::unique_ptr<net::ssl::context> tls;
   // Per library entry: the float form its unedited views share, while any
   // view holds it (compiled on first use by a float32 stream; freed with the
   // last view, so memory follows what is being streamed).

@@ -3,6 +3,10 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <openssl/evp.h>
+#include <openssl/pem.h>
+#include <openssl/x509.h>
+#include <openssl/x509v3.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -10,6 +14,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 
 #include "gmr/ops/convert.h"
@@ -199,6 +204,49 @@ void LibraryMotionTest::SetUp() {
     if (e.name == GetParam()) source_ = e.motion;
   }
   ASSERT_NE(source_, nullptr) << "no motion " << GetParam();
+}
+
+Certificate::~Certificate() {
+  std::error_code ec;
+  std::filesystem::remove_all(dir, ec);
+}
+
+std::unique_ptr<Certificate> self_signed(const std::string& names) {
+  static int serial = 0;
+  auto out = std::make_unique<Certificate>();
+  out->dir = std::filesystem::temp_directory_path() / ("gmr-tls-" + std::to_string(::getpid()) + "-" + std::to_string(++serial));
+  std::filesystem::create_directories(out->dir);
+  out->cert = out->dir / "cert.pem";
+  out->key = out->dir / "key.pem";
+  EVP_PKEY* key = EVP_EC_gen("P-256");
+  X509* x = X509_new();
+  X509_set_version(x, 2);
+  ASN1_INTEGER_set(X509_get_serialNumber(x), serial);
+  X509_gmtime_adj(X509_getm_notBefore(x), -60);
+  X509_gmtime_adj(X509_getm_notAfter(x), 3600);
+  X509_set_pubkey(x, key);
+  X509_NAME* name = X509_get_subject_name(x);
+  X509_NAME_add_entry_by_txt(name, "CN", MBSTRING_ASC, reinterpret_cast<const unsigned char*>("gmr test"), -1, -1, 0);
+  X509_set_issuer_name(x, name);
+  X509V3_CTX ctx;
+  X509V3_set_ctx_nodb(&ctx);
+  X509V3_set_ctx(&ctx, x, x, nullptr, nullptr, 0);
+  for (auto [nid, value] : {std::pair{NID_subject_alt_name, names.c_str()},
+                            std::pair{NID_basic_constraints, "critical,CA:TRUE"}}) {
+    X509_EXTENSION* ext = X509V3_EXT_conf_nid(nullptr, &ctx, nid, value);
+    X509_add_ext(x, ext, -1);
+    X509_EXTENSION_free(ext);
+  }
+  X509_sign(x, key, EVP_sha256());
+  FILE* f = std::fopen(out->cert.c_str(), "w");
+  PEM_write_X509(f, x);
+  std::fclose(f);
+  f = std::fopen(out->key.c_str(), "w");
+  PEM_write_PrivateKey(f, key, nullptr, nullptr, 0, nullptr, nullptr);
+  std::fclose(f);
+  X509_free(x);
+  EVP_PKEY_free(key);
+  return out;
 }
 
 }  // namespace gmr::test

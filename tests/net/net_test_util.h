@@ -69,6 +69,15 @@ class RawConnection {
   bool closed_ = false;
 };
 
+// A self-signed certificate and its key (P-256), as PEM files in a
+// directory of their own that goes with the object. `names` are its
+// subjectAltName entries ("IP:127.0.0.1,DNS:localhost").
+struct Certificate {
+  std::filesystem::path dir, cert, key;
+  ~Certificate();
+};
+std::unique_ptr<Certificate> self_signed(const std::string& names);
+
 // A value that another thread sets; wait() has a deadline.
 template <class T>
 class Latch {

@@ -411,11 +411,11 @@ TEST(BadInput, UdpDatagramsWithWrongTokensAreIgnored) {
 // endpoint keeps streaming.
 TEST(BadInput, AForgedRegistrationGetsOneSmallChallengeAndNoFrames) {
   TestServer s;
+  std::atomic<int> frames{0};  // outlives the client, whose thread counts into it
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
   auto v = c->create_view("walk");
   ASSERT_TRUE(v.ok());
-  std::atomic<int> frames{0};
   client::SubscribeOptions o;
   o.udp = true;
   o.loop = true;

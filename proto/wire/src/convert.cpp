@@ -60,6 +60,8 @@ const char* error_code_name(pb::ErrorCode code) {
     case pb::ERROR_CODE_RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
     case pb::ERROR_CODE_HANDSHAKE_REQUIRED: return "HANDSHAKE_REQUIRED";
     case pb::ERROR_CODE_INTERNAL: return "INTERNAL";
+    case pb::ERROR_CODE_UNAUTHENTICATED: return "UNAUTHENTICATED";
+    case pb::ERROR_CODE_PERMISSION_DENIED: return "PERMISSION_DENIED";
     default: return "UNSPECIFIED";
   }
 }

@@ -39,6 +39,23 @@ struct ClientOptions {
   // full", ErrorKind::kResourceExhausted) instead of queueing without bound
   // behind a server that stopped reading. An empty queue takes any request.
   std::size_t max_write_queue_bytes = 4u << 20;
+  // A token from the server's auth file (docs/security.md); empty: connect
+  // anonymously. It is a password: send it over TLS or loopback only.
+  std::string auth_token;
+  // TLS (docs/security.md). The server's certificate must chain to ca_file
+  // (PEM; empty: the system's trust store) and name server_name (empty: host).
+  struct Tls {
+    bool enabled = false;
+    std::string ca_file;
+    std::string server_name;
+  } tls;
+};
+
+// What the connection may do (the server's auth file, docs/security.md).
+enum class Role : std::uint8_t {
+  kUnknown,  // a server that does not say
+  kRead,     // list, skeletons, views and their viewpoint, queries, subscriptions
+  kControl,  // also structural view edits and server statistics
 };
 
 // What the server said in its Hello reply.
@@ -50,6 +67,8 @@ struct ServerHello {
   std::uint32_t max_message_bytes = 0;
   std::uint32_t heartbeat_interval_ms = 0;
   std::uint32_t idle_timeout_ms = 0;
+  Role role = Role::kUnknown;
+  bool tls = false;  // the connection speaks TLS
 };
 
 // One motion of the server's library.

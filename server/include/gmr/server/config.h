@@ -3,8 +3,10 @@
 
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <string>
 
+#include "gmr/server/auth.h"
 #include "gmr/wire/framing.h"
 
 namespace gmr::server {
@@ -14,6 +16,16 @@ struct ServerConfig {
   std::uint16_t port = 0;                  // TCP; 0 picks a free port (read it back with Server::tcp_port)
   int udp_port = -1;                       // -1: the TCP port number (any free port when port is 0); 0: any free port
   std::string server_name = "gmr-server";
+
+  // Who may do what (docs/security.md). A client's Hello token gives its role
+  // from `credentials` (an unknown token is refused); a client without a
+  // token gets `anonymous`. No credentials: every client is anonymous.
+  std::shared_ptr<const Credentials> credentials;
+  Role anonymous = Role::kControl;
+  // TLS on the TCP port (docs/security.md): a PEM certificate chain and its
+  // private key. Both empty: plain TCP. With TLS the port speaks only TLS.
+  std::string tls_certificate_file;
+  std::string tls_key_file;
 
   std::uint32_t max_message_bytes = wire::kDefaultMaxMessageBytes;  // either direction
   std::size_t max_connections = 256;

@@ -41,6 +41,7 @@ struct ServerStats {
   std::uint64_t udp_rejected = 0;     // datagrams that were not a valid registration or confirm
   std::uint64_t udp_challenges = 0;   // challenges sent (one per valid registration datagram)
   std::uint64_t connections_refused = 0;
+  std::uint64_t hellos_refused = 0;   // unknown token, or none where one is needed
   std::uint64_t buffered_bytes = 0;      // now: all connections' replies, frames, writes, request bodies
   std::uint64_t max_buffered_bytes = 0;  // high-water mark of buffered_bytes
   std::uint64_t view_bytes = 0;          // now: motion bytes views own (edited copies)

@@ -1,0 +1,26 @@
+// The options of every command that talks to a server (gmr ls/skeleton/
+// query/stream and gmr-load): where it is, and how to reach it safely.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <string>
+
+#include "gmr/client/client.h"
+
+namespace gmr::cli {
+
+inline void add_connect_options(CLI::App& cmd, client::ClientOptions& o) {
+  cmd.add_option("--host", o.host, "Server address")->capture_default_str();
+  cmd.add_option("--port", o.port, "Server TCP port")->capture_default_str();
+  cmd.add_option("--token", o.auth_token, "Token from the server's auth file (docs/security.md)")
+      ->envname("GMR_TOKEN");
+  cmd.add_flag("--tls", o.tls.enabled, "Speak TLS; the server's certificate must chain to the system's trust store");
+  cmd.add_option("--tls-ca", o.tls.ca_file, "PEM file of the CA (or self-signed certificate) to trust (implies --tls)")
+      ->check(CLI::ExistingFile)
+      ->each([&o](const std::string&) { o.tls.enabled = true; });
+  cmd.add_option("--tls-server-name", o.tls.server_name,
+                 "Name the server's certificate must carry (default: --host; implies --tls)")
+      ->each([&o](const std::string&) { o.tls.enabled = true; });
+}
+
+}  // namespace gmr::cli
