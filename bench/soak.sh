@@ -19,9 +19,10 @@ mkdir -p "$(dirname "$out")"
 port_file=$(mktemp)
 rm -f "$port_file"
 # Every client is on 127.0.0.1: no per-address limit, room for 1,000 steady
-# clients plus the hostile ones.
+# clients plus the hostile ones; no send budget, so that the hostile clients'
+# 2 kHz subscriptions are admitted and press on memory.
 taskset -c 0 "$server" --port 0 --port-file "$port_file" --max-connections 4096 \
-  --max-connections-per-address 0 --log-level warn >"$out.server.log" 2>&1 &
+  --max-connections-per-address 0 --send-budget 0 --log-level warn >"$out.server.log" 2>&1 &
 server_pid=$!
 stop_server() {
   kill -INT "$server_pid" 2>/dev/null && wait "$server_pid" || true

@@ -67,6 +67,11 @@ int main(int argc, char** argv) {
   app.add_option("--max-buffered-bytes", cfg.max_buffered_bytes,
                  "Bytes all connections may hold together (0: no server-wide limit)")
       ->capture_default_str();
+  app.add_option("--send-budget", cfg.send_budget,
+                 "Frames/s all subscriptions together may ask for; past it a subscription is refused "
+                 "(0: no limit, for load tests that mean to overload)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--max-view-bytes", cfg.max_view_bytes, "Motion bytes all edited views may own together")
       ->capture_default_str();
   app.add_option("--max-view-bytes-per-connection", cfg.max_view_bytes_per_connection,

@@ -100,6 +100,14 @@ int main(int argc, char** argv) {
       r->latencies_ns.push_back(f.receive_time_ns - f.server_send_time_ns);
     });
     if (!sub.ok()) {
+      // The server's admission control: measure the clients it took.
+      if (!runs.empty() && sub.error().message.find("RESOURCE_EXHAUSTED") != std::string::npos) {
+        std::printf("gmr-load: the server admitted %zu of %d subscriptions: %s\n", runs.size(), clients,
+                    sub.error().message.c_str());
+        std::printf("          (gmr-server --send-budget 0 turns admission off to overload it on purpose)\n");
+        clients = static_cast<int>(runs.size());
+        break;
+      }
       std::fprintf(stderr, "gmr-load: %s\n", sub.error().to_string().c_str());
       return 1;
     }

@@ -727,6 +727,9 @@ Result<ServerCounters> Client::stats() {
   c.frames_skipped_total = s.frames_skipped_total();
   c.queued_bytes = s.queued_bytes();
   c.max_queued_bytes = s.max_queued_bytes();
+  c.committed_frames_per_second = s.committed_frames_per_second();
+  c.send_budget = s.send_budget();
+  c.subscriptions_refused = s.subscriptions_refused();
   return c;
 }
 

@@ -29,7 +29,10 @@ void RequestHandler::on_stop() {
   if (log_limit_.pending() > 0) {
     spdlog::warn("conn {}: {} more lines about its requests were suppressed", connection_id_, log_limit_.pending());
   }
-  for (auto& [id, sub] : subs_) sub.stream->remove(sub.target.get());
+  for (auto& [id, sub] : subs_) {
+    sub.stream->remove(sub.target.get());
+    server_.committed_mhz -= sub.rate_mhz;
+  }
   subs_.clear();
   for (const auto& [id, v] : views_) forget_view(*v);
   views_.clear();
@@ -351,6 +354,9 @@ Reply RequestHandler::stats() {
   st->set_frames_skipped_total(server_.counters.frames_skipped);
   st->set_queued_bytes(own.queued_bytes);
   st->set_max_queued_bytes(own.max_queued_bytes);
+  st->set_committed_frames_per_second(static_cast<double>(server_.committed_mhz) / 1000.0);
+  st->set_send_budget(server_.cfg.send_budget);
+  st->set_subscriptions_refused(server_.subscriptions_refused);
   return out;
 }
 

@@ -151,6 +151,8 @@ ServerStats Server::Impl::snapshot() {
   st.udp_challenges = udp.challenges();
   st.connections_refused = connections_refused;
   st.hellos_refused = auth_refused;
+  st.committed_frames_per_second = static_cast<double>(committed_mhz) / 1000.0;
+  st.subscriptions_refused = subscriptions_refused;
   st.buffered_bytes = buffers.held;
   st.max_buffered_bytes = buffers.max_held;
   st.view_bytes = view_bytes;

@@ -44,6 +44,10 @@ struct Server::Impl {
   BufferBudget buffers{cfg.max_buffered_bytes, 0, 0, cfg.max_buffered_bytes / std::max<std::size_t>(1, cfg.max_connections)};
   // Bytes of motions that views own (edited copies, docs/protocol.md).
   std::uint64_t view_bytes = 0;
+  // Frames per second the subscriptions ask for, in millihertz (integers:
+  // no drift however many come and go), against cfg.send_budget.
+  std::uint64_t committed_mhz = 0;
+  std::uint64_t subscriptions_refused = 0;  // for the send budget
 
   net::io_context io;
   tcp::acceptor acceptor{io};

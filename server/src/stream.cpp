@@ -106,7 +106,29 @@ std::shared_ptr<Stream> Stream::split_off(std::uint64_t id, const Target* target
   return s;
 }
 
+namespace {
+
+// What encode() computes a frame in: used only inside one encode() call, so
+// every stream of a thread shares one set (and it stays in cache) instead of
+// each stream keeping its own (the FK workspace alone is ~23 KB for a CMU
+// skeleton). Grows to the largest content shown.
+struct Scratch {
+  std::vector<Eigen::Vector3d> all_positions;  // double path
+  std::vector<Eigen::Matrix3d> all_orientations;
+  std::vector<double> positions_f64, orientations_f64;
+  std::vector<float> fk_positions, fk_orientations, workspace;  // float path
+  std::vector<float> positions_f32, orientations_f32;
+};
+
+Scratch& scratch() {
+  static thread_local Scratch s;
+  return s;
+}
+
+}  // namespace
+
 std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
+  Scratch& w = scratch();
   const Motion& m = *content_->motion;
   const std::size_t n = m.skeleton.size();
   const int viewer = content_->relative_to;
@@ -125,42 +147,42 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
   if (cm != nullptr && cm->joint_count() == n && frame < cm->frame_count() && viewer < static_cast<int>(n)) {
     // The viewer's orientation is needed even when the client wants none.
     const bool orient = settings_.orientations || viewer >= 0;
-    fk_positions_.resize(n * 3);
-    fk_orientations_.resize(orient ? n * 9 : 0);
-    workspace_.resize(std::max(workspace_.size(), content_->compiled->workspace_floats()));
-    fast::FkFrameJob job{cm, frame, fk_positions_, fk_orientations_, workspace_};
+    w.fk_positions.resize(n * 3);
+    w.fk_orientations.resize(orient ? n * 9 : 0);
+    w.workspace.resize(std::max(w.workspace.size(), content_->compiled->workspace_floats()));
+    fast::FkFrameJob job{cm, frame, w.fk_positions, w.fk_orientations, w.workspace};
     if (job.run()) {
-      positions_f32_.resize(joints.size() * 3);
-      orientations_f32_.resize(settings_.orientations ? joints.size() * 4 : 0);
-      view_frame_float(fk_positions_, fk_orientations_, viewer, joints, positions_f32_, orientations_f32_);
-      c.positions = positions_f32_;
-      c.orientations = orientations_f32_;
+      w.positions_f32.resize(joints.size() * 3);
+      w.orientations_f32.resize(settings_.orientations ? joints.size() * 4 : 0);
+      view_frame_float(w.fk_positions, w.fk_orientations, viewer, joints, w.positions_f32, w.orientations_f32);
+      c.positions = w.positions_f32;
+      c.orientations = w.orientations_f32;
       ++counters_.frames_computed_float;
       done = true;
     }
   }
   if (!done) {
-    all_positions_.resize(n);
-    all_orientations_.resize(settings_.orientations || viewer >= 0 ? n : 0);
-    view_frame(m, viewer, frame, all_positions_, all_orientations_);
-    positions_f64_.clear();
-    orientations_f64_.clear();
+    w.all_positions.resize(n);
+    w.all_orientations.resize(settings_.orientations || viewer >= 0 ? n : 0);
+    view_frame(m, viewer, frame, w.all_positions, w.all_orientations);
+    w.positions_f64.clear();
+    w.orientations_f64.clear();
     for (int j : joints) {
-      const auto& p = all_positions_[static_cast<std::size_t>(j)];
-      positions_f64_.insert(positions_f64_.end(), {p.x(), p.y(), p.z()});
+      const auto& p = w.all_positions[static_cast<std::size_t>(j)];
+      w.positions_f64.insert(w.positions_f64.end(), {p.x(), p.y(), p.z()});
       if (settings_.orientations) {
-        const Eigen::Quaterniond q(all_orientations_[static_cast<std::size_t>(j)]);
-        orientations_f64_.insert(orientations_f64_.end(), {q.x(), q.y(), q.z(), q.w()});
+        const Eigen::Quaterniond q(w.all_orientations[static_cast<std::size_t>(j)]);
+        w.orientations_f64.insert(w.orientations_f64.end(), {q.x(), q.y(), q.z(), q.w()});
       }
     }
     if (settings_.float64) {
-      c.positions_f64 = positions_f64_;
-      c.orientations_f64 = orientations_f64_;
+      c.positions_f64 = w.positions_f64;
+      c.orientations_f64 = w.orientations_f64;
     } else {  // a float32 stream whose motion did not compile: rounded once here
-      positions_f32_.assign(positions_f64_.begin(), positions_f64_.end());
-      orientations_f32_.assign(orientations_f64_.begin(), orientations_f64_.end());
-      c.positions = positions_f32_;
-      c.orientations = orientations_f32_;
+      w.positions_f32.assign(w.positions_f64.begin(), w.positions_f64.end());
+      w.orientations_f32.assign(w.orientations_f64.begin(), w.orientations_f64.end());
+      c.positions = w.positions_f32;
+      c.orientations = w.orientations_f32;
     }
   }
   ++counters_.frames_computed;
@@ -215,7 +237,13 @@ void Stream::on_tick() {
       if (anyone) {
         last_frame_ = static_cast<std::int64_t>(frame);
         const auto body = encode(frame);
-        for (std::size_t i = 0; i < targets.size(); ++i) {
+        // The fan-out starts one target further each tick: waiting behind
+        // the others' sends is shared by all of a shared stream's
+        // subscribers rather than always borne by the last ones.
+        const std::size_t n = targets.size();
+        const std::size_t first = fan_out_start_++ % n;
+        for (std::size_t k = 0; k < n; ++k) {
+          const std::size_t i = first + k < n ? first + k : first + k - n;
           if (ready[i]) {
             targets[i].target->deliver(id_, body);
           } else if (targets[i].target->alive()) {

@@ -135,12 +135,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   std::int64_t last_frame_ = -1;
   std::uint64_t sequence_ = 0;
 
-  // Per-tick buffers, reused (they grow to the largest content shown).
-  std::vector<Eigen::Vector3d> all_positions_;   // double path
-  std::vector<Eigen::Matrix3d> all_orientations_;
-  std::vector<double> positions_f64_, orientations_f64_;
-  std::vector<float> fk_positions_, fk_orientations_, workspace_;  // float path
-  std::vector<float> positions_f32_, orientations_f32_;
+  std::uint32_t fan_out_start_ = 0;  // rotates: each tick the fan-out starts one target further
   std::vector<char> ready_;  // per target, this tick: alive and not congested
 };
 

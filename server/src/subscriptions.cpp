@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "gmr/wire/framing.h"
 #include "request_handler.h"
@@ -73,6 +74,19 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   const std::vector<std::string> names(r.joints().begin(), r.joints().end());
   auto joints = resolve_joints(*v, names);
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
+  // Admission: the rates all subscribers asked for stay within what the
+  // server can send (docs/protocol.md, "Admission").
+  const auto rate_mhz = static_cast<std::uint64_t>(std::llround(s.rate * 1000.0));
+  if (cfg.send_budget > 0 && static_cast<double>(server_.committed_mhz + rate_mhz) > cfg.send_budget * 1000.0) {
+    ++server_.subscriptions_refused;
+    char text[320];
+    std::snprintf(text, sizeof text,
+                  "the server's subscriptions already ask for %.0f of the %.0f frames/s it can send "
+                  "(--send-budget); %.1f Hz more would pass it: subscribe at a lower rate, or connect to "
+                  "another replica",
+                  static_cast<double>(server_.committed_mhz) / 1000.0, cfg.send_budget, s.rate);
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, text};
+  }
   settings.joints = std::move(joints).value();
   settings.orientations = r.orientations();
   settings.float64 = r.precision() == pb::PRECISION_FLOAT64;
@@ -93,7 +107,8 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
     target = std::make_shared<TcpTarget>(weak_from_this(), connection_, id, v->id());
   }
   stream->add(target, r.max_frames());
-  subs_[id] = Subscription{v->id(), stream, target, names};
+  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz};
+  server_.committed_mhz += rate_mhz;
   if (!joined) stream->start();
 
   pb::ServerMessage out;
@@ -160,6 +175,7 @@ void RequestHandler::drop_subscription(std::uint32_t id) {
   s.stream->remove(s.target.get());
   if (s.stream->idle()) s.stream->stop();
   if (auto c = connection_.lock()) c->discard_frames(id);
+  server_.committed_mhz -= s.rate_mhz;
   subs_.erase(it);
 }
 
@@ -196,6 +212,7 @@ void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, co
   // The frames still waiting go out before the end notice.
   if (auto c = connection_.lock()) c->send_frames_now(id);
   s.stream->remove(s.target.get());
+  server_.committed_mhz -= s.rate_mhz;
   subs_.erase(it);
   send(m);
 }

@@ -40,9 +40,21 @@ std::vector<server::LibraryEntry> test_library() {
   return lib;
 }
 
+namespace {
+// The tests overload the server on purpose: no send budget unless a test
+// sets one of its own.
+server::ServerConfig test_config(server::ServerConfig cfg) {
+  cfg.port = 0;
+  cfg.udp_port = 0;
+  cfg.bind_address = "127.0.0.1";
+  cfg.max_catch_up = std::chrono::hours(1);
+  if (cfg.send_budget == server::ServerConfig{}.send_budget) cfg.send_budget = 0;
+  return cfg;
+}
+}  // namespace
+
 TestServer::TestServer(server::ServerConfig cfg, std::vector<server::LibraryEntry> library)
-    : server((cfg.port = 0, cfg.udp_port = 0, cfg.bind_address = "127.0.0.1", cfg.max_catch_up = std::chrono::hours(1), cfg),
-             std::move(library)) {
+    : server(test_config(std::move(cfg)), std::move(library)) {
   // Warnings and errors only: the tests provoke many closed connections.
   spdlog::set_level(spdlog::level::warn);
   server.start();

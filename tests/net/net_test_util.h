@@ -36,7 +36,8 @@ inline constexpr bool kSlowBuild = false;
 #endif
 
 // A server started on a free loopback port (TCP and UDP). Streams never skip
-// frames to catch up (max_catch_up is an hour).
+// frames to catch up (max_catch_up is an hour), and there is no send budget
+// unless the test's configuration sets one other than the default.
 struct TestServer {
   explicit TestServer(server::ServerConfig cfg = {}, std::vector<server::LibraryEntry> library = test_library());
   server::Server server;

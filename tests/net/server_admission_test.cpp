@@ -9,7 +9,10 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <thread>
+
 #include "gmr/wire/framing.h"
+
 #include "net_test_util.h"
 
 namespace gmr::test {
@@ -112,6 +115,55 @@ TEST(Admission, OneAddressCannotTakeEverySlot) {
   EXPECT_EQ(s.server.stats().connections_refused, 1u);
   ::close(ninth);
   for (int fd : eight) ::close(fd);
+}
+
+// The send budget: subscriptions' rates add up across connections, shared
+// streams or not; the one that would pass the budget is refused with the
+// figures; what ends, is closed or disconnects gives its rate back.
+TEST(Admission, SubscriptionsPastTheSendBudgetAreRefused) {
+  server::ServerConfig cfg;
+  cfg.send_budget = 1000;
+  TestServer s(cfg);
+  auto a = s.connect();
+  auto b = s.connect();
+  ASSERT_TRUE(a && b);
+  auto va = a->create_view("walk");
+  auto vb = b->create_view("walk");
+  ASSERT_TRUE(va.ok() && vb.ok());
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 300;
+  std::vector<std::uint32_t> subs;
+  for (auto* c : {a.get(), a.get(), b.get()}) {
+    auto sub = c->subscribe(c == a.get() ? va->id : vb->id, o, [](const client::ReceivedFrame&) {});
+    ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+    subs.push_back(sub->id);
+  }
+  o.shared = true;  // sharing a stream saves computing, not sending: it counts the same
+  auto refused = b->subscribe(vb->id, o, [](const client::ReceivedFrame&) {});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("RESOURCE_EXHAUSTED: the server's subscriptions already ask for 900 of "
+                                         "the 1000 frames/s it can send"),
+            std::string::npos)
+      << refused.error().message;
+  o.rate_hz = 100;  // exactly the budget
+  auto fits = b->subscribe(vb->id, o, [](const client::ReceivedFrame&) {});
+  ASSERT_TRUE(fits.ok()) << fits.error().to_string();
+  auto st = s.server.stats();
+  EXPECT_EQ(st.committed_frames_per_second, 1000.0);
+  EXPECT_EQ(st.subscriptions_refused, 1u);
+  // Unsubscribing gives 300 back: a 300 Hz subscription fits again.
+  ASSERT_TRUE(a->unsubscribe(subs[0]).ok());
+  o.rate_hz = 300;
+  ASSERT_TRUE(a->subscribe(va->id, o, [](const client::ReceivedFrame&) {}).ok());
+  // Closing a view ends its subscriptions; a disconnect ends the rest.
+  ASSERT_TRUE(b->close_view(vb->id).ok());
+  EXPECT_EQ(s.server.stats().committed_frames_per_second, 600.0);
+  a->close();
+  for (int i = 0; i < 200 && s.server.stats().committed_frames_per_second != 0.0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(s.server.stats().committed_frames_per_second, 0.0);
 }
 
 }  // namespace

@@ -273,6 +273,7 @@ TEST(Streaming, TicksALateServerSkipsAreGapsAndAreCounted) {
   cfg.port = 0;
   cfg.udp_port = 0;
   cfg.max_catch_up = std::chrono::milliseconds(0);  // skip as soon as a tick is a period late
+  cfg.send_budget = 15000;  // room for the 10 kHz stream, not for a second one
   server::Server srv(cfg, test_library());
   srv.start();
   client::ClientOptions co;
@@ -293,6 +294,13 @@ TEST(Streaming, TicksALateServerSkipsAreGapsAndAreCounted) {
   ASSERT_TRUE(other.ok());
   auto ov = (*other)->create_view("walk");
   ASSERT_TRUE(ov.ok());
+  // Admission: a second 10 kHz subscription would pass the send budget.
+  client::SubscribeOptions more = o;
+  more.max_frames = 1;
+  auto refused = (*other)->subscribe(ov->id, more, [](const ReceivedFrame&) {});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("RESOURCE_EXHAUSTED"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("10000 of the 15000 frames/s"), std::string::npos) << refused.error().message;
   const auto all = static_cast<std::uint32_t>(std::min<std::uint64_t>(ov->frame_count, 1000));
   for (int i = 0; i < 1000 && !sink.ended.wait(std::chrono::milliseconds(0)); ++i) {
     ASSERT_TRUE((*other)->query(ov->id, 0, all, true).ok());
@@ -318,6 +326,9 @@ TEST(Streaming, TicksALateServerSkipsAreGapsAndAreCounted) {
   auto st = (*other)->stats();
   ASSERT_TRUE(st.ok());
   EXPECT_GE(st->frames_skipped_total, end->frames_skipped);
+  EXPECT_EQ(st->subscriptions_refused, 1u);
+  EXPECT_EQ(st->send_budget, 15000.0);
+  EXPECT_EQ(st->committed_frames_per_second, 0.0) << "the ended subscription gave its rate back";
   srv.stop();
 }
 

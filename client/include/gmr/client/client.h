@@ -158,6 +158,9 @@ struct ServerCounters {
   std::uint64_t frames_skipped_total = 0;  // all streams
   std::uint64_t queued_bytes = 0;
   std::uint64_t max_queued_bytes = 0;
+  double committed_frames_per_second = 0;  // all subscriptions' rates together
+  double send_budget = 0;                  // what the server admits (0: no limit)
+  std::uint64_t subscriptions_refused = 0; // for the send budget
 };
 
 using FrameCallback = std::function<void(const ReceivedFrame&)>;

@@ -73,6 +73,14 @@ struct ServerConfig {
   // grow to net.ipv4.tcp_wmem's maximum, 4 MiB). 0 keeps the system's
   // autotuning. Tests shrink it so a client that never reads fills it quickly.
   int socket_send_buffer = 256 * 1024;
+  // Admission against what the server can send (docs/protocol.md,
+  // "Admission"): the frames per second all subscriptions together may ask
+  // for (each subscriber's rate counts, shared stream or not). A
+  // subscription that would pass it is refused with RESOURCE_EXHAUSTED.
+  // 0: no limit (load tests that mean to overload). The default is what one
+  // I/O thread held at p99 <= 2 ms on the reference 2-core machine
+  // (docs/performance.md); measure yours with gmr-load.
+  double send_budget = 30000;
   // How far a stream may fall behind its schedule (a stalled server) and
   // still catch up frame by frame; beyond it playback jumps to the frame due
   // now. Tests raise it so that a slow (sanitizer) build still sends every frame.
