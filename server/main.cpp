@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdio>
 #include <exception>
+#include <functional>
 
 #include "gmr/core/file_util.h"
 #include "gmr/server/library.h"
@@ -164,11 +165,33 @@ int main(int argc, char** argv) {
       }
     }
     // The main thread waits for a signal; the server runs on its own thread.
+    // SIGHUP reads the auth file again (a file that does not parse leaves
+    // the tokens in use as they are).
     boost::asio::io_context signals_io;
-    boost::asio::signal_set signals(signals_io, SIGINT, SIGTERM);
-    signals.async_wait([&](const boost::system::error_code& ec, int sig) {
-      if (!ec) spdlog::info("signal {}: stopping", sig);
-    });
+    boost::asio::signal_set signals(signals_io, SIGINT, SIGTERM, SIGHUP);
+    std::function<void(const boost::system::error_code&, int)> on_signal = [&](const boost::system::error_code& ec,
+                                                                                 int sig) {
+      if (ec) return;
+      if (sig != SIGHUP) {
+        spdlog::info("signal {}: stopping", sig);
+        return;
+      }
+      if (auth_file.empty()) {
+        spdlog::info("SIGHUP: no --auth-file to read again");
+      } else {
+        std::string warning;
+        auto credentials = Credentials::load(auth_file, &warning);
+        if (!credentials.ok()) {
+          spdlog::error("SIGHUP: the tokens in use stay: {}", credentials.error().to_string());
+        } else {
+          if (!warning.empty()) spdlog::warn("{}", warning);
+          spdlog::info("SIGHUP: {} tokens read from {}", credentials->size(), auth_file);
+          server.set_credentials(std::make_shared<const Credentials>(std::move(credentials).value()));
+        }
+      }
+      signals.async_wait(on_signal);
+    };
+    signals.async_wait(on_signal);
     signals_io.run();
     server.stop();
     spdlog::info("stopped");

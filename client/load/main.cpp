@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -130,6 +131,7 @@ int main(int argc, char** argv) {
 
   std::vector<std::int64_t> all;
   std::uint64_t frames = 0, gaps = 0, server_dropped = 0, server_sent = 0, server_skipped = 0;
+  std::string stats_refused;  // why the server's own figures are missing (a 'read' token)
   for (auto& r : runs) {
     {
       std::lock_guard lock(r->mutex);
@@ -141,6 +143,8 @@ int main(int argc, char** argv) {
       server_dropped += st->frames_dropped;
       server_skipped += st->frames_skipped;
       server_sent += st->frames_sent;
+    } else if (stats_refused.empty()) {
+      stats_refused = st.error().message;
     }
     (void)r->client->unsubscribe(r->subscription);
   }
@@ -150,6 +154,9 @@ int main(int argc, char** argv) {
       computed = st->frames_computed;
       encoded = st->frames_encoded;
     }
+  }
+  if (!stats_refused.empty()) {
+    std::printf("gmr-load: the server's figures below are missing: %s\n", stats_refused.c_str());
   }
   const double max_ms = all.empty() ? 0.0 : static_cast<double>(*std::max_element(all.begin(), all.end())) / 1e6;
   std::printf("gmr-load: %d clients, motion %s, %s, %.1f Hz each, %s stream%s, %.1f s measured\n", clients,

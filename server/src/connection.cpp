@@ -21,6 +21,7 @@ Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id
                        BufferBudget* budget, net::ssl::context* tls)
     : socket_(std::move(socket)), id_(id), limits_(limits), budget_(budget), watchdog_(io) {
   if (tls != nullptr) socket_.use_tls(*tls);
+  secured_ = tls == nullptr;
   boost::system::error_code ec;
   auto ep = socket_.tcp().remote_endpoint(ec);
   peer_address_ = ec ? std::string("?") : ep.address().to_string();
@@ -67,6 +68,7 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
                                            self->stop("TLS handshake failed: " + e.message());
                                            return;
                                          }
+                                         self->secured_ = true;
                                          self->last_read_ = Clock::now();
                                          self->read_prefix();
                                        });
@@ -296,7 +298,8 @@ void Connection::arm_watchdog() {
       self->read_paused_ = false;
       self->read_prefix();
     }
-    if (!self->writing_ && now - self->last_write_ > lim.heartbeat_interval) {
+    // (Nothing is written into a TLS stream before its handshake.)
+    if (self->secured_ && !self->writing_ && now - self->last_write_ > lim.heartbeat_interval) {
       pb::ServerMessage hb;
       hb.mutable_heartbeat()->set_client_time_ns(0);
       self->send(wire::frame_message(hb).value());

@@ -278,6 +278,25 @@ void Server::wait() {
   if (d.thread.joinable()) d.thread.join();
 }
 
+void Server::set_credentials(std::shared_ptr<const Credentials> credentials) {
+  auto& d = *impl_;
+  if (!d.started || d.stopped_future.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+    d.cfg.credentials = std::move(credentials);
+    return;
+  }
+  auto done = std::make_shared<std::promise<void>>();
+  auto f = done->get_future();
+  net::post(d.io, [done, impl = impl_.get(), c = std::move(credentials)]() mutable {
+    impl->cfg.credentials = std::move(c);
+    done->set_value();
+  });
+  // The loop may end before it runs the handler (a stop under way): then
+  // nobody says Hello any more.
+  while (f.wait_for(std::chrono::milliseconds(50)) != std::future_status::ready) {
+    if (d.stopped_future.wait_for(std::chrono::seconds(0)) == std::future_status::ready) return;
+  }
+}
+
 ServerStats Server::stats(std::chrono::milliseconds timeout) const {
   auto& d = *impl_;
   if (!d.started || d.stopped_future.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {

@@ -7,6 +7,7 @@ auth file, reached by the real gmr command.
 """
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -89,12 +90,28 @@ def check_real_server(entrypoint, bin_dir, work):
         assert ok.returncode == 0 and "walk" in ok.stdout, ok.stdout + ok.stderr
         refused = subprocess.run([gmr, "ls", "--port", port], capture_output=True, text=True, timeout=30)
         assert refused.returncode == 1 and "UNAUTHENTICATED" in refused.stderr, refused.stdout + refused.stderr
+        # A new token, read again on SIGHUP: the old one stops working, the new one works.
+        with open(auth, "w") as f:
+            f.write("control fedcba9876543210fedc\n")
+        server.send_signal(signal.SIGHUP)
+        deadline = time.time() + 20
+        while True:
+            new = subprocess.run([gmr, "ls", "--port", port, "--token", "fedcba9876543210fedc"],
+                                 capture_output=True, text=True, timeout=30)
+            if new.returncode == 0:
+                break
+            assert time.time() < deadline, new.stderr
+            time.sleep(0.1)
+        old = subprocess.run([gmr, "ls", "--port", port, "--token", "0123456789abcdef0123"],
+                             capture_output=True, text=True, timeout=30)
+        assert old.returncode == 1 and "UNAUTHENTICATED" in old.stderr, old.stdout + old.stderr
     finally:
         server.terminate()
         log = server.communicate(timeout=20)[0]
     assert server.returncode == 0, log
     assert "1 tokens, anonymous clients none" in log, log
-    print("real gmr-server through the entrypoint: token accepted, anonymous refused")
+    assert "SIGHUP: 1 tokens read from" in log, log
+    print("real gmr-server through the entrypoint: token accepted, anonymous refused, tokens rotated on SIGHUP")
 
 
 def main():

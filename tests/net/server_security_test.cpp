@@ -7,10 +7,15 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <array>
+#include <boost/asio.hpp>
+#include <boost/asio/ssl.hpp>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 #include "gmr/server/auth.h"
+#include "gmr/wire/framing.h"
 #include "net_test_util.h"
 #include "test_data.h"
 
@@ -181,6 +186,34 @@ TEST(Auth, UnknownTokensAndMissingOnesAreRefusedAtHello) {
   EXPECT_EQ((*ok)->hello().role, client::Role::kRead);
 }
 
+// Tokens rotate without a restart (gmr-server reads its auth file again on
+// SIGHUP): the next Hello is checked against the new ones, connections
+// already in keep the role they had.
+TEST(Auth, NewCredentialsApplyToTheNextHello) {
+  server::ServerConfig cfg;
+  cfg.credentials = credentials();
+  cfg.anonymous = server::Role::kNone;
+  TestServer s(cfg);
+  client::ClientOptions o;
+  o.host = "127.0.0.1";
+  o.port = s.port();
+  o.auth_token = kControlToken;
+  auto before = client::Client::connect(o);
+  ASSERT_TRUE(before.ok()) << before.error().to_string();
+
+  auto rotated = server::Credentials::parse("read 0f1e2d3c4b5a69788796a5b4\n", "auth");
+  ASSERT_TRUE(rotated.ok());
+  s.server.set_credentials(std::make_shared<const server::Credentials>(std::move(rotated).value()));
+  auto old_token = client::Client::connect(o);
+  ASSERT_FALSE(old_token.ok());
+  EXPECT_NE(old_token.error().message.find("UNAUTHENTICATED"), std::string::npos) << old_token.error().message;
+  o.auth_token = "0f1e2d3c4b5a69788796a5b4";
+  auto new_token = client::Client::connect(o);
+  ASSERT_TRUE(new_token.ok()) << new_token.error().to_string();
+  EXPECT_EQ((*new_token)->hello().role, client::Role::kRead);
+  EXPECT_TRUE((*before)->stats().ok()) << "a connection keeps the role it said Hello with";
+}
+
 TEST(Auth, WithoutAnAuthFileEveryClientMayDoEverything) {
   TestServer s;
   client::ClientOptions o;
@@ -317,6 +350,44 @@ TEST(Tls, TokensTravelOverTls) {
   ASSERT_TRUE(c.ok()) << c.error().to_string();
   EXPECT_EQ((*c)->hello().role, client::Role::kControl);
   expect_role(**c, true);
+}
+
+// A client slow to start its handshake: the server's heartbeat timer fires
+// meanwhile, and must not write into the TLS stream before the handshake.
+TEST(Tls, NothingIsWrittenBeforeTheHandshake) {
+  const auto cert = self_signed("IP:127.0.0.1");
+  server::ServerConfig cfg = tls_config(*cert);
+  cfg.heartbeat_interval = std::chrono::milliseconds(50);
+  cfg.handshake_timeout = std::chrono::seconds(5);
+  TestServer s(cfg);
+  namespace net = boost::asio;
+  net::io_context io;
+  net::ssl::context ctx(net::ssl::context::tls_client);
+  ctx.load_verify_file(cert->cert.string());
+  ctx.set_verify_mode(net::ssl::verify_peer);
+  net::ssl::stream<net::ip::tcp::socket> stream(io, ctx);
+  stream.next_layer().connect({net::ip::make_address("127.0.0.1"), s.port()});
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // eight heartbeat periods
+  boost::system::error_code ec;
+  stream.handshake(net::ssl::stream_base::client, ec);
+  ASSERT_FALSE(ec) << ec.message();
+  pb::ClientMessage hello = request(1);
+  hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+  net::write(stream, net::buffer(wire::frame_message(hello).value()), ec);
+  ASSERT_FALSE(ec) << ec.message();
+  // Replies and heartbeats until the HelloReply.
+  for (int i = 0; i < 100; ++i) {
+    std::array<std::uint8_t, 4> prefix{};
+    net::read(stream, net::buffer(prefix), ec);
+    ASSERT_FALSE(ec) << ec.message();
+    std::string body(wire::read_length_prefix(prefix), '\0');
+    net::read(stream, net::buffer(body), ec);
+    ASSERT_FALSE(ec) << ec.message();
+    pb::ServerMessage m;
+    ASSERT_TRUE(m.ParseFromString(body));
+    if (m.has_hello()) return;
+  }
+  ADD_FAILURE() << "no HelloReply";
 }
 
 TEST(Tls, ABadCertificateOrKeyStopsTheServerFromStarting) {

@@ -70,6 +70,12 @@ class Server {
   // Blocks until the server has stopped.
   void wait();
 
+  // New tokens (an auth file read again: gmr-server does it on SIGHUP).
+  // Connections already past Hello keep their role; the next Hello is
+  // checked against these. Null: no tokens, every client anonymous. Call
+  // from any thread but the I/O thread; returns once the server uses them.
+  void set_credentials(std::shared_ptr<const Credentials> credentials);
+
   // A snapshot taken on the I/O thread, waiting at most `timeout` for it
   // (then, or after stop(), what can be read without it: empty counters).
   ServerStats stats(std::chrono::milliseconds timeout = std::chrono::seconds(5)) const;
