@@ -101,8 +101,6 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   void send_frames_now(std::uint32_t key) override;
   void close_after_reply() override;
   void established() override { established_ = true; }
-  bool is_established() const { return established_; }
-  Clock::time_point started() const { return started_; }
   const std::string& peer_address() const { return peer_address_; }
   void count_frame_sent() override { ++counters_.frames_sent; }
   void count_frame_dropped(std::uint64_t n = 1) override { counters_.frames_dropped += n; }

@@ -183,6 +183,7 @@ Reply RequestHandler::hello(const pb::Hello& h) {
   role_ = role;
   handshaked_ = true;
   if (auto c = connection_.lock()) c->established();
+  server_.pending_hello.erase(connection_id_);
   spdlog::info("conn {}: hello from {} ({})", connection_id_, printable(h.client_name()), role_name(role_));
   pb::ServerMessage out;
   auto* r = out.mutable_hello();

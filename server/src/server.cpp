@@ -44,6 +44,7 @@ void Server::Impl::connection_closed(std::uint64_t id) {
   if (it == connections.end()) return;
   if (auto n = per_address.find(it->second.address); n != per_address.end() && --n->second == 0) per_address.erase(n);
   connections.erase(it);
+  pending_hello.erase(id);
   if (stopping && connections.empty() && grace_timer) grace_timer->cancel();
 }
 
@@ -67,6 +68,7 @@ void Server::Impl::accept_loop() {
         auto handler = std::make_shared<RequestHandler>(*this, c);
         handler->start();
         connections[id] = ConnectionEntry{c, handler, address};
+        pending_hello[id] = c;
         ++per_address[address];
         c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
       }
@@ -85,15 +87,11 @@ std::string Server::Impl::admit(const std::string& address) {
   }
   // Connections still waiting for their Hello: past the cap, the oldest of
   // them gives way (it had its chance; a real client says Hello at once).
-  std::size_t pending = 0;
-  std::shared_ptr<Connection> oldest;
-  for (auto& [id, e] : connections) {
-    auto c = e.connection.lock();
-    if (!c || c->is_established() || c->stopped()) continue;
-    ++pending;
-    if (!oldest || c->started() < oldest->started()) oldest = c;
+  while (!pending_hello.empty() && pending_hello.size() >= cfg.max_pending_handshakes) {
+    const std::weak_ptr<Connection> oldest = pending_hello.begin()->second;
+    pending_hello.erase(pending_hello.begin());  // before stop(), whose connection_closed erases by id
+    if (auto c = oldest.lock(); c && !c->stopped()) c->stop("made room for a new connection: no Hello yet");
   }
-  if (pending >= cfg.max_pending_handshakes && oldest) oldest->stop("made room for a new connection: no Hello yet");
   if (connections.size() >= cfg.max_connections) {
     return "the server's limit of " + std::to_string(cfg.max_connections) + " connections (--max-connections)";
   }

@@ -69,6 +69,9 @@ struct Server::Impl {
   };
   std::map<std::uint64_t, ConnectionEntry> connections;
   std::map<std::string, std::size_t> per_address;  // open connections by IP address
+  // Connections waiting for their Hello, by id: ids grow, so the first is
+  // the oldest (admit() pushes it out past max_pending_handshakes).
+  std::map<std::uint64_t, std::weak_ptr<Connection>> pending_hello;
   std::uint64_t connections_refused = 0;
   LogLimiter refusal_log{5, std::chrono::seconds(10)};
   // Hello refused for its token (or for having none).
