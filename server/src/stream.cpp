@@ -282,13 +282,16 @@ void Stream::on_tick() {
     if (jumped > 0 && !finished) {
       sequence_ += jumped;
       for (auto& e : targets_) {
+        // A target whose max_frames this tick reached has ended: the ticks
+        // after it are not its. Another counts those up to its max_frames.
+        if (e.max_frames != 0 && e.sent >= e.max_frames) continue;
+        const std::uint64_t n = e.max_frames == 0 ? jumped : std::min(jumped, e.max_frames - e.sent);
         if (e.target->alive()) {
-          e.target->late(jumped);
-          counters_.frames_skipped += jumped;
+          e.target->late(n);
+          counters_.frames_skipped += n;
         }
-        const bool was_done = e.max_frames != 0 && e.sent >= e.max_frames;
-        e.sent += jumped;
-        if (!was_done && e.max_frames != 0 && e.sent >= e.max_frames) ended.emplace_back(e.target, e.sent);
+        e.sent += n;
+        if (e.max_frames != 0 && e.sent >= e.max_frames) ended.emplace_back(e.target, e.sent);
       }
     }
   }
