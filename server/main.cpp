@@ -120,15 +120,21 @@ int main(int argc, char** argv) {
   cfg.write_timeout = std::chrono::milliseconds(write_ms);
   cfg.handshake_timeout = std::chrono::milliseconds(handshake_ms);
 
-  if (!auth_file.empty()) {
+  // The auth file, at start and on SIGHUP; a readable-by-others warning is logged.
+  auto read_credentials = [&auth_file]() -> gmr::Result<std::shared_ptr<const Credentials>> {
     std::string warning;
     auto credentials = Credentials::load(auth_file, &warning);
+    if (!credentials.ok()) return credentials.error();
+    if (!warning.empty()) spdlog::warn("{}", warning);
+    return std::make_shared<const Credentials>(std::move(credentials).value());
+  };
+  if (!auth_file.empty()) {
+    auto credentials = read_credentials();
     if (!credentials.ok()) {
       std::fprintf(stderr, "gmr-server: %s\n", credentials.error().to_string().c_str());
       return 1;
     }
-    if (!warning.empty()) spdlog::warn("{}", warning);
-    cfg.credentials = std::make_shared<const Credentials>(std::move(credentials).value());
+    cfg.credentials = std::move(credentials).value();
     cfg.anonymous = Role::kRead;
   }
   if (!anonymous.empty()) cfg.anonymous = parse_role(anonymous).value();
@@ -179,14 +185,12 @@ int main(int argc, char** argv) {
       if (auth_file.empty()) {
         spdlog::info("SIGHUP: no --auth-file to read again");
       } else {
-        std::string warning;
-        auto credentials = Credentials::load(auth_file, &warning);
+        auto credentials = read_credentials();
         if (!credentials.ok()) {
           spdlog::error("SIGHUP: the tokens in use stay: {}", credentials.error().to_string());
         } else {
-          if (!warning.empty()) spdlog::warn("{}", warning);
-          spdlog::info("SIGHUP: {} tokens read from {}", credentials->size(), auth_file);
-          server.set_credentials(std::make_shared<const Credentials>(std::move(credentials).value()));
+          spdlog::info("SIGHUP: {} tokens read from {}", (*credentials)->size(), auth_file);
+          server.set_credentials(std::move(credentials).value());
         }
       }
       signals.async_wait(on_signal);
