@@ -18,14 +18,35 @@ packages=(
   gnuplot-nox               # the Figure 4 plot (gmr-bench figure4)
   python3                   # the layout check (tests/layout/check_layout.py)
   clang libclang-rt-14-dev  # the sanitizer build uses clang (gmr builds with GCC and clang)
+  blender                   # the interop test: Blender's own BVH importer reads what gmr writes
+  nodejs npm                # the interop test: three.js's BVHLoader (npm, tests/interop/package.json)
 )
 
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
 done
+# Debian's nodejs and npm, unless a node is already there (node from another
+# source ships its own npm, which Debian's npm package would conflict with).
+if command -v node >/dev/null && command -v npm >/dev/null; then
+  kept=()
+  for p in "${missing[@]}"; do [ "$p" = nodejs ] || [ "$p" = npm ] || kept+=("$p"); done
+  missing=("${kept[@]}")
+fi
+
+# The npm packages of the JS-side tests, pinned by tests/interop/package-lock.json.
+npm_packages() {
+  local dir
+  dir="$(cd "$(dirname "$0")/.." && pwd)/tests/interop"
+  if [ ! -f "$dir/node_modules/three/package.json" ]; then
+    echo "install-deps: npm ci in tests/interop"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+  fi
+}
+
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#packages[@]} packages present"
+  npm_packages
   exit 0
 fi
 
@@ -38,3 +59,4 @@ echo "install-deps: installing ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
 $sudo apt-get update -qq
 $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+npm_packages

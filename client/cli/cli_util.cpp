@@ -30,10 +30,15 @@ FrameRange parse_frame_range(std::string_view text) {
 }
 
 FrameRange clamp_frame_range(FrameRange r, std::size_t frame_count) {
-  if (r.end > frame_count) r.end = frame_count;
-  if (r.begin > r.end)
-    throw CommandError("frame " + std::to_string(r.begin) + " is past the last frame (" +
-                       std::to_string(frame_count) + " frames)");
+  // The rule of the protocol's QueryFrames: begin < end <= frame_count. An
+  // open end means the last frame; ':' on a motion with no frames is empty.
+  const bool open_end = r.end == static_cast<std::size_t>(-1);
+  if (open_end) r.end = frame_count;
+  if (open_end && r.begin == 0 && frame_count == 0) return r;
+  if (!(r.begin < r.end && r.end <= frame_count)) {
+    throw CommandError("frames [" + std::to_string(r.begin) + ", " + (open_end ? "end" : std::to_string(r.end)) +
+                       ") are not within the motion's " + std::to_string(frame_count) + " frames");
+  }
   return r;
 }
 

@@ -37,8 +37,9 @@ struct FrameRange {
 };
 // Parses "A:B"; throws CommandError on anything else. Clamps nothing.
 FrameRange parse_frame_range(std::string_view text);
-// Clamps to [0, frame_count) and throws CommandError when begin > end or begin
-// is past the last frame of a non-empty motion.
+// The frames of `r` in a motion of frame_count frames: an open end becomes
+// frame_count; a range that is empty or reaches past the last frame throws
+// CommandError, as the protocol refuses it (QueryFrames). Nothing is clamped.
 FrameRange clamp_frame_range(FrameRange r, std::size_t frame_count);
 
 // Prints a reader's warnings on stderr, one "gmr: warning: ..." line each

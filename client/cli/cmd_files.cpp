@@ -97,6 +97,7 @@ struct ConvertOptions {
   std::string out;
   std::string asf;
   bool force = false;  // .amc output: replace an .asf beside it that holds another skeleton
+  bool single_root = false;  // .bvh output: a forest as one ROOT
 };
 
 void run_convert(const ConvertOptions& o) {
@@ -105,6 +106,7 @@ void run_convert(const ConvertOptions& o) {
   const Motion m = load(o.in, o.asf, warnings);
   LoadOptions save;
   save.replace_asf = o.force;
+  save.bvh_single_root = o.single_root;
   check(save_motion(m, o.out, save));
   print_warnings(warnings);
 }
@@ -171,6 +173,7 @@ void add_file_commands(CLI::App& app) {
     cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr); .trc for marker input")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc input (default: the single .asf beside it)");
     cmd->add_flag("--force", o->force, "For .amc output: replace an existing .asf that holds another skeleton");
+    add_single_root_flag(*cmd, o->single_root);
     cmd->callback([o] { run_convert(*o); });
   }
   {

@@ -32,6 +32,7 @@ struct OpOptions {
   std::string out;
   std::string asf;
   std::string joints;  // --set / --to / --at / --root
+  bool single_root = false;  // .bvh output: a forest as one ROOT
 };
 
 // Loads FILE as a pre-rotation motion.
@@ -44,6 +45,7 @@ Motion load_pre(const OpOptions& o, Warnings& warnings) {
 
 void save(const Motion& m, const OpOptions& o) {
   LoadOptions options;
+  options.bvh_single_root = o.single_root;
   check(save_motion(m, o.out, options));
 }
 
@@ -123,6 +125,7 @@ CLI::App* add_op(CLI::App& app, const char* name, const char* help, const std::s
   cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
   cmd->add_option("-o,--output", o->out, "Output file (.gmr, .bvh); written atomically")->required();
   cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+  add_single_root_flag(*cmd, o->single_root);
   return cmd;
 }
 

@@ -11,4 +11,12 @@ void add_net_commands(CLI::App& app);    // ls, skeleton, query, stream (cmd_net
 void add_demo_commands(CLI::App& app);   // demo: write the built-in library (cmd_demo.cpp)
 void add_marker_commands(CLI::App& app); // markers: CSV of a .c3d/.trc   (cmd_markers.cpp)
 
+// --single-root of the commands that write motions: a forest saved as .bvh
+// gets one ROOT (gmr::BvhExportOptions::single_root), for readers that take
+// only one tree.
+inline void add_single_root_flag(CLI::App& cmd, bool& flag) {
+  cmd.add_flag("--single-root", flag,
+               ".bvh output: write a forest as one ROOT (a gmr_world joint at the origin) for readers that take one");
+}
+
 }  // namespace gmr::cli

@@ -186,7 +186,18 @@ TEST_F(CliFiles, BadArgumentsFailWithOneLine) {
   EXPECT_THAT(range.err, HasSubstr("expected A:B"));
   const Outcome past = gmr("positions " + src + " --frames 400:");
   EXPECT_EQ(past.status, 1);
-  EXPECT_THAT(past.err, HasSubstr("past the last frame"));
+  EXPECT_THAT(past.err, HasSubstr("frames [400, end) are not within the motion's 344 frames"));
+  // One rule with the protocol's QueryFrames: a range that reaches past the
+  // last frame, or holds none, is refused, never clamped.
+  const Outcome over = gmr("positions " + src + " --frames 300:400");
+  EXPECT_EQ(over.status, 1);
+  EXPECT_EQ(lines(over.err), 1u);
+  EXPECT_THAT(over.err, HasSubstr("frames [300, 400) are not within the motion's 344 frames"));
+  EXPECT_TRUE(over.out.empty());
+  EXPECT_EQ(gmr("positions " + src + " --frames 5:5").status, 1);
+  const Outcome last = gmr("positions " + src + " --frames 343:344");
+  EXPECT_EQ(last.status, 0);
+  EXPECT_EQ(lines(last.out), 1u + 38u);  // header + one frame of 38 joints (31 and 7 End Sites)
   const Outcome ext = gmr("convert " + src + " " + shell_quote((dir_ / "out.xyz").string()));
   EXPECT_EQ(ext.status, 1);
   EXPECT_EQ(lines(ext.err), 1u);

@@ -711,24 +711,27 @@ Result<std::string> format_hierarchy_text(const Motion& motion, Dialect dialect)
     const Joint& joint = sk.joint(j);
     close_until(joint.parent);
     const int depth = static_cast<int>(open.size());
-    const bool end_site = bvh && joint.parent != kNoParent && joint.channels.empty() && sk.children(j).empty();
+    // A leaf without channels is an End Site when the reader would give it
+    // this very name; any other name stays on a JOINT with CHANNELS 0 (an
+    // `End Site <name>` line is not standard BVH and other readers drop it).
+    bool end_site = false;
+    if (bvh && joint.parent != kNoParent && joint.channels.empty() && sk.children(j).empty()) {
+      int& next = next_end_site[static_cast<std::size_t>(joint.parent)];
+      int k = next;
+      const std::string def =
+          default_end_site_name(sk.joint(joint.parent).name, [&](const std::string& n) { return seen.count(n) != 0; }, k);
+      // The reader advances its counter only for unnamed End Sites: do the same.
+      if (joint.name == def) {
+        end_site = true;
+        next = k;
+      }
+    }
     indent(out, depth);
     if (joint.parent == kNoParent) {
       out += "ROOT ";
       out += joint.name;
     } else if (end_site) {
-      // The reader advances its counter only for unnamed End Sites: do the same.
-      int& next = next_end_site[static_cast<std::size_t>(joint.parent)];
-      int k = next;
-      const std::string def =
-          default_end_site_name(sk.joint(joint.parent).name, [&](const std::string& n) { return seen.count(n) != 0; }, k);
       out += "End Site";
-      if (joint.name != def) {
-        out += ' ';
-        out += joint.name;
-      } else {
-        next = k;
-      }
     } else {
       out += "JOINT ";
       out += joint.name;

@@ -97,8 +97,9 @@ Error at_path(Error e, const std::filesystem::path& path) {
 Status save_motion(const Motion& motion, const std::filesystem::path& path, const LoadOptions& options) {
   const std::string ext = lower_extension(path);
   if (ext == ".bvh") {
-    if (motion.convention == Convention::kPostRotation) return write_bvh(motion, path);
-    auto post = to_post_rotation(motion);
+    BvhExportOptions bvh;
+    bvh.single_root = options.bvh_single_root;
+    auto post = to_bvh_interchange(motion, bvh);
     if (!post) return at_path(post.error(), path);
     return write_bvh(*post, path);
   }

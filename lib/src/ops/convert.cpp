@@ -5,11 +5,15 @@
 // post -> pre: the pre frame of a non-root j must equal the post frame of its
 // parent, so R_j = S_p(j) (a channel copy) and roots get R = I.
 // pre -> post: the post frame of x must equal the pre frame of each child c, so
-// S_x = R_c when all children share R_c (S_root = R_root R_c); when they do not,
-// x gets S = I (roots: R_root) and each group of children with equal rotation
-// hangs under a zero-length joint whose S is that rotation.
+// S_x = R_c when all children share R_c (S_root = R_root R_c). When they do
+// not, one group of children with equal rotation rides on x (S_x = R_main) and
+// each other group hangs under a zero-length joint whose S is R_main^-1 R_group:
+// a joint whose children fall into k groups gets k - 1 inserted joints, the
+// fewest that can keep every position.
 #include "gmr/ops/convert.h"
 
+#include <algorithm>
+#include <cmath>
 #include <set>
 #include <string>
 
@@ -21,7 +25,17 @@ namespace {
 using detail::Track;
 using detail::Work;
 
-bool same_rotation(const Track& a, const Track& b) { return a.rot_ch == b.rot_ch && a.rot_v == b.rot_v; }
+// No rotation channel, or only angles that are whole turns in every frame.
+bool is_identity(const Track& t) {
+  for (double v : t.rot_v) {
+    if (std::fmod(v, 360.0) != 0.0) return false;
+  }
+  return true;
+}
+
+bool same_rotation(const Track& a, const Track& b) {
+  return (a.rot_ch == b.rot_ch && a.rot_v == b.rot_v) || (is_identity(a) && is_identity(b));
+}
 
 }  // namespace
 
@@ -50,10 +64,17 @@ Result<Motion> to_post_rotation(const Motion& motion) {
   const int n = in.size();
   const std::size_t frames = in.frames;
 
+  std::vector<int> subtree(static_cast<std::size_t>(n), 1);  // joints in each subtree
+  for (int j = n - 1; j >= 0; --j) {
+    // Parents may follow their children in index order: walk up instead.
+    for (int p = in[j].parent; p != kNoParent; p = in[p].parent) ++subtree[static_cast<std::size_t>(p)];
+  }
+
   // For each child: the index of its group's first child when the group hangs
   // under an inserted joint, else -1.
   std::vector<int> group_head(static_cast<std::size_t>(n), -1);
-  std::vector<Track> post(in.tracks);  // S_x of every joint, parents as in `in`
+  std::vector<Track> post(in.tracks);     // S_x of every joint, parents as in `in`
+  std::vector<Track> inserted(static_cast<std::size_t>(n));  // S of the joint inserted for a group, by its head
   for (int x = 0; x < n; ++x) {
     const std::vector<int> kids = in.children(x);
     std::vector<int> heads;  // first child of each group of equal rotations
@@ -67,24 +88,51 @@ Result<Motion> to_post_rotation(const Motion& motion) {
     }
     Track& s = post[static_cast<std::size_t>(x)];
     const bool root = in[x].parent == kNoParent;
-    if (heads.size() == 1) {
-      // One shared rotation: S_x = R_c (roots: R_root R_c); no inserted joint.
-      const Track& shared = in[heads[0]];
-      if (root) {
-        detail::set_product(s, in[x], false, shared, frames);
-      } else {
-        detail::copy_rotation(s, shared);
-      }
-      for (int c : kids) group_head[static_cast<std::size_t>(c)] = -1;
-    } else {
-      // No child, or children that rotate independently: S_x = I (roots keep R_root).
+    if (heads.empty()) {
       if (!root) {
         s.rot_ch.clear();
         s.rot_v.clear();
       }
+      continue;
+    }
+    // One group rides on x itself: S_x = R_main (roots: R_root R_main). The
+    // group without rotation when there is one (the other groups' inserted
+    // joints are then plain copies), else the largest subtree (first wins).
+    int main = heads.front();
+    std::size_t main_size = 0;
+    for (int h : heads) {
+      std::size_t size = 0;
       for (int c : kids) {
-        // Children without rotation need no inserted joint.
-        if (!in[c].has_rotation()) group_head[static_cast<std::size_t>(c)] = -1;
+        if (group_head[static_cast<std::size_t>(c)] == h) size += static_cast<std::size_t>(subtree[static_cast<std::size_t>(c)]);
+      }
+      if (is_identity(in[h])) size = static_cast<std::size_t>(n) + 1;
+      if (size > main_size) {
+        main = h;
+        main_size = size;
+      }
+    }
+    const bool main_identity = is_identity(in[main]);
+    if (root) {
+      if (!main_identity) detail::set_product(s, in[x], false, in[main], frames);
+    } else if (main_identity) {
+      s.rot_ch.clear();
+      s.rot_v.clear();
+    } else {
+      detail::copy_rotation(s, in[main]);
+    }
+    for (int c : kids) {
+      const int h = group_head[static_cast<std::size_t>(c)];
+      if (h == main) group_head[static_cast<std::size_t>(c)] = -1;
+    }
+    // Every other group hangs under a zero-length joint whose S turns x's
+    // frame into the group's: R_main^-1 R_group (a copy when R_main = I).
+    for (int h : heads) {
+      if (h == main) continue;
+      Track& d = inserted[static_cast<std::size_t>(h)];
+      if (main_identity) {
+        detail::copy_rotation(d, in[h]);
+      } else {
+        detail::set_product(d, in[main], true, is_identity(in[h]) ? Track{} : in[h], frames);
       }
     }
   }
@@ -108,7 +156,7 @@ Result<Motion> to_post_rotation(const Motion& motion) {
       names.insert(name);
       d.name = std::move(name);
       d.parent = new_index[static_cast<std::size_t>(p)];
-      detail::copy_rotation(d, in[j]);
+      detail::copy_rotation(d, inserted[static_cast<std::size_t>(j)]);
       dummy_index[static_cast<std::size_t>(j)] = out.size();
       out.tracks.push_back(std::move(d));
     }
@@ -126,6 +174,97 @@ Result<Motion> to_post_rotation(const Motion& motion) {
     if (t.soft_parent <= -2) t.soft_parent = new_index[static_cast<std::size_t>(-2 - t.soft_parent)];
   }
   return out.to_motion();
+}
+
+namespace {
+
+// Rotation channels every BVH reader takes: none, or the three axes once each.
+// One or two axes get the missing ones appended with zero angles (the same
+// rotation); anything else (an axis twice, more than three) is re-encoded.
+void three_rotation_axes(Track& t, std::size_t frames) {
+  if (t.rot_ch.empty()) return;
+  bool distinct = t.rot_ch.size() <= 3;
+  for (std::size_t i = 0; i < t.rot_ch.size() && distinct; ++i) {
+    for (std::size_t k = i + 1; k < t.rot_ch.size(); ++k) distinct = distinct && t.rot_ch[i] != t.rot_ch[k];
+  }
+  if (!distinct) {
+    const std::vector<Eigen::Matrix3d> r = detail::rotations(t, frames);
+    t.rot_ch.clear();
+    detail::encode_rotations(t, r, frames);
+    if (t.rot_ch.empty()) return;
+  }
+  const std::size_t k = t.rot_ch.size();
+  if (k == 3) return;
+  for (Axis a : {Axis::kX, Axis::kY, Axis::kZ}) {
+    const ChannelType c = rotation_channel(a);
+    if (std::find(t.rot_ch.begin(), t.rot_ch.end(), c) == t.rot_ch.end()) t.rot_ch.push_back(c);
+  }
+  std::vector<double> v(frames * 3, 0.0);
+  for (std::size_t f = 0; f < frames; ++f) std::copy_n(t.rot_v.data() + f * k, k, v.data() + f * 3);
+  t.rot_v = std::move(v);
+}
+
+// Position channels every BVH reader takes the same way: none, or all three
+// with the OFFSET 0 (readers disagree on whether a channel adds to OFFSET or
+// replaces it, and on what an axis without a channel means). A non-root joint
+// whose channels never change gets them as its OFFSET instead.
+void unambiguous_translation(Track& t, std::size_t frames, bool root) {
+  if (t.pos_ch.empty()) return;
+  std::vector<Eigen::Vector3d> v(frames);
+  bool constant = true;
+  for (std::size_t f = 0; f < frames; ++f) {
+    v[f] = t.translation(f);
+    constant = constant && v[f] == v[0];
+  }
+  if (!root && constant) {
+    detail::set_translations(t, v, frames, false, t.offset);
+    return;
+  }
+  detail::set_translations(t, v, frames, true, Eigen::Vector3d::Zero());
+  t.offset = Eigen::Vector3d::Zero();
+}
+
+}  // namespace
+
+Result<Motion> to_bvh_interchange(const Motion& motion, const BvhExportOptions& options) {
+  Result<Motion> post = to_post_rotation(motion);
+  if (!post) return post.error();
+  Work w = Work::from_motion(*post);
+  const std::size_t frames = w.frames;
+  int roots = 0;
+  for (const Track& t : w.tracks) roots += t.parent == kNoParent ? 1 : 0;
+  if (options.single_root && roots > 1) {
+    std::set<std::string> names;
+    for (const Track& t : w.tracks) names.insert(t.name);
+    std::string name = options.root_name;
+    for (int k = 2; names.count(name) != 0; ++k) name = options.root_name + std::to_string(k);
+    const int top = w.size();
+    for (Track& t : w.tracks) {
+      if (t.parent == kNoParent) t.parent = top;  // its translation is now its world position
+    }
+    Track world;
+    world.name = std::move(name);
+    w.tracks.push_back(std::move(world));
+  }
+  bool any_channel = false;
+  for (Track& t : w.tracks) {
+    t.soft_parent = kNoParent;  // BVH has no place for soft links
+    three_rotation_axes(t, frames);
+    unambiguous_translation(t, frames, t.parent == kNoParent);
+    any_channel = any_channel || !t.rot_ch.empty() || !t.pos_ch.empty();
+  }
+  if (!any_channel && frames > 0) {
+    // Rows with no value are blank lines, which readers skip: the frames would
+    // be lost. The first root carries its position instead.
+    for (Track& t : w.tracks) {
+      if (t.parent != kNoParent) continue;
+      const std::vector<Eigen::Vector3d> v(frames, t.offset);
+      detail::set_translations(t, v, frames, true, t.offset);
+      t.offset = Eigen::Vector3d::Zero();
+      break;
+    }
+  }
+  return w.to_motion();
 }
 
 }  // namespace gmr

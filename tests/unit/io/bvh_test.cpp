@@ -577,7 +577,10 @@ TEST(BvhWriter, NamedEndSitesAndLeafJointsKeepTheirNames) {
       "}\nMOTION\nFrames: 1\nFrame Time: 0.5\n7\n";
   const Motion m = parse_ok(text);
   const std::string out = format_bvh(m).value();
-  EXPECT_THAT(out, HasSubstr("End Site Nose\n"));
+  // `End Site <name>` is not standard BVH: a named leaf is a JOINT with CHANNELS 0.
+  EXPECT_THAT(out, HasSubstr("JOINT Nose\n"));
+  EXPECT_EQ(out.find("End Site Nose"), std::string::npos);
+  EXPECT_THAT(out, HasSubstr("End Site\n"));
   EXPECT_THAT(out, HasSubstr("JOINT Leaf\n"));
   const Motion back = parse_ok(out);
   ASSERT_EQ(back.skeleton.size(), 4u);
@@ -602,11 +605,12 @@ TEST(BvhWriter, EndSiteNamesMirrorTheReader) {
   EXPECT_EQ(m.skeleton.joint(3).name, "P_End2");
   EXPECT_EQ(m.skeleton.joint(4).name, "P_End3");
   const std::string out = format_bvh(m).value();
-  // Nose stays named; the others (the channel-less leaf JOINT P_End2 too) are
-  // exactly what the reader names unnamed End Sites at their places.
-  EXPECT_THAT(out, HasSubstr("End Site Nose\n"));
+  // Nose stays named, on a JOINT; the others (the channel-less leaf JOINT
+  // P_End2 too) are exactly what the reader names unnamed End Sites at their
+  // places, so they are plain End Sites.
+  EXPECT_THAT(out, HasSubstr("JOINT Nose\n"));
   EXPECT_EQ(out.find("End Site P_End"), std::string::npos);
-  EXPECT_EQ(out.find("JOINT"), std::string::npos);
+  EXPECT_EQ(out.find("JOINT"), out.rfind("JOINT"));
   const Motion back = parse_ok(out);
   for (int j = 0; j < 5; ++j) EXPECT_EQ(back.skeleton.joint(j).name, m.skeleton.joint(j).name);
 }
@@ -671,8 +675,8 @@ TEST(BvhWriter, ForestInBreadthFirstOrder) {
   ASSERT_EQ(back.skeleton.size(), 6u);
   EXPECT_EQ(back.skeleton.joint(1).name, "B");  // depth-first: A B D C P Q
   EXPECT_EQ(back.skeleton.joint(2).name, "D");
-  EXPECT_EQ(back.skeleton.joint(3).name, "C");  // a channel-less leaf is an End Site, named
-  EXPECT_NE(text.find("End Site C\n"), std::string::npos);
+  EXPECT_EQ(back.skeleton.joint(3).name, "C");  // a channel-less leaf not named C_End: a JOINT
+  EXPECT_NE(text.find("JOINT C\n"), std::string::npos);
   const auto pa = compute_positions(m);
   const auto pb = compute_positions(back);
   for (int j = 0; j < 6; ++j) {

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <set>
+
 #include "gmr/kinematics/forward_kinematics.h"
 #include "ops_test_util.h"
 
@@ -80,8 +82,9 @@ TEST(ToPostRotation, InsertsZeroLengthJointsWhereChildrenRotateIndependently) {
 }
 
 TEST(ToPostRotation, InsertedNamesAreUnique) {
-  // Root r with children a (rotates) and b (rotates differently), and a joint
-  // already named a_gmr_pre.
+  // Root r with children a (rotates, the larger subtree: it rides on r) and b
+  // (rotates differently: it gets an inserted joint), and a joint already
+  // named b_gmr_pre.
   std::vector<Joint> joints(4);
   joints[0].name = "r";
   joints[1].name = "a";
@@ -92,7 +95,7 @@ TEST(ToPostRotation, InsertedNamesAreUnique) {
   joints[2].parent = 0;
   joints[2].offset = {0, 1, 0};
   joints[2].channels = {ChannelType::kXrotation};
-  joints[3].name = "a_gmr_pre";
+  joints[3].name = "b_gmr_pre";
   joints[3].parent = 1;
   joints[3].offset = {0, 0, 1};
   Motion pre;
@@ -100,10 +103,130 @@ TEST(ToPostRotation, InsertedNamesAreUnique) {
   pre.frame_count = 1;
   pre.values = {30.0, 40.0};
   const Motion post = to_post_rotation(pre).value();
-  ASSERT_EQ(post.skeleton.size(), 6u);
-  EXPECT_GE(post.skeleton.find("a_gmr_pre2"), 0);
-  EXPECT_GE(post.skeleton.find("b_gmr_pre"), 0);
+  ASSERT_EQ(post.skeleton.size(), 5u);
+  EXPECT_GE(post.skeleton.find("b_gmr_pre2"), 0);
   EXPECT_LE(position_error(pre, post), 1e-14);
+}
+
+// A joint with three children that each rotate their own way needs two
+// inserted joints, not three; children whose channels hold only whole turns
+// rotate like children without channels and need none.
+TEST(ToPostRotation, InsertsTheFewestJoints) {
+  using C = ChannelType;
+  auto joint = [](std::string name, int parent, Eigen::Vector3d off, std::vector<ChannelType> ch) {
+    Joint j;
+    j.name = std::move(name);
+    j.parent = parent;
+    j.offset = off;
+    j.channels = std::move(ch);
+    return j;
+  };
+  // r -> x -> {a, b, c} rotating; x -> {z1 (no channels), z2 (Xrotation 0 or 360)}.
+  const std::vector<Joint> rotating = {
+      joint("r", -1, {0, 0, 0}, {C::kXposition, C::kYposition, C::kZposition}),
+      joint("x", 0, {0, 1, 0}, {C::kZrotation, C::kXrotation, C::kYrotation}),
+      joint("a", 1, {1, 0, 0}, {C::kZrotation}),
+      joint("b", 1, {0, 1, 0}, {C::kXrotation, C::kYrotation}),
+      joint("c", 1, {0, 0, 1}, {C::kYrotation, C::kZrotation, C::kXrotation}),
+      joint("a1", 2, {1, 0, 0}, {}),
+  };
+  Motion pre;
+  pre.skeleton = Skeleton::create(rotating).value();
+  pre.frame_count = 3;
+  for (int f = 0; f < 3; ++f)
+    for (int c = 0; c < pre.skeleton.channel_count(); ++c) pre.values.push_back(7.0 * f + 11.0 * c - 20.0);
+  const Motion post = to_post_rotation(pre).value();
+  EXPECT_EQ(post.skeleton.size(), pre.skeleton.size() + 2);
+  EXPECT_LT(post.skeleton.find("a_gmr_pre"), 0) << "a has the largest subtree: it rides on x";
+  EXPECT_GE(post.skeleton.find("b_gmr_pre"), 0);
+  EXPECT_GE(post.skeleton.find("c_gmr_pre"), 0);
+  EXPECT_LE(position_error(pre, post), 1e-12 * skeleton_size(pre));
+  EXPECT_LE(position_error(pre, to_pre_rotation(post).value()), 1e-12 * skeleton_size(pre));
+
+  const std::vector<Joint> still = {
+      joint("r", -1, {0, 0, 0}, {C::kXposition, C::kYposition, C::kZposition}),
+      joint("x", 0, {0, 1, 0}, {C::kZrotation}),
+      joint("z1", 1, {1, 0, 0}, {}),
+      joint("z2", 1, {0, 1, 0}, {C::kXrotation}),
+  };
+  Motion quiet;
+  quiet.skeleton = Skeleton::create(still).value();
+  quiet.frame_count = 2;
+  quiet.values = {1, 2, 3, 25, 0, 4, 5, 6, 35, 360};
+  const Motion qpost = to_post_rotation(quiet).value();
+  EXPECT_EQ(qpost.skeleton.size(), quiet.skeleton.size()) << "z1 and z2 rotate alike: no inserted joint";
+  EXPECT_LE(position_error(quiet, qpost), 1e-12 * skeleton_size(quiet));
+}
+
+// What every common BVH reader reads alike: 0 or 3 distinct rotation axes,
+// position channels none or all three with OFFSET 0, and the same positions.
+TEST(ToBvhInterchange, ChannelLayoutsEveryReaderTakes) {
+  int forests = 0;
+  for (std::uint32_t seed = 1; seed <= 60; ++seed) {
+    RandomMotionOptions o;
+    o.roots = 1 + static_cast<int>(seed % 3);
+    o.convention = seed % 2 ? Convention::kPreRotation : Convention::kPostRotation;
+    o.position_channel_chance = 0.3;
+    const Motion m = random_motion(seed, o);
+    for (const bool single : {false, true}) {
+      BvhExportOptions opt;
+      opt.single_root = single;
+      const Motion out = to_bvh_interchange(m, opt).value();
+      EXPECT_EQ(out.convention, Convention::kPostRotation);
+      EXPECT_LE(position_error(m, out), 1e-12 * skeleton_size(m)) << "seed " << seed;
+      int roots = 0;
+      for (const Joint& j : out.skeleton.joints()) {
+        roots += j.parent == kNoParent ? 1 : 0;
+        EXPECT_EQ(j.soft_parent, kNoParent);
+        std::set<Axis> rot, pos;
+        int nrot = 0, npos = 0;
+        for (ChannelType c : j.channels) {
+          (is_rotation(c) ? rot : pos).insert(axis_of(c));
+          (is_rotation(c) ? nrot : npos) += 1;
+        }
+        EXPECT_TRUE(nrot == 0 || (nrot == 3 && rot.size() == 3)) << j.name << " seed " << seed;
+        EXPECT_TRUE(npos == 0 || (npos == 3 && pos.size() == 3)) << j.name << " seed " << seed;
+        if (npos != 0) EXPECT_EQ(j.offset, Eigen::Vector3d::Zero()) << j.name;
+      }
+      if (single) {
+        EXPECT_EQ(roots, 1);
+        if (o.roots > 1) {
+          EXPECT_EQ(out.skeleton.joint(out.skeleton.roots().front()).name, "gmr_world");
+          ++forests;
+        }
+      } else {
+        EXPECT_EQ(roots, o.roots);
+      }
+    }
+  }
+  EXPECT_EQ(forests, 40);
+}
+
+// A non-root joint whose position channels never change gets them as OFFSET
+// (readers that add channels to OFFSET would count them twice).
+TEST(ToBvhInterchange, ConstantPositionChannelsBecomeTheOffset) {
+  using C = ChannelType;
+  std::vector<Joint> joints(2);
+  joints[0].name = "hip";
+  joints[0].offset = {9, 9, 9};
+  joints[0].channels = {C::kXposition, C::kYposition, C::kZposition, C::kZrotation, C::kYrotation};
+  joints[1].name = "knee";
+  joints[1].parent = 0;
+  joints[1].offset = {5, 5, 5};
+  joints[1].channels = {C::kYposition, C::kXrotation};
+  Motion m;
+  m.skeleton = Skeleton::create(joints).value();
+  m.convention = Convention::kPostRotation;
+  m.frame_count = 2;
+  m.values = {1, 2, 3, 10, 20, -4, 30, 4, 5, 6, 15, 25, -4, 40};
+  const Motion out = to_bvh_interchange(m).value();
+  const Joint& hip = out.skeleton.joint(out.skeleton.find("hip"));
+  EXPECT_EQ(hip.offset, Eigen::Vector3d::Zero());
+  EXPECT_EQ(hip.channels.size(), 6u);
+  const Joint& knee = out.skeleton.joint(out.skeleton.find("knee"));
+  EXPECT_EQ(knee.offset, Eigen::Vector3d(5, -4, 5));
+  EXPECT_EQ(knee.channels.size(), 3u);
+  EXPECT_LE(position_error(m, out), 1e-12);
 }
 
 TEST(Convert, SameConventionIsUnchanged) {

@@ -45,9 +45,12 @@ Result<Motion> read_bvh(const std::filesystem::path& path, Warnings* out_warning
 // parse_bvh(format_bvh(m)) has m's values exactly. Each tree is written as one
 // ROOT block, depth-first (values permuted to match, so a motion whose joints
 // are not in depth-first order reads back in that order with the same values
-// per joint name). A non-root leaf without channels is written as `End Site`,
-// with its name after it unless it is the name the reader would make up.
-// Soft links are not written.
+// per joint name). A non-root leaf without channels is written as a plain
+// `End Site` when it has the name the reader would make up for it, else as a
+// JOINT with CHANNELS 0 (other readers ignore a name after `End Site`).
+// Soft links are not written. Channels are written as they are: for a file
+// other programs read the same way, write to_bvh_interchange() of the motion
+// (save_motion() does).
 Result<std::string> format_bvh(const Motion& motion);
 // Writes format_bvh() to `path` atomically (temporary file, then rename).
 Status write_bvh(const Motion& motion, const std::filesystem::path& path);

@@ -21,6 +21,9 @@ struct LoadOptions {
   // Saving .amc: an existing skeleton file with other content is replaced
   // only when this is true (otherwise the save fails and writes nothing).
   bool replace_asf = false;
+  // Saving .bvh: a forest is written as one ROOT (BvhExportOptions::single_root)
+  // for readers that take only one; otherwise one ROOT block per tree.
+  bool bvh_single_root = false;
 };
 
 // The motion as the file holds it: BVH stays post-rotation, GMR is
@@ -29,7 +32,8 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
                            Warnings* out_warnings = nullptr);
 
 // Saves by extension, converting between conventions as needed (.bvh wants
-// post-rotation; .gmr, .gmrb and .amc pre-rotation). Atomic. For .amc the
+// post-rotation, and gets the form every common reader reads alike:
+// to_bvh_interchange; .gmr, .gmrb and .amc pre-rotation). Atomic. For .amc the
 // skeleton is written to options.asf, else beside it with the extension .asf,
 // the two as a pair (write_asf_amc); an existing skeleton that differs is
 // kept, and the save refused, unless options.replace_asf.

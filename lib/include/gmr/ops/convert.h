@@ -2,6 +2,8 @@
 // Both keep every joint's world position in every frame.
 #pragma once
 
+#include <string>
+
 #include "gmr/core/error.h"
 #include "gmr/motion/motion.h"
 
@@ -14,9 +16,31 @@ namespace gmr {
 Result<Motion> to_pre_rotation(const Motion& motion);
 
 // Pre-rotation -> post-rotation for a forest of trees. Where a joint's children
-// rotate independently, zero-length joints are inserted (the inverse of dummy
-// removal) so that the BVH has the same positions. A post-rotation motion is
-// returned unchanged.
+// rotate independently, zero-length joints named `<child>_gmr_pre` are inserted
+// (the inverse of dummy removal) so that the BVH has the same positions: a
+// joint whose children fall into k groups of equal rotation gets k - 1 (one
+// group rides on the joint itself; the one without rotation when there is
+// one). A post-rotation motion is returned unchanged.
 Result<Motion> to_post_rotation(const Motion& motion);
+
+struct BvhExportOptions {
+  // One ROOT block for readers that take only one tree: a forest's trees hang
+  // under a joint named root_name (made unique) at the origin, with no
+  // channels; each former root keeps its world position and rotation through
+  // six channels. A single tree is left as it is.
+  bool single_root = false;
+  std::string root_name = "gmr_world";
+};
+
+// The motion (either convention) in the post-rotation form that Blender,
+// three.js and Assimp read with the same positions as gmr (docs/gmr-format.md,
+// "BVH that other programs read"): every joint has 0 or 3 rotation channels
+// (missing axes added with zero angles, other layouts re-encoded); position
+// channels are none or all three with OFFSET 0 (a non-root joint whose
+// position channels never change gets them as its OFFSET); a motion with
+// frames but no channel at all gets position channels on its first root (its
+// rows would otherwise be blank lines, which readers skip); soft links are
+// dropped. Every joint keeps its name and world position in every frame.
+Result<Motion> to_bvh_interchange(const Motion& motion, const BvhExportOptions& options = {});
 
 }  // namespace gmr

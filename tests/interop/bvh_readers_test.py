@@ -1,0 +1,317 @@
+#!/usr/bin/env python3
+"""BVH files gmr writes, read by the programs people open them with.
+
+For every BVH and ASF/AMC take of the corpus (../shared/data), gmr writes:
+  export    the take as BVH (gmr convert)
+  via-gmr   BVH -> GMR -> BVH (BVH takes only)
+  shift     re-rooted at the head (gmr shift --to), one ROOT
+  forest    split at an upper arm (gmr split --at): two ROOT blocks
+  forest1   the same forest with --single-root: one ROOT
+Blender's own importer (Debian's blender, rotation modes Quaternion and, for
+the takes' own rotations, Native Euler) and three.js's BVHLoader (npm `three`,
+played with an AnimationMixer) read them, and every joint's world
+position in every frame must equal `gmr positions` of the original take to
+1e-4 of the skeleton's size (the diagonal of its frame-0 bounding box).
+three.js reads one ROOT only, so it gets forest1 and not forest; it cannot
+animate bones whose names hold one of []:/. (Mixamo's "mixamorig:Hips"), so
+takes with such names are left out of its part.
+
+  bvh_readers_test.py REPO_ROOT GMR_BIN_DIR [--only SUBSTRING] [--keep DIR]
+
+Outside CI a missing corpus, Blender or node/three skips (exit 77); under
+CI=true it fails.
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+SKIP = 77
+REL_TOL = 1e-4
+MIN_TAKES = 52  # 43 BVH and 9 AMC takes in ../shared/data
+# three.js's PropertyBinding treats these as separators in a track name: a
+# bone named "mixamorig:Hips" is never animated, whatever file it comes from.
+THREE_RESERVED = "[]:/."
+IN_CI = os.environ.get("CI") == "true"
+
+
+def skip_or_fail(message):
+    if IN_CI:
+        print(f"FAIL: {message} (CI=true: the interop test must run)")
+        sys.exit(1)
+    print(f"SKIP: {message}")
+    sys.exit(SKIP)
+
+
+def run(cmd, **kw):
+    r = subprocess.run(cmd, capture_output=True, text=True, **kw)
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, cmd))}: exit {r.returncode}: {r.stderr.strip()[-2000:]}")
+    return r.stdout
+
+
+def read_positions(path_or_text, from_text=False):
+    """CSV frame,joint,x,y,z -> {joint: [(x, y, z) per frame]}, joint order."""
+    lines = path_or_text.splitlines() if from_text else open(path_or_text).read().splitlines()
+    out, order = {}, []
+    for row in csv.reader(lines[1:]):
+        f, name = int(row[0]), row[1]
+        seq = out.get(name)
+        if seq is None:
+            seq = out[name] = []
+            order.append(name)
+        if len(seq) != f:
+            raise RuntimeError(f"{name}: frame {f} out of order")
+        seq.append((float(row[2]), float(row[3]), float(row[4])))
+    return out, order
+
+
+def hierarchy_nodes(bvh_path):
+    """Nodes of a BVH hierarchy in file order: (kind, parent index, offset)."""
+    nodes, stack = [], []
+    pending = None
+    with open(bvh_path) as f:
+        for line in f:
+            t = line.split()
+            if not t:
+                continue
+            key = t[0].upper()
+            if key == "MOTION":
+                break
+            if key in ("ROOT", "JOINT") or (key == "END" and len(t) > 1 and t[1].upper() == "SITE"):
+                pending = "end" if key == "END" else key.lower()
+            elif key == "{":
+                nodes.append([pending, stack[-1] if stack else -1, None])
+                stack.append(len(nodes) - 1)
+            elif key == "}":
+                stack.pop()
+            elif key == "OFFSET":
+                nodes[stack[-1]][2] = tuple(float(v) for v in t[1:4])
+    return nodes
+
+
+def pick_joint(order, nodes, names_wanted):
+    """The first joint (not an End Site) whose lower-case name contains one of
+    names_wanted, tried in turn; else the joint in the middle of the file."""
+    kinds = {}
+    for (kind, _, _), name in zip(nodes, order):
+        kinds[name] = kind
+    for want in names_wanted:
+        for name in order:
+            if kinds.get(name) == "joint" and want in name.lower():
+                return name
+    joints = [n for n in order if kinds.get(n) == "joint"]
+    return joints[len(joints) // 2]
+
+
+def size_of(ref):
+    lo = [math.inf] * 3
+    hi = [-math.inf] * 3
+    for seq in ref.values():
+        for i in range(3):
+            lo[i] = min(lo[i], seq[0][i])
+            hi[i] = max(hi[i], seq[0][i])
+    return math.dist(lo, hi)
+
+
+def compare(reader, case, ref, got, frames, tol):
+    """Max error of `got` ({reference name: positions}) against `ref`; every
+    reference joint must be there."""
+    missing = sorted(set(ref) - set(got))
+    worst, where = 0.0, ""
+    for name, seq in got.items():
+        r = ref.get(name)
+        if r is None:
+            continue  # a joint gmr inserted (*_gmr_pre, gmr_world): not in the take
+        if len(seq) != frames:
+            return f"{reader} {case}: {name} has {len(seq)} frames, expected {frames}", 0, []
+        for f in range(frames):
+            e = math.dist(seq[f], r[f])
+            if e > worst:
+                worst, where = e, f"{name} frame {f}"
+    problem = None
+    if worst > tol:
+        problem = f"{reader} {case}: error {worst:.3g} > {tol:.3g} at {where}"
+    return problem, worst, missing
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("repo")
+    ap.add_argument("bindir")
+    ap.add_argument("--only", default="")
+    ap.add_argument("--keep", default="")
+    args = ap.parse_args()
+    repo = Path(args.repo).resolve()
+    gmr = str(Path(args.bindir) / "gmr")
+    data = (repo / ".." / "shared" / "data").resolve()
+    if not data.is_dir():
+        skip_or_fail(f"no corpus at {data}")
+    blender = shutil.which("blender")
+    node = shutil.which("node")
+    three = repo / "tests" / "interop" / "node_modules" / "three" / "package.json"
+    if not blender:
+        skip_or_fail("Blender is not installed (scripts/install-deps.sh installs it)")
+    if not node or not three.is_file():
+        skip_or_fail("node or npm package three missing (scripts/install-deps.sh installs them)")
+
+    takes = sorted((data / "bvh").rglob("*.bvh")) + sorted((data / "asfamc").rglob("*.amc"))
+    takes = [t for t in takes if args.only in str(t)]
+    work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="gmr-interop-"))
+    work.mkdir(parents=True, exist_ok=True)
+
+    cases = []  # (take, variant, bvh path, reference key)
+    refs = {}
+    failures = []
+    for i, take in enumerate(takes):
+        key = f"{i:02d}_{take.stem}"
+        text = run([gmr, "positions", str(take)])
+        ref, order = read_positions(text, from_text=True)
+        frames = len(next(iter(ref.values())))
+        refs[key] = (ref, frames, size_of(ref) * REL_TOL, take)
+        out = work / key
+        try:
+            run([gmr, "convert", str(take), f"{out}.export.bvh"])
+            cases.append((key, "export", f"{out}.export.bvh"))
+            if take.suffix == ".bvh":
+                run([gmr, "convert", str(take), f"{out}.gmr"])
+                run([gmr, "convert", f"{out}.gmr", f"{out}.via-gmr.bvh"])
+                cases.append((key, "via-gmr", f"{out}.via-gmr.bvh"))
+            nodes = hierarchy_nodes(f"{out}.export.bvh")
+            export_order = read_positions(run([gmr, "positions", f"{out}.export.bvh", "--frames", "0:1"]), True)[1]
+            head = pick_joint(export_order, nodes, ["head"])
+            arm = pick_joint(export_order, nodes, ["leftarm", "lhumerus", "l_upperarm", "leftshoulder", "arm"])
+            run([gmr, "shift", str(take), "--to", head, "-o", f"{out}.shift.bvh"])
+            cases.append((key, "shift", f"{out}.shift.bvh"))
+            run([gmr, "split", str(take), "--at", arm, "-o", f"{out}.forest.bvh"])
+            cases.append((key, "forest", f"{out}.forest.bvh"))
+            run([gmr, "split", str(take), "--at", arm, "--single-root", "-o", f"{out}.forest1.bvh"])
+            cases.append((key, "forest1", f"{out}.forest1.bvh"))
+        except RuntimeError as e:
+            failures.append(f"{take}: gmr failed: {e}")
+
+    # gmr's names for each exported file's nodes, in file order (End Sites named as gmr reads them).
+    layouts = {}
+    for key, variant, bvh in cases:
+        order = read_positions(run([gmr, "positions", bvh, "--frames", "0:1"]), True)[1]
+        nodes = hierarchy_nodes(bvh)
+        if len(order) != len(nodes):
+            failures.append(f"{bvh}: gmr reads {len(order)} joints, the hierarchy has {len(nodes)} blocks")
+            continue
+        layouts[(key, variant)] = (order, nodes)
+
+    # Blender reads every file with rotation mode Quaternion, and the takes'
+    # own rotations (export, via-gmr) also with its default, Native Euler:
+    # that mode re-expresses each rotation as Euler angles about the bone's
+    # rest axes in single precision, which near gimbal lock in those axes
+    # costs up to 1e-3 of the skeleton's size (docs/gmr-format.md).
+    blender_runs = [(c, "QUATERNION") for c in cases] + [(c, "NATIVE") for c in cases if c[1] in ("export", "via-gmr")]
+    blender_manifest, three_manifest = [], []
+    for (key, variant, bvh), mode in blender_runs:
+        blender_manifest.append({"bvh": bvh, "out": f"{bvh}.blender-{mode}.csv", "frames": refs[key][1], "mode": mode})
+    three_cases = []
+    for key, variant, bvh in cases:
+        if variant == "forest":
+            continue  # three.js reads one ROOT only: it gets forest1
+        if any(c in name for name in refs[key][0] for c in THREE_RESERVED):
+            continue  # three.js cannot animate these names, not even in the original take
+        three_cases.append((key, variant, bvh))
+        three_manifest.append({"bvh": bvh, "out": f"{bvh}.three.csv", "frames": refs[key][1]})
+    (work / "blender.json").write_text(json.dumps(blender_manifest))
+    (work / "three.json").write_text(json.dumps(three_manifest))
+    here = repo / "tests" / "interop"
+    b = subprocess.run([blender, "-b", "--factory-startup", "-noaudio", "--python",
+                        str(here / "blender_bvh_positions.py"), "--", str(work / "blender.json")],
+                       capture_output=True, text=True)
+    for line in b.stdout.splitlines():
+        if line.startswith("blender-bvh:") and "FAILED" in line:
+            failures.append(line)
+    if b.returncode != 0 and not any("blender-bvh" in f for f in failures):
+        failures.append(f"blender exited {b.returncode}: {b.stderr[-2000:]}")
+    t = subprocess.run([node, str(here / "three_bvh_positions.mjs"), str(work / "three.json")],
+                       capture_output=True, text=True, cwd=str(here))
+    for line in t.stdout.splitlines():
+        if "FAILED" in line:
+            failures.append(line)
+    if t.returncode != 0 and not any("three-bvh" in f for f in failures):
+        failures.append(f"node exited {t.returncode}: {t.stderr[-2000:]}")
+
+    checked = {"blender": set(), "three": set()}
+    uncompared_end_sites = 0
+    for (key, variant, bvh), mode in blender_runs:
+        if (key, variant) not in layouts:
+            continue
+        order, nodes = layouts[(key, variant)]
+        ref, frames, tol, take = refs[key]
+        case = f"{take.relative_to(data)} [{variant}, {mode.lower()}]"
+        # A bone per ROOT/JOINT; an End Site is its parent's tail when it is
+        # the parent's only End Site and not of zero length.
+        path = Path(f"{bvh}.blender-{mode}.csv")
+        if not path.is_file():
+            continue
+        got_raw, _ = read_positions(str(path))
+        got = {}
+        end_sites = {}
+        for i, (kind, parent, offset) in enumerate(nodes):
+            if kind == "end":
+                end_sites.setdefault(parent, []).append(i)
+        for i, (kind, parent, offset) in enumerate(nodes):
+            if kind != "end":
+                got[order[i]] = got_raw.get(order[i], [])
+            elif len(end_sites[parent]) == 1 and math.hypot(*offset) > 1e-3:
+                got[order[i]] = got_raw.get(order[parent] + "@tail", [])
+            elif mode == "QUATERNION":
+                uncompared_end_sites += 1
+        problem, worst, missing = compare("blender", case, ref, got, frames, tol)
+        # End Sites Blender shows as no tail are counted above, not missing.
+        missing = [m for m in missing if not (m in order and nodes[order.index(m)][0] == "end")]
+        if problem:
+            failures.append(problem)
+        elif missing:
+            failures.append(f"blender {case}: joints not read: {missing[:5]}")
+        else:
+            checked["blender"].add((key, variant, mode))
+    for key, variant, bvh in three_cases:
+        if (key, variant) not in layouts:
+            continue
+        order, nodes = layouts[(key, variant)]
+        ref, frames, tol, take = refs[key]
+        case = f"{take.relative_to(data)} [{variant}]"
+        path = Path(f"{bvh}.three.csv")
+        if not path.is_file():
+            continue
+        got_raw, _ = read_positions(str(path))
+        got = {order[k]: got_raw.get(f"#{k}", []) for k in range(len(order))}
+        problem, worst, missing = compare("three.js", case, ref, got, frames, tol)
+        if problem:
+            failures.append(problem)
+        elif missing:
+            failures.append(f"three.js {case}: joints not read: {missing[:5]}")
+        else:
+            checked["three"].add((key, variant))
+
+    n_takes = len(refs)
+    three_takes = len({c[0] for c in three_cases})
+    print(f"takes: {n_takes} ({three_takes} with names three.js can animate), exported files: {len(cases)}")
+    print(f"blender: {len(checked['blender'])} of {len(blender_runs)} imports equal to gmr positions "
+          f"({uncompared_end_sites} End Sites not shown by Blender as a bone tail)")
+    print(f"three.js: {len(checked['three'])} of {len(three_cases)} files equal to gmr positions")
+    if not args.only and n_takes < MIN_TAKES:
+        failures.append(f"only {n_takes} takes found under {data}: the corpus has {MIN_TAKES}")
+    if not failures and (len(checked["blender"]) != len(blender_runs) or len(checked["three"]) != len(three_cases)):
+        failures.append("some files were not checked")
+    for f in failures:
+        print(f"FAIL: {f}")
+    if not args.keep:
+        shutil.rmtree(work, ignore_errors=True)
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()
