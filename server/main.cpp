@@ -53,6 +53,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   // Memory (docs/protocol.md, "Memory budget").
   MotionLimits motion_limits;
+  gmr::LoadOptions library_files;
+  app.add_option("--amc-fps", library_files.amc_fps,
+                 "Frames per second of the library's .amc files, which do not say (default 120, the CMU captures')")
+      ->check(CLI::PositiveNumber);
   app.add_option("--max-motion-joint-frames", motion_limits.max_joint_frames,
                  "Largest motion served, frames x joints (larger files are rejected at load)")
       ->capture_default_str();
@@ -153,7 +157,7 @@ int main(int argc, char** argv) {
             if (!why) spdlog::debug("loaded {}", file.string());
             if (done == total || done % 10 == 0) spdlog::info("loading: {}/{} files", done, total);
           },
-          motion_limits);
+          motion_limits, library_files);
       if (!loaded.ok()) {
         std::fprintf(stderr, "gmr-server: %s\n", loaded.error().to_string().c_str());
         return 1;

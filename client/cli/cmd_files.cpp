@@ -3,6 +3,7 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "cli_util.h"
 #include "cmd_markers.h"
@@ -15,13 +16,15 @@
 #include "gmr/io/positions_csv.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/motion/motion.h"
+#include "gmr/ops/convert.h"
 
 namespace gmr::cli {
 namespace {
 
-Motion load(const std::string& file, const std::string& asf, Warnings& warnings) {
+Motion load(const std::string& file, const std::string& asf, double fps, Warnings& warnings) {
   LoadOptions options;
   options.asf = asf;
+  options.amc_fps = fps;
   return take(load_motion(file, options, &warnings));
 }
 
@@ -36,12 +39,13 @@ std::string format_seconds(double s) {
 struct InfoOptions {
   std::string file;
   std::string asf;
+  double fps = 0.0;  // .amc input: frames per second (0: 120)
 };
 
 void run_info(const InfoOptions& o) {
   if (is_marker_file(o.file)) return run_marker_info(o.file);  // .c3d, .trc: cmd_markers.cpp
   Warnings warnings;
-  const Motion m = load(o.file, o.asf, warnings);
+  const Motion m = load(o.file, o.asf, o.fps, warnings);
   const Skeleton& sk = m.skeleton;
   std::string roots;
   int leaves = 0;
@@ -96,6 +100,7 @@ struct ConvertOptions {
   std::string in;
   std::string out;
   std::string asf;
+  double fps = 0.0;  // .amc input: frames per second (0: 120)
   bool force = false;  // .amc output: replace an .asf beside it that holds another skeleton
   bool single_root = false;  // .bvh output: a forest as one ROOT
 };
@@ -103,7 +108,7 @@ struct ConvertOptions {
 void run_convert(const ConvertOptions& o) {
   if (is_marker_file(o.in)) return run_marker_convert(o.in, o.out);  // markers -> .trc: cmd_markers.cpp
   Warnings warnings;
-  const Motion m = load(o.in, o.asf, warnings);
+  const Motion m = load(o.in, o.asf, o.fps, warnings);
   LoadOptions save;
   save.replace_asf = o.force;
   save.bvh_single_root = o.single_root;
@@ -118,7 +123,9 @@ void run_convert(const ConvertOptions& o) {
 struct PositionsOptions {
   std::string file;
   std::string asf;
+  double fps = 0.0;  // .amc input: frames per second (0: 120)
   std::string frames = ":";
+  std::string orientations;  // "", "quat" or "matrix"
   ViewOptions view;  // --roots, --strip-dummies, --relative-to (cmd_ops.cpp)
 };
 
@@ -134,7 +141,9 @@ Motion transform_for_positions(Motion m, const PositionsOptions& o) {
 void run_positions(const PositionsOptions& o) {
   const FrameRange requested = parse_frame_range(o.frames);
   Warnings warnings;
-  const Motion m = transform_for_positions(load(o.file, o.asf, warnings), o);
+  const Motion m = transform_for_positions(load(o.file, o.asf, o.fps, warnings), o);
+  if (o.view.any() && !o.orientations.empty())
+    throw CommandError("--orientations cannot be combined with --roots, --strip-dummies or --relative-to");
   if (o.view.any()) {
     write_view_positions(m, o.view, requested, std::cout);
     std::cout.flush();
@@ -143,13 +152,34 @@ void run_positions(const PositionsOptions& o) {
     return;
   }
   const FrameRange r = clamp_frame_range(requested, m.frame_count);
-  write_positions_csv_header(std::cout);
-  // Chunks keep memory flat for long motions.
-  constexpr std::size_t kChunk = 1024;
-  for (std::size_t f = r.begin; f < r.end; f += kChunk) {
-    const std::size_t e = std::min(r.end, f + kChunk);
-    const auto p = compute_positions(m, f, e);
-    write_positions_csv_rows(std::cout, m.skeleton, p, f);
+  constexpr std::size_t kChunk = 1024;  // chunks keep memory flat for long motions
+  if (!o.orientations.empty()) {
+    // Orientations are GMR's (docs/gmr-format.md): W_j is the frame of the
+    // bone from j's parent to j, whatever the file's convention.
+    const OrientationColumns columns =
+        o.orientations == "matrix" ? OrientationColumns::kMatrix : OrientationColumns::kQuaternion;
+    const Motion pre = take(to_pre_rotation(m));
+    const std::size_t joints = pre.skeleton.size();
+    write_poses_csv_header(std::cout, columns);
+    std::vector<Eigen::Vector3d> p;
+    std::vector<Eigen::Matrix3d> w;
+    for (std::size_t f = r.begin; f < r.end; f += kChunk) {
+      const std::size_t e = std::min(r.end, f + kChunk);
+      p.resize((e - f) * joints);
+      w.resize((e - f) * joints);
+      for (std::size_t k = f; k < e; ++k) {
+        compute_frame(pre, k, std::span(p).subspan((k - f) * joints, joints),
+                      std::span(w).subspan((k - f) * joints, joints));
+      }
+      write_poses_csv_rows(std::cout, pre.skeleton, p, w, f, columns);
+    }
+  } else {
+    write_positions_csv_header(std::cout);
+    for (std::size_t f = r.begin; f < r.end; f += kChunk) {
+      const std::size_t e = std::min(r.end, f + kChunk);
+      const auto p = compute_positions(m, f, e);
+      write_positions_csv_rows(std::cout, m.skeleton, p, f);
+    }
   }
   std::cout.flush();
   if (!std::cout) throw CommandError("cannot write the positions to standard output");
@@ -164,6 +194,7 @@ void add_file_commands(CLI::App& app) {
     CLI::App* cmd = app.add_subcommand("info", "Show a motion file's joints, roots, channels, frames and duration");
     cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+    add_fps_option(*cmd, o->fps);
     cmd->callback([o] { run_info(*o); });
   }
   {
@@ -172,6 +203,7 @@ void add_file_commands(CLI::App& app) {
     cmd->add_option("IN", o->in, "Input motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
     cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr); .trc for marker input")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc input (default: the single .asf beside it)");
+    add_fps_option(*cmd, o->fps);
     cmd->add_flag("--force", o->force, "For .amc output: replace an existing .asf that holds another skeleton");
     add_single_root_flag(*cmd, o->single_root);
     cmd->callback([o] { run_convert(*o); });
@@ -183,7 +215,12 @@ void add_file_commands(CLI::App& app) {
     cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
     cmd->add_option("--frames", o->frames, "Half-open frame range A:B (frames A to B-1; ':' = all)");
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+    add_fps_option(*cmd, o->fps);
     add_positions_transform_options(*cmd, *o);
+    cmd->add_option("--orientations", o->orientations,
+                    "Also print each joint's world orientation (its GMR bone frame): quat (qw,qx,qy,qz) or matrix "
+                    "(r00..r22, row by row)")
+        ->check(CLI::IsMember({"quat", "matrix"}));
     cmd->callback([o] { run_positions(*o); });
   }
 }

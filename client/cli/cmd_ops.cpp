@@ -31,6 +31,7 @@ struct OpOptions {
   std::string file;
   std::string out;
   std::string asf;
+  double fps = 0.0;  // .amc input: frames per second (0: 120)
   std::string joints;  // --set / --to / --at / --root
   bool single_root = false;  // .bvh output: a forest as one ROOT
 };
@@ -39,6 +40,7 @@ struct OpOptions {
 Motion load_pre(const OpOptions& o, Warnings& warnings) {
   LoadOptions options;
   options.asf = o.asf;
+  options.amc_fps = o.fps;
   Motion m = take(load_motion(o.file, options, &warnings));
   return take(to_pre_rotation(m));
 }
@@ -115,6 +117,7 @@ void run_constant(const OpOptions& o, double tolerance) {
   Warnings w;
   LoadOptions options;
   options.asf = o.asf;
+  options.amc_fps = o.fps;
   const Motion m = take(load_motion(o.file, options, &w));
   for (const std::string& name : constant_rotation_joints(m, tolerance)) std::printf("%s\n", name.c_str());
   print_warnings(w);
@@ -125,6 +128,7 @@ CLI::App* add_op(CLI::App& app, const char* name, const char* help, const std::s
   cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
   cmd->add_option("-o,--output", o->out, "Output file (.gmr, .bvh); written atomically")->required();
   cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+  add_fps_option(*cmd, o->fps);
   add_single_root_flag(*cmd, o->single_root);
   return cmd;
 }
@@ -190,6 +194,7 @@ void add_ops_commands(CLI::App& app) {
     CLI::App* cmd = app.add_subcommand("constant-rotations", "List joints whose rotation never changes");
     cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+    add_fps_option(*cmd, o->fps);
     cmd->add_option("--tolerance", *tolerance, "Largest change from frame 0, in degrees (default 1e-9)");
     cmd->callback([o, tolerance] { run_constant(*o, *tolerance); });
   }

@@ -11,6 +11,13 @@ void add_net_commands(CLI::App& app);    // ls, skeleton, query, stream (cmd_net
 void add_demo_commands(CLI::App& app);   // demo: write the built-in library (cmd_demo.cpp)
 void add_marker_commands(CLI::App& app); // markers: CSV of a .c3d/.trc   (cmd_markers.cpp)
 
+// --fps of the commands that read motions: the frame rate of an .amc input,
+// which the file does not hold (default 120, the CMU captures').
+inline void add_fps_option(CLI::App& cmd, double& fps) {
+  cmd.add_option("--fps", fps, "Frames per second of an .amc input (AMC files do not say; default 120)")
+      ->check(CLI::PositiveNumber);
+}
+
 // --single-root of the commands that write motions: a forest saved as .bvh
 // gets one ROOT (gmr::BvhExportOptions::single_root), for readers that take
 // only one tree.

@@ -72,7 +72,7 @@ Status check_motion_limits(const Motion& m, const MotionLimits& limits) {
 }
 
 Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const LoadProgress& progress,
-                                 const MotionLimits& limits) {
+                                 const MotionLimits& limits, const LoadOptions& file_options) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return Error{dir.string(), 0, 0, "not a readable folder"};
 
@@ -91,7 +91,7 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
     // symbolic link and name its target). An .amc's skeleton is found by
     // load_motion: the .asf of its folder, or of its subject among several.
     const fs::path relative = f.lexically_relative(dir);
-    Job job{f, limits, {}, fs::path(relative).replace_extension().generic_string(), relative.generic_string()};
+    Job job{f, limits, file_options, fs::path(relative).replace_extension().generic_string(), relative.generic_string()};
     if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") {
       jobs.push_back(std::move(job));
     } else {

@@ -1,5 +1,6 @@
 // ASF/AMC through the `gmr` command: info, positions and convert with --asf,
 // and the one-line error for broken files.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 
@@ -23,6 +24,7 @@ namespace {
 namespace fs = std::filesystem;
 
 using Outcome = test::CliOutcome;
+using ::testing::HasSubstr;
 using test::shell_quote;
 
 class CliAsf : public test::CliTest {};
@@ -62,6 +64,21 @@ TEST_F(CliAsf, InfoAndPositions) {
   const auto got = csv_positions(pos.out);
   ASSERT_EQ(got.size(), expect.size());
   for (std::size_t i = 0; i < got.size(); ++i) ASSERT_EQ(got[i], expect[i]) << "row " << i;
+}
+
+// AMC files do not hold a frame rate: 120 unless --fps says, and the rate
+// reaches what is written (the BVH's Frame Time).
+TEST_F(CliAsf, FrameRateOfAnAmc) {
+  GMR_REQUIRE_DATA();
+  const std::string args = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
+  EXPECT_THAT(gmr("info " + args).out, HasSubstr("(120 fps)"));
+  EXPECT_THAT(gmr("info " + args + " --fps 60").out, HasSubstr("(60 fps)"));
+  const std::string bvh = shell_quote((dir_ / "at60.bvh").string());
+  ASSERT_EQ(gmr("convert " + args + " --fps 60 " + bvh).status, 0);
+  EXPECT_THAT(gmr("info " + bvh).out, HasSubstr("(60 fps)"));
+  const Outcome zero = gmr("info " + args + " --fps 0");
+  EXPECT_NE(zero.status, 0);  // CLI11's status for a value that fails its check
+  EXPECT_THAT(zero.err, HasSubstr("--fps"));
 }
 
 TEST_F(CliAsf, ConvertToGmrAndToAmc) {

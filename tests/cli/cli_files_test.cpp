@@ -13,7 +13,12 @@
 #include <filesystem>
 #include <string>
 
+#include <Eigen/Geometry>
+#include <vector>
+
 #include "gmr/core/file_util.h"
+#include "gmr/io/bvh.h"
+#include "gmr/kinematics/forward_kinematics.h"
 #include "cli_test_util.h"
 #include "test_data.h"
 
@@ -63,6 +68,67 @@ TEST_F(CliFiles, PositionsOfARealFile) {
 
   const Outcome tail = gmr("positions " + file + " --frames 340:");
   EXPECT_EQ(lines(tail.out), 1 + 4u * 38u);
+}
+
+// --orientations: GMR's W_j (the frame of the bone parent -> j). For a BVH,
+// that is the BVH frame of j's parent, computed here by the reference FK of
+// the file as read (post-rotation), a different path from the command's.
+TEST_F(CliFiles, PositionsWithOrientations) {
+  GMR_REQUIRE_DATA();
+  const fs::path path = test::data_file("bvh/cmu/02_01.bvh");
+  const std::string file = shell_quote(path.string());
+  const Outcome q = gmr("positions " + file + " --frames 100:103 --orientations quat");
+  const Outcome m = gmr("positions " + file + " --frames 100:103 --orientations matrix");
+  const Outcome plain = gmr("positions " + file + " --frames 100:103");
+  ASSERT_EQ(q.status, 0) << q.err;
+  ASSERT_EQ(m.status, 0) << m.err;
+  EXPECT_THAT(q.out, StartsWith("frame,joint,x,y,z,qw,qx,qy,qz\n100,Hips,"));
+  EXPECT_THAT(m.out, StartsWith("frame,joint,x,y,z,r00,r01,r02,r10,r11,r12,r20,r21,r22\n100,Hips,"));
+  const Motion bvh = read_bvh(path).value();
+  const std::size_t joints = bvh.skeleton.size();
+  std::vector<Eigen::Vector3d> p(joints);
+  std::vector<Eigen::Matrix3d> w(joints);
+  std::istringstream qin(q.out), min(m.out), pin(plain.out);
+  std::string ql, ml, pl;
+  std::getline(qin, ql);
+  std::getline(min, ml);
+  std::getline(pin, pl);
+  std::size_t rows = 0;
+  for (std::size_t f = 100; f < 103; ++f) {
+    compute_frame(bvh, f, p, w);
+    for (std::size_t j = 0; j < joints; ++j) {
+      ASSERT_TRUE(std::getline(qin, ql) && std::getline(min, ml) && std::getline(pin, pl));
+      // The position columns are those of plain `gmr positions`.
+      EXPECT_EQ(ql.substr(0, pl.size() + 1), pl + ",");
+      const int parent = bvh.skeleton.joint(static_cast<int>(j)).parent;
+      const Eigen::Matrix3d want = parent < 0 ? Eigen::Matrix3d::Identity() : w[static_cast<std::size_t>(parent)];
+      auto tail = [](const std::string& line, int n) {  // the last n numbers of a row
+        std::vector<double> v;
+        std::size_t at = line.size();
+        for (int i = 0; i < n; ++i) at = line.rfind(',', at - 1);
+        std::istringstream s(line.substr(at + 1));
+        std::string cell;
+        while (std::getline(s, cell, ',')) v.push_back(std::stod(cell));
+        return v;
+      };
+      const auto qv = tail(ql, 4);
+      const auto mv = tail(ml, 9);
+      ASSERT_EQ(qv.size(), 4u);
+      ASSERT_EQ(mv.size(), 9u);
+      EXPECT_GE(qv[0], 0.0);
+      const Eigen::Matrix3d from_q = Eigen::Quaterniond(qv[0], qv[1], qv[2], qv[3]).toRotationMatrix();
+      Eigen::Matrix3d from_m;
+      from_m << mv[0], mv[1], mv[2], mv[3], mv[4], mv[5], mv[6], mv[7], mv[8];
+      EXPECT_LE((from_q - want).cwiseAbs().maxCoeff(), 1e-12) << ql;
+      EXPECT_LE((from_m - want).cwiseAbs().maxCoeff(), 1e-12) << ml;
+      ++rows;
+    }
+  }
+  EXPECT_EQ(rows, 3u * 38u);
+  EXPECT_FALSE(std::getline(qin, ql));
+  const Outcome both = gmr("positions " + file + " --orientations quat --relative-to Head");
+  EXPECT_EQ(both.status, 1);
+  EXPECT_THAT(both.err, HasSubstr("--orientations cannot be combined"));
 }
 
 TEST_F(CliFiles, MalformedFileGivesOneLineWithTheLocation) {

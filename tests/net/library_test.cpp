@@ -50,6 +50,28 @@ TEST(Library, LoadsTheSharedDataAndReportsRejectedFiles) {
   EXPECT_EQ(progress_calls, lib->entries.size() + lib->rejected.size());
 }
 
+// AMC files hold no frame rate: 120 Hz unless the server is told (--amc-fps);
+// BVH files keep their own.
+TEST(Library, AmcFrameRateComesFromTheOptions) {
+  GMR_REQUIRE_DATA();
+  TempDir d;
+  namespace fs = std::filesystem;
+  fs::create_symlink(data_file("asfamc/09/09-run.asf"), d.path / "09-run.asf");
+  fs::create_symlink(data_file("asfamc/09/09_06-run.amc"), d.path / "09_06-run.amc");
+  fs::create_symlink(data_file("bvh/cmu/02_01.bvh"), d.path / "02_01.bvh");
+  for (const double fps : {0.0, 30.0}) {
+    LoadOptions options;
+    options.amc_fps = fps;
+    auto lib = server::load_library(d.path, 1, {}, {}, options);
+    ASSERT_TRUE(lib.ok()) << lib.error().to_string();
+    ASSERT_EQ(lib->entries.size(), 2u);
+    for (const auto& e : lib->entries) {
+      const double want = e.name == "02_01" ? 0.0083333 : fps == 0.0 ? 1.0 / 120.0 : 1.0 / 30.0;  // the BVH says .0083333
+      EXPECT_NEAR(e.motion->frame_time, want, 1e-15) << e.name << " at " << fps;
+    }
+  }
+}
+
 TEST(Library, NamesFilesAsFoundAndPicksEachAmcsSkeleton) {
   GMR_REQUIRE_DATA();
   // A folder of symbolic links (how a deployment often points at a shared

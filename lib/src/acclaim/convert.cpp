@@ -2,6 +2,8 @@
 #include "gmr/acclaim/convert.h"
 
 #include <cmath>
+#include <string>
+#include <string_view>
 #include <unordered_set>
 
 #include "acclaim_model.h"
@@ -9,6 +11,34 @@
 #include "gmr/core/file_util.h"
 
 namespace gmr {
+namespace {
+
+// The documentation line that keeps a root's name through ASF, which names
+// every root `root` (docs/asf-amc.md).
+constexpr std::string_view kRootNameTag = "gmr root name: ";
+
+// `root`, or the name a gmr-written ASF kept for its root when it is usable:
+// on one line, and no bone's name (ASF names compare case-insensitively).
+std::string root_name(const AsfSkeleton& s) {
+  std::size_t at = 0;
+  while (at < s.documentation.size()) {
+    std::size_t end = s.documentation.find('\n', at);
+    if (end == std::string::npos) end = s.documentation.size();
+    std::string_view line(s.documentation.data() + at, end - at);
+    while (!line.empty() && (line.front() == ' ' || line.front() == '\t')) line.remove_prefix(1);
+    while (!line.empty() && (line.back() == ' ' || line.back() == '\t' || line.back() == '\r')) line.remove_suffix(1);
+    if (line.substr(0, kRootNameTag.size()) == kRootNameTag) {
+      const std::string name(line.substr(kRootNameTag.size()));
+      if (name.empty() || s.find(name) > 0) return "root";
+      return name;
+    }
+    at = end + 1;
+  }
+  return "root";
+}
+
+}  // namespace
+
 
 using namespace acclaim_detail;
 
@@ -41,7 +71,7 @@ Result<Motion> acclaim_to_gmr(const AsfSkeleton& s, const AmcMotion& m, const Ac
     if (bone.parent >= static_cast<int>(b)) return make_error("ASF bone '" + bone.name + "' comes before its parent");
     Joint& j = joints[b];
     Plan& p = plans[b];
-    j.name = bone.parent < 0 ? "root" : bone.name;
+    j.name = bone.parent < 0 ? root_name(s) : bone.name;
     j.parent = bone.parent;
     j.offset = bone.parent < 0 ? Eigen::Vector3d(bone.position * scale) : Eigen::Vector3d(bone.direction * (bone.length * scale));
     if (!j.offset.allFinite()) {
@@ -126,12 +156,13 @@ Result<Motion> acclaim_to_gmr(const AsfSkeleton& s, const AmcMotion& m, const Ac
   return out;
 }
 
-Result<Motion> read_asf_amc(const std::filesystem::path& asf, const std::filesystem::path& amc, Warnings* out_warnings) {
+Result<Motion> read_asf_amc(const std::filesystem::path& asf, const std::filesystem::path& amc, Warnings* out_warnings,
+                            const AcclaimToGmrOptions& options) {
   auto skeleton = read_asf(asf, out_warnings);
   if (!skeleton) return skeleton.error();
   auto motion = read_amc(amc, *skeleton, out_warnings);
   if (!motion) return motion.error();
-  return acclaim_to_gmr(*skeleton, *motion);
+  return acclaim_to_gmr(*skeleton, *motion, options);
 }
 
 // ---- GMR -> Acclaim ---------------------------------------------------------
@@ -182,6 +213,10 @@ Result<AcclaimModel> gmr_to_acclaim(const Motion& motion) {
   as.name = "gmr";
   as.units = AsfUnits{};  // mass 1, length 1, degrees
   as.documentation = "written by gmr from a GMR (pre-rotation) motion";
+  // ASF calls its root `root`; the joint's own name stays in the
+  // documentation, where acclaim_to_gmr finds it again.
+  if (const std::string& rn = sk.joint(root).name; rn != "root" && rn.find_first_of("\r\n") == std::string::npos)
+    as.documentation += "\n" + std::string(kRootNameTag) + rn;
   // For each bone: which channel feeds each dof value (-1 = computed translation).
   std::vector<std::vector<int>> sources(order.size());
   for (std::size_t i = 0; i < order.size(); ++i) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <system_error>
 
 #include "gmr/acclaim/convert.h"
@@ -76,7 +77,17 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
   if (ext == ".amc") {
     auto asf = find_asf(path, options);
     if (!asf) return asf.error();
-    return read_asf_amc(*asf, path, out_warnings);
+    AcclaimToGmrOptions acclaim;
+    if (options.amc_fps != 0.0) {
+      if (!std::isfinite(options.amc_fps) || options.amc_fps < 0.0) {
+        Error e;
+        e.file = path.string();
+        e.message = "the frame rate of an .amc must be a positive number of frames per second";
+        return e;
+      }
+      acclaim.frame_time = 1.0 / options.amc_fps;
+    }
+    return read_asf_amc(*asf, path, out_warnings, acclaim);
   }
   // ---- .gmrb (GMR binary: gmr/io/gmrb.h)
   if (ext == ".gmrb") return read_gmrb(path);

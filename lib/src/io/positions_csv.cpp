@@ -1,5 +1,7 @@
 #include "gmr/io/positions_csv.h"
 
+#include <Eigen/Geometry>
+
 #include <charconv>
 #include <string>
 
@@ -50,6 +52,60 @@ void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::
       for (int i = 0; i < 3; ++i) {
         buf += ',';
         append_number(buf, p[i]);
+      }
+      buf += '\n';
+    }
+    if (buf.size() > (1 << 16) - 1024) {
+      out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+      buf.clear();
+    }
+  }
+  out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+}
+
+void write_poses_csv_header(std::ostream& out, OrientationColumns columns) {
+  out << (columns == OrientationColumns::kQuaternion ? "frame,joint,x,y,z,qw,qx,qy,qz\n"
+                                                     : "frame,joint,x,y,z,r00,r01,r02,r10,r11,r12,r20,r21,r22\n");
+}
+
+void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
+                          std::span<const Eigen::Matrix3d> orientations, std::size_t first_frame,
+                          OrientationColumns columns) {
+  const std::size_t joints = skeleton.size();
+  if (joints == 0) return;
+  std::vector<std::string> names;
+  names.reserve(joints);
+  for (const Joint& j : skeleton.joints()) names.push_back(csv_field(j.name));
+  std::string buf;
+  buf.reserve(1 << 16);
+  const std::size_t frames = positions.size() / joints;
+  for (std::size_t f = 0; f < frames; ++f) {
+    const std::string frame = std::to_string(first_frame + f);
+    for (std::size_t j = 0; j < joints; ++j) {
+      const std::size_t k = f * joints + j;
+      buf += frame;
+      buf += ',';
+      buf += names[j];
+      for (int i = 0; i < 3; ++i) {
+        buf += ',';
+        append_number(buf, positions[k][i]);
+      }
+      const Eigen::Matrix3d& w = orientations[k];
+      if (columns == OrientationColumns::kQuaternion) {
+        Eigen::Quaterniond q(w);
+        q.normalize();
+        if (q.w() < 0) q.coeffs() = -q.coeffs();  // one of the two: qw >= 0
+        for (double v : {q.w(), q.x(), q.y(), q.z()}) {
+          buf += ',';
+          append_number(buf, v);
+        }
+      } else {
+        for (int r = 0; r < 3; ++r) {
+          for (int c = 0; c < 3; ++c) {
+            buf += ',';
+            append_number(buf, w(r, c));
+          }
+        }
       }
       buf += '\n';
     }

@@ -221,8 +221,12 @@ TEST(WritesAndReadsBackAGmrMotion, GmrToAcclaim) {
   ASSERT_TRUE(write_asf_amc(m, dir / "x.asf", dir / "x.amc").ok());
   auto g = read_asf_amc(dir / "x.asf", dir / "x.amc");
   ASSERT_TRUE(g.ok()) << g.error().to_string();
-  // Names kept (the root becomes `root`), positions kept.
-  EXPECT_EQ(g->skeleton.joint(0).name, "root");
+  // Names kept (the root is `root` in the ASF, its name on a documentation
+  // line that gmr reads back), positions kept.
+  EXPECT_EQ(g->skeleton.joint(0).name, "Hips");
+  const std::string asf = read_file(dir / "x.asf").value();
+  EXPECT_NE(asf.find("\n   gmr root name: Hips\n"), std::string::npos) << asf;
+  EXPECT_NE(asf.find("\n:root\n"), std::string::npos);
   EXPECT_EQ(g->skeleton.joint(1).name, "Spine");
   EXPECT_EQ(g->skeleton.joint(2).name, "Spine_End");
   const auto a = compute_positions(m);
@@ -286,7 +290,10 @@ TEST(EveryCorpusBvhExports, GmrToAcclaim) {
     ASSERT_EQ(bones.size(), sk.size());
     const auto a = compute_positions(*bvh);
     const auto b = acclaim_positions(model->skeleton, model->motion);
-    // Bone i <-> GMR joint of the same name (the root is renamed `root`).
+    // The root's own name survives in the documentation, read back by acclaim_to_gmr.
+    const Motion back = acclaim_to_gmr(model->skeleton, model->motion).value();
+    EXPECT_EQ(back.skeleton.joint(back.skeleton.roots()[0]).name, sk.joint(sk.roots()[0]).name);
+    // Bone i <-> GMR joint of the same name (the root is `root` in the ASF).
     std::vector<Eigen::Vector3d> reordered(b.size());
     for (std::size_t i = 0; i < bones.size(); ++i) {
       const int j = i == 0 ? sk.roots()[0] : sk.find(bones[i].name);

@@ -1,6 +1,7 @@
 // Acclaim <-> GMR: an ASF/AMC pair as a GMR (pre-rotation) motion and back.
 // Conversion to GMR is exact in positions: a bone's joint sits at the bone's
-// tip, named after the bone; the root joint is `root`.
+// tip, named after the bone; the root joint is `root` (or the name a gmr-written
+// ASF kept for it: see gmr_to_acclaim).
 #pragma once
 
 #include <filesystem>
@@ -18,7 +19,8 @@ struct AcclaimToGmrOptions {
 };
 
 // Acclaim -> GMR (pre-rotation), one joint per bone in skeleton.bones order
-// (joint j = bone j, the root is `root`):
+// (joint j = bone j, the root is `root`, unless the documentation holds a line
+// `gmr root name: NAME` that names no bone: then NAME):
 // - offset = direction * length * length_scale (root: position * length_scale);
 // - rotation channels: none for a bone with no rotation dof; when the axis is
 //   zero (C = I) the dof rotations themselves, listed in reverse dof order
@@ -35,9 +37,10 @@ Result<Motion> acclaim_to_gmr(const AsfSkeleton& skeleton, const AmcMotion& moti
                               const AcclaimToGmrOptions& options = {});
 
 // Reads an ASF skeleton and an AMC motion and converts them to a GMR
-// (pre-rotation) motion with acclaim_to_gmr (default options).
+// (pre-rotation) motion with acclaim_to_gmr (AMC files hold no frame rate:
+// options.frame_time, 1/120 s unless said otherwise).
 Result<Motion> read_asf_amc(const std::filesystem::path& asf, const std::filesystem::path& amc,
-                            Warnings* out_warnings = nullptr);
+                            Warnings* out_warnings = nullptr, const AcclaimToGmrOptions& options = {});
 
 struct AcclaimModel {
   AsfSkeleton skeleton;
@@ -45,7 +48,9 @@ struct AcclaimModel {
 };
 
 // GMR (pre-rotation) -> Acclaim, for a motion with a single root:
-// - the root becomes `root`: position = its offset with the components that
+// - the root becomes `root` (ASF's name for it; the joint's own name goes to a
+//   documentation line `gmr root name: NAME`, which acclaim_to_gmr reads back):
+//   position = its offset with the components that
 //   have position channels set to 0, order = TX/TY/TZ for its position
 //   channels then RX/RY/RZ for its rotation channels in reverse;
 // - every other joint becomes a bone named after it: direction = offset /

@@ -18,6 +18,9 @@ namespace gmr {
 
 struct LoadOptions {
   std::filesystem::path asf;  // skeleton for .amc input; empty: look for it in the same folder (above)
+  // Frames per second of .amc input (AMC files do not say): 0 means 120, the
+  // rate of the CMU captures. Other formats carry their own.
+  double amc_fps = 0.0;
   // Saving .amc: an existing skeleton file with other content is replaced
   // only when this is true (otherwise the save fails and writes nothing).
   bool replace_asf = false;

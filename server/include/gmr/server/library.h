@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "gmr/io/motion_file.h"
 #include "gmr/motion/motion.h"
 
 namespace gmr::server {
@@ -47,10 +48,12 @@ using LoadProgress = std::function<void(std::size_t done, std::size_t total, con
 // one, or the one whose stem prefixes the .amc's) under `dir`, recursively, on
 // `threads` threads (0: hardware concurrency). Never stops at a bad file: it is
 // listed in `rejected` with the reason. Each motion is converted to
-// pre-rotation and checked against `limits`. Fails only when `dir` is not a
-// readable folder.
+// pre-rotation and checked against `limits`. `file_options` applies to every file
+// (amc_fps: the frame rate of .amc files, which do not hold one). Fails only
+// when `dir` is not a readable folder.
 Result<LibraryLoad> load_library(const std::filesystem::path& dir, unsigned threads = 0,
-                                 const LoadProgress& progress = {}, const MotionLimits& limits = {});
+                                 const LoadProgress& progress = {}, const MotionLimits& limits = {},
+                                 const LoadOptions& file_options = {});
 
 // The built-in demo library (gmr/demo/demo_library.h).
 std::vector<LibraryEntry> builtin_library();
