@@ -97,7 +97,7 @@ void run_strip(const OpOptions& o) {
   std::vector<RemovedJoint> removed;
   const Motion stripped = take(strip_dummies(m, &removed));
   save(stripped, o);
-  for (const RemovedJoint& r : removed) std::printf("removed %s (zero-length, child of %s)\n", r.name.c_str(), r.parent.c_str());
+  for (const RemovedJoint& r : removed) std::printf("removed %s (zero-length, merged into %s)\n", r.name.c_str(), r.merged_into.c_str());
   if (removed.empty()) std::printf("no zero-length joints to remove\n");
   // BVH cannot let siblings rotate independently without zero-length joints:
   // say so when the writer had to insert some back.

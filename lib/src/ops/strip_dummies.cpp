@@ -13,20 +13,67 @@ using namespace detail;
 Result<Motion> strip_dummies(const Motion& motion, std::vector<RemovedJoint>* out_removed) {
   if (Status st = check_pre(motion, "strip dummies"); !st) return st.error();
   Work w = Work::from_motion(motion);
-  std::vector<RemovedJoint> removed;
-  // Parents come first, so a chain of dummies collapses from the top.
-  for (int d = 0; d < w.size(); ++d) {
-    Track& t = w[d];
-    if (t.parent == kNoParent || !t.pos_ch.empty() || t.offset != Eigen::Vector3d::Zero()) continue;
-    const std::vector<int> kids = w.children(d);
-    if (kids.empty()) continue;
-    // [R_d | 0][R_c | R_c t_c] = [R_d R_c | R_d R_c t_c]: the child takes R_d R_c.
-    for (int c : kids) {
-      detail::set_product(w[c], w[d], false, w[c], w.frames);
-      w[c].parent = t.parent;
+  const int n = w.size();
+  const auto at = [](int j) { return static_cast<std::size_t>(j); };
+  // A zero-length bone joins j to its parent: positions equal in every frame.
+  auto zero_bone = [&](int j) {
+    const Track& t = w[j];
+    return t.parent != kNoParent && t.pos_ch.empty() && t.offset == Eigen::Vector3d::Zero();
+  };
+  // Bones at each joint, parent and children alike: the same wherever the roots are.
+  std::vector<int> bones(at(n), 0);
+  for (int j = 0; j < n; ++j) {
+    if (w[j].parent == kNoParent) continue;
+    ++bones[at(j)];
+    ++bones[at(w[j].parent)];
+  }
+  // The top of j's group: its highest ancestor through zero-length bones.
+  std::vector<int> top(at(n), -1);
+  for (int j = 0; j < n; ++j) {
+    std::vector<int> path;
+    int k = j;
+    while (top[at(k)] < 0 && zero_bone(k)) {
+      path.push_back(k);
+      k = w[k].parent;
     }
-    t.removed = true;
-    removed.push_back(RemovedJoint{t.name, w[t.parent].name});
+    const int t = top[at(k)] < 0 ? k : top[at(k)];
+    top[at(k)] = t;
+    for (int p : path) top[at(p)] = t;
+  }
+  // The member whose name the group keeps.
+  std::vector<int> keeper(at(n), -1);
+  for (int j = 0; j < n; ++j) {
+    int& k = keeper[at(top[at(j)])];
+    if (k < 0 || bones[at(j)] > bones[at(k)] || (bones[at(j)] == bones[at(k)] && w[j].name < w[k].name)) k = j;
+  }
+  std::vector<std::string> names(at(n));
+  for (int j = 0; j < n; ++j) names[at(j)] = w[j].name;
+
+  std::vector<RemovedJoint> removed;
+  // Every member but the top goes, parents first, so a chain collapses from
+  // the top: [R_d | 0][R_c | R_c t_c] = [R_d R_c | R_d R_c t_c].
+  std::vector<bool> done(at(n), false);
+  std::vector<int> order;
+  for (int j = 0; j < n; ++j) {
+    std::vector<int> chain;
+    for (int k = j; k != kNoParent && !done[at(k)]; k = w[k].parent) chain.push_back(k);
+    for (auto it = chain.rbegin(); it != chain.rend(); ++it) {
+      done[at(*it)] = true;
+      order.push_back(*it);
+    }
+  }
+  for (int d : order) {
+    if (top[at(d)] == d) continue;
+    for (int c : w.children(d)) {
+      detail::set_product(w[c], w[d], false, w[c], w.frames);
+      w[c].parent = w[d].parent;
+    }
+    w[d].removed = true;
+  }
+  for (int j = 0; j < n; ++j) {
+    const int k = keeper[at(top[at(j)])];
+    if (j != k) removed.push_back(RemovedJoint{names[at(j)], names[at(k)]});
+    if (top[at(j)] == j) w[j].name = names[at(k)];
   }
   auto out = w.to_motion();
   if (out && out_removed) *out_removed = std::move(removed);

@@ -28,10 +28,11 @@ Result<MotionView> apply_view(const Motion& source, const ViewSpec& spec) {
   if (!spec.relative_to.empty()) {
     view.viewer = view.motion.skeleton.find(spec.relative_to);
     if (view.viewer < 0) {
-      const bool was_removed = std::any_of(view.removed.begin(), view.removed.end(),
-                                           [&](const RemovedJoint& r) { return r.name == spec.relative_to; });
+      const auto it = std::find_if(view.removed.begin(), view.removed.end(),
+                                   [&](const RemovedJoint& r) { return r.name == spec.relative_to; });
       return make_error("unknown joint '" + spec.relative_to + "'" +
-                        (was_removed ? " (removed as a zero-length joint by strip-dummies)" : ""));
+                        (it != view.removed.end() ? " (zero-length: merged into '" + it->merged_into + "' by strip-dummies)"
+                                                  : std::string()));
     }
   }
   for (const Joint& j : source.skeleton.joints()) {

@@ -230,17 +230,40 @@ TEST(StripDummiesOnCmuFiles, RemovesOnlyZeroLengthJoints) {
     for (const auto& r : removed) names.push_back(r.name);
     EXPECT_NE(std::find(names.begin(), names.end(), "LHipJoint"), names.end());
     EXPECT_NE(std::find(names.begin(), names.end(), "RHipJoint"), names.end());
-    // Exactly the zero-length joints with children went; every other joint stays
-    // where it was in every frame.
-    for (int j = 0; j < static_cast<int>(l.pre.skeleton.size()); ++j) {
-      const Joint& joint = l.pre.skeleton.joint(j);
-      const bool dummy = joint.parent != kNoParent && joint.offset == Eigen::Vector3d::Zero() &&
-                         !joint.has_translation() && !l.pre.skeleton.children(j).empty();
-      EXPECT_EQ(s.skeleton.find(joint.name) < 0, dummy) << joint.name;
+    EXPECT_GE(s.skeleton.find("Hips"), 0);
+    // Only joints at the place of another went (every frame), and every
+    // other joint stays where it was.
+    const std::size_t n = l.pre.skeleton.size();
+    const auto all = positions_by_name(l.pre, l.pre.skeleton);
+    for (const auto& r : removed) {
+      const int d = l.pre.skeleton.find(r.name), k = l.pre.skeleton.find(r.merged_into);
+      ASSERT_GE(k, 0) << r.merged_into;
+      for (std::size_t f = 0; f < l.pre.frame_count; ++f) ASSERT_EQ(all[f * n + d], all[f * n + k]) << r.name;
     }
+    EXPECT_EQ(s.skeleton.size() + removed.size(), n);
     const auto p = positions_by_name(s, s.skeleton);
     const auto q = positions_by_name(l.pre, s.skeleton);
     EXPECT_LE(test::compare_positions(p, q, s.skeleton.size()).max_error, 1e-9 * l.size);
+
+    // The rule does not depend on where a tree's root is: rooted at the head,
+    // or at the end of a limb, the same joints go and the rest stand as before.
+    // (Several roots would split the tree: a split root is a tree of its own.)
+    const int head = l.pre.skeleton.find("Head");
+    ASSERT_GE(head, 0);
+    const int last = static_cast<int>(n) - 1;  // a joint at the end of some limb
+    for (const std::vector<int>& idx : {std::vector<int>{head}, std::vector<int>{last}}) {
+      const std::string roots = l.pre.skeleton.joint(idx.front()).name;
+      auto moved = set_roots(l.pre, idx);
+      ASSERT_TRUE(moved.ok()) << moved.error().to_string();
+      std::vector<RemovedJoint> removed_there;
+      auto stripped = strip_dummies(*moved, &removed_there);
+      ASSERT_TRUE(stripped.ok()) << stripped.error().to_string();
+      const Motion& t = *stripped;
+      ASSERT_EQ(t.skeleton.size(), s.skeleton.size()) << roots;
+      for (const Joint& j : s.skeleton.joints()) EXPECT_GE(t.skeleton.find(j.name), 0) << j.name << " rooted at " << roots;
+      const auto there = positions_by_name(t, s.skeleton);
+      EXPECT_LE(test::compare_positions(p, there, s.skeleton.size()).max_error, 1e-9 * l.size) << roots;
+    }
   }
   EXPECT_GE(cmu_files, 5);
 }

@@ -378,15 +378,19 @@ Motion with_dummy() {
 }
 
 TEST(StripDummies, RemovesZeroLengthJointsExactly) {
+  // Hips (one bone) and Dummy (three: Hips, Leg, Spine) are one place: the
+  // joint with more bones keeps its name.
   const Motion pre = to_pre_rotation(with_dummy()).value();
   std::vector<RemovedJoint> removed;
   const Motion s = strip_dummies(pre, &removed).value();
   expect_valid(s);
   ASSERT_EQ(removed.size(), 1u);
-  EXPECT_EQ(removed[0].name, "Dummy");
-  EXPECT_EQ(removed[0].parent, "Hips");
-  EXPECT_EQ(s.skeleton.find("Dummy"), -1);
-  EXPECT_EQ(s.skeleton.joint(s.skeleton.find("Leg")).parent, s.skeleton.find("Hips"));
+  EXPECT_EQ(removed[0].name, "Hips");
+  EXPECT_EQ(removed[0].merged_into, "Dummy");
+  EXPECT_EQ(s.skeleton.find("Hips"), -1);
+  EXPECT_EQ(s.skeleton.size(), pre.skeleton.size() - 1);
+  EXPECT_EQ(s.skeleton.joint(s.skeleton.find("Leg")).parent, s.skeleton.find("Dummy"));
+  EXPECT_EQ(s.skeleton.joint(s.skeleton.find("Dummy")).parent, kNoParent);
   EXPECT_LE(position_error(s, pre), 1e-12 * skeleton_size(pre));
   // Stripping again finds nothing.
   std::vector<RemovedJoint> again;
@@ -406,11 +410,15 @@ TEST(StripDummies, RandomForestsKeepPositions) {
     const Motion s = strip_dummies(pre, &removed).value();
     expect_valid(s);
     EXPECT_EQ(s.skeleton.size() + removed.size(), pre.skeleton.size());
+    // Each removed joint stood where the joint it was merged into stands.
+    const auto all = test::positions_by_name(pre, pre.skeleton);
+    const std::size_t n = pre.skeleton.size();
     for (const auto& r : removed) {
-      const Joint& d = pre.skeleton.joint(pre.skeleton.find(r.name));
-      EXPECT_EQ(d.offset, Eigen::Vector3d::Zero());
-      EXPECT_FALSE(d.has_translation());
-      EXPECT_FALSE(pre.skeleton.children(pre.skeleton.find(r.name)).empty());
+      const int d = pre.skeleton.find(r.name), k = pre.skeleton.find(r.merged_into);
+      ASSERT_GE(d, 0);
+      ASSERT_GE(k, 0);
+      EXPECT_GE(s.skeleton.find(r.merged_into), 0);
+      for (std::size_t f = 0; f < pre.frame_count; ++f) EXPECT_EQ(all[f * n + d], all[f * n + k]) << r.name;
     }
     // Positions of the kept joints are unchanged.
     EXPECT_LE(position_error(s, pre), 1e-12 * skeleton_size(pre)) << "seed " << seed;
