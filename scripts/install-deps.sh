@@ -20,6 +20,7 @@ packages=(
   clang libclang-rt-14-dev  # the sanitizer build uses clang (gmr builds with GCC and clang)
   blender                   # the interop test: Blender's own BVH importer reads what gmr writes
   nodejs npm                # the interop test: three.js's BVHLoader (npm, tests/interop/package.json)
+  libassimp-dev             # the interop test: Assimp's BVH importer
 )
 
 missing=()

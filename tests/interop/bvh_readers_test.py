@@ -12,11 +12,13 @@ the takes' own rotations, Native Euler) and three.js's BVHLoader (npm `three`,
 played with an AnimationMixer) read them, and every joint's world
 position in every frame must equal `gmr positions` of the original take to
 1e-4 of the skeleton's size (the diagonal of its frame-0 bounding box).
-three.js reads one ROOT only, so it gets forest1 and not forest; it cannot
+Assimp (libassimp-dev, through tests/interop/assimp_bvh_positions.cpp) reads
+the same files as three.js but every take. three.js and Assimp read one ROOT
+only, so they get forest1 and not forest; it cannot
 animate bones whose names hold one of []:/. (Mixamo's "mixamorig:Hips"), so
 takes with such names are left out of its part.
 
-  bvh_readers_test.py REPO_ROOT GMR_BIN_DIR [--only SUBSTRING] [--keep DIR]
+  bvh_readers_test.py REPO_ROOT GMR_BIN_DIR --assimp READER [--only SUBSTRING] [--keep DIR]
 
 Outside CI a missing corpus, Blender or node/three skips (exit 77); under
 CI=true it fails.
@@ -147,6 +149,7 @@ def main():
     ap.add_argument("bindir")
     ap.add_argument("--only", default="")
     ap.add_argument("--keep", default="")
+    ap.add_argument("--assimp", default="", help="gmr_assimp_bvh_positions (built when libassimp-dev is installed)")
     args = ap.parse_args()
     repo = Path(args.repo).resolve()
     gmr = str(Path(args.bindir) / "gmr")
@@ -160,6 +163,8 @@ def main():
         skip_or_fail("Blender is not installed (scripts/install-deps.sh installs it)")
     if not node or not three.is_file():
         skip_or_fail("node or npm package three missing (scripts/install-deps.sh installs them)")
+    if not args.assimp or not Path(args.assimp).is_file():
+        skip_or_fail("the Assimp reader was not built (libassimp-dev missing at configure time)")
 
     takes = sorted((data / "bvh").rglob("*.bvh")) + sorted((data / "asfamc").rglob("*.amc"))
     takes = [t for t in takes if args.only in str(t)]
@@ -223,6 +228,16 @@ def main():
             continue  # three.js cannot animate these names, not even in the original take
         three_cases.append((key, variant, bvh))
         three_manifest.append({"bvh": bvh, "out": f"{bvh}.three.csv", "frames": refs[key][1]})
+    # Assimp, like three.js, reads one ROOT only; it takes any name.
+    assimp_cases = [c for c in cases if c[1] != "forest"]
+    (work / "assimp.txt").write_text("".join(f"{bvh}\t{bvh}.assimp.csv\t{refs[key][1]}\n"
+                                             for key, variant, bvh in assimp_cases))
+    a = subprocess.run([args.assimp, str(work / "assimp.txt")], capture_output=True, text=True)
+    for line in a.stdout.splitlines():
+        if "FAILED" in line:
+            failures.append(line)
+    if a.returncode != 0 and not any("assimp-bvh" in f for f in failures):
+        failures.append(f"the Assimp reader exited {a.returncode}: {a.stderr[-2000:]}")
     (work / "blender.json").write_text(json.dumps(blender_manifest))
     (work / "three.json").write_text(json.dumps(three_manifest))
     here = repo / "tests" / "interop"
@@ -242,7 +257,7 @@ def main():
     if t.returncode != 0 and not any("three-bvh" in f for f in failures):
         failures.append(f"node exited {t.returncode}: {t.stderr[-2000:]}")
 
-    checked = {"blender": set(), "three": set()}
+    checked = {"blender": set(), "three": set(), "assimp": set()}
     uncompared_end_sites = 0
     for (key, variant, bvh), mode in blender_runs:
         if (key, variant) not in layouts:
@@ -277,24 +292,26 @@ def main():
             failures.append(f"blender {case}: joints not read: {missing[:5]}")
         else:
             checked["blender"].add((key, variant, mode))
-    for key, variant, bvh in three_cases:
-        if (key, variant) not in layouts:
-            continue
-        order, nodes = layouts[(key, variant)]
-        ref, frames, tol, take = refs[key]
-        case = f"{take.relative_to(data)} [{variant}]"
-        path = Path(f"{bvh}.three.csv")
-        if not path.is_file():
-            continue
-        got_raw, _ = read_positions(str(path))
-        got = {order[k]: got_raw.get(f"#{k}", []) for k in range(len(order))}
-        problem, worst, missing = compare("three.js", case, ref, got, frames, tol)
-        if problem:
-            failures.append(problem)
-        elif missing:
-            failures.append(f"three.js {case}: joints not read: {missing[:5]}")
-        else:
-            checked["three"].add((key, variant))
+    # three.js and Assimp: every node in file order, End Sites included.
+    for reader, suffix, reader_cases in (("three.js", "three", three_cases), ("assimp", "assimp", assimp_cases)):
+        for key, variant, bvh in reader_cases:
+            if (key, variant) not in layouts:
+                continue
+            order, nodes = layouts[(key, variant)]
+            ref, frames, tol, take = refs[key]
+            case = f"{take.relative_to(data)} [{variant}]"
+            path = Path(f"{bvh}.{suffix}.csv")
+            if not path.is_file():
+                continue
+            got_raw, _ = read_positions(str(path))
+            got = {order[k]: got_raw.get(f"#{k}", []) for k in range(len(order))}
+            problem, worst, missing = compare(reader, case, ref, got, frames, tol)
+            if problem:
+                failures.append(problem)
+            elif missing:
+                failures.append(f"{reader} {case}: joints not read: {missing[:5]}")
+            else:
+                checked[suffix].add((key, variant))
 
     n_takes = len(refs)
     three_takes = len({c[0] for c in three_cases})
@@ -302,9 +319,11 @@ def main():
     print(f"blender: {len(checked['blender'])} of {len(blender_runs)} imports equal to gmr positions "
           f"({uncompared_end_sites} End Sites not shown by Blender as a bone tail)")
     print(f"three.js: {len(checked['three'])} of {len(three_cases)} files equal to gmr positions")
+    print(f"assimp: {len(checked['assimp'])} of {len(assimp_cases)} files equal to gmr positions")
     if not args.only and n_takes < MIN_TAKES:
         failures.append(f"only {n_takes} takes found under {data}: the corpus has {MIN_TAKES}")
-    if not failures and (len(checked["blender"]) != len(blender_runs) or len(checked["three"]) != len(three_cases)):
+    if not failures and (len(checked["blender"]) != len(blender_runs) or len(checked["three"]) != len(three_cases)
+                         or len(checked["assimp"]) != len(assimp_cases)):
         failures.append("some files were not checked")
     for f in failures:
         print(f"FAIL: {f}")

@@ -222,6 +222,11 @@ void unambiguous_translation(Track& t, std::size_t frames, bool root) {
   }
   detail::set_translations(t, v, frames, true, Eigen::Vector3d::Zero());
   t.offset = Eigen::Vector3d::Zero();
+  // Assimp reads position channels only on a joint with six channels.
+  if (t.rot_ch.empty()) {
+    t.rot_ch = {ChannelType::kZrotation, ChannelType::kYrotation, ChannelType::kXrotation};
+    t.rot_v.assign(frames * 3, 0.0);
+  }
 }
 
 }  // namespace
@@ -258,9 +263,9 @@ Result<Motion> to_bvh_interchange(const Motion& motion, const BvhExportOptions& 
     // be lost. The first root carries its position instead.
     for (Track& t : w.tracks) {
       if (t.parent != kNoParent) continue;
-      const std::vector<Eigen::Vector3d> v(frames, t.offset);
-      detail::set_translations(t, v, frames, true, t.offset);
-      t.offset = Eigen::Vector3d::Zero();
+      t.pos_ch = {ChannelType::kXposition};  // made the full six by unambiguous_translation
+      t.pos_v.assign(frames, t.offset.x());
+      unambiguous_translation(t, frames, true);
       break;
     }
   }

@@ -36,11 +36,12 @@ struct BvhExportOptions {
 // three.js and Assimp read with the same positions as gmr (docs/gmr-format.md,
 // "BVH that other programs read"): every joint has 0 or 3 rotation channels
 // (missing axes added with zero angles, other layouts re-encoded); position
-// channels are none or all three with OFFSET 0 (a non-root joint whose
-// position channels never change gets them as its OFFSET); a motion with
-// frames but no channel at all gets position channels on its first root (its
-// rows would otherwise be blank lines, which readers skip); soft links are
-// dropped. Every joint keeps its name and world position in every frame.
+// channels are none or all three with OFFSET 0, and come with three rotation
+// channels (Assimp reads positions only from six-channel joints); a non-root
+// joint whose position channels never change gets them as its OFFSET; a
+// motion with frames but no channel at all gets six channels on its first
+// root (its rows would otherwise be blank lines, which readers skip); soft
+// links are dropped. Every joint keeps its name and world position in every frame.
 Result<Motion> to_bvh_interchange(const Motion& motion, const BvhExportOptions& options = {});
 
 }  // namespace gmr
