@@ -28,39 +28,33 @@ void append_number(std::string& out, double v) {
   out.append(buf, detail::format_shortest(buf, v));
 }
 
+// ",qw,qx,qy,qz" (qw >= 0: one of the two quaternions) or ",r00,...,r22".
+void append_orientation(std::string& buf, const Eigen::Matrix3d& w, OrientationColumns columns) {
+  if (columns == OrientationColumns::kQuaternion) {
+    Eigen::Quaterniond q(w);
+    q.normalize();
+    if (q.w() < 0) q.coeffs() = -q.coeffs();
+    for (double v : {q.w(), q.x(), q.y(), q.z()}) {
+      buf += ',';
+      append_number(buf, v);
+    }
+    return;
+  }
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      buf += ',';
+      append_number(buf, w(r, c));
+    }
+  }
+}
+
 }  // namespace
 
 void write_positions_csv_header(std::ostream& out) { out << "frame,joint,x,y,z\n"; }
 
 void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
                               std::size_t first_frame) {
-  const std::size_t joints = skeleton.size();
-  if (joints == 0) return;
-  std::vector<std::string> names;
-  names.reserve(joints);
-  for (const Joint& j : skeleton.joints()) names.push_back(csv_field(j.name));
-  std::string buf;
-  buf.reserve(1 << 16);
-  const std::size_t frames = positions.size() / joints;
-  for (std::size_t f = 0; f < frames; ++f) {
-    const std::string frame = std::to_string(first_frame + f);
-    for (std::size_t j = 0; j < joints; ++j) {
-      const Eigen::Vector3d& p = positions[f * joints + j];
-      buf += frame;
-      buf += ',';
-      buf += names[j];
-      for (int i = 0; i < 3; ++i) {
-        buf += ',';
-        append_number(buf, p[i]);
-      }
-      buf += '\n';
-    }
-    if (buf.size() > (1 << 16) - 1024) {
-      out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
-      buf.clear();
-    }
-  }
-  out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+  write_poses_csv_rows(out, skeleton, positions, {}, first_frame, OrientationColumns::kQuaternion);
 }
 
 void write_poses_csv_header(std::ostream& out, OrientationColumns columns) {
@@ -90,23 +84,7 @@ void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span
         buf += ',';
         append_number(buf, positions[k][i]);
       }
-      const Eigen::Matrix3d& w = orientations[k];
-      if (columns == OrientationColumns::kQuaternion) {
-        Eigen::Quaterniond q(w);
-        q.normalize();
-        if (q.w() < 0) q.coeffs() = -q.coeffs();  // one of the two: qw >= 0
-        for (double v : {q.w(), q.x(), q.y(), q.z()}) {
-          buf += ',';
-          append_number(buf, v);
-        }
-      } else {
-        for (int r = 0; r < 3; ++r) {
-          for (int c = 0; c < 3; ++c) {
-            buf += ',';
-            append_number(buf, w(r, c));
-          }
-        }
-      }
+      if (!orientations.empty()) append_orientation(buf, orientations[k], columns);
       buf += '\n';
     }
     if (buf.size() > (1 << 16) - 1024) {

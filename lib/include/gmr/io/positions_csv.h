@@ -26,7 +26,8 @@ void write_positions_csv_header(std::ostream& out);
 // the joint's frame to world axes.
 enum class OrientationColumns { kQuaternion, kMatrix };
 void write_poses_csv_header(std::ostream& out, OrientationColumns columns);
-// Rows of positions and orientations (both frame-major, skeleton.size() per frame).
+// Rows of positions and orientations (both frame-major, skeleton.size() per
+// frame); with no orientations, the rows of write_positions_csv_rows.
 void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
                           std::span<const Eigen::Matrix3d> orientations, std::size_t first_frame,
                           OrientationColumns columns);
