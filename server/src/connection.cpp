@@ -233,6 +233,7 @@ void Connection::flush() {
   }
   frames_.clear();
   frame_bytes_ = 0;
+  writing_frames_ = !hold_heads_.empty();
   writing_ = true;
   write_started_ = Clock::now();
   if (socket_.tls()) {
@@ -258,6 +259,7 @@ void Connection::flush() {
       return;
     }
     self->last_write_ = Clock::now();
+    if (self->writing_frames_) self->last_frames_written_ = self->last_write_;
     if (self->read_paused_ && self->may_read()) {
       self->read_paused_ = false;
       self->read_prefix();
@@ -282,7 +284,10 @@ void Connection::arm_watchdog() {
       self->stop("no Hello in time");
       return;
     }
-    if (now - self->last_read_ > lim.idle_timeout) {
+    // A client that only listens to a TCP subscription is not idle while its
+    // frames are written: a dead one stops taking them, and the write
+    // timeout below closes it. Heartbeats the server writes do not count.
+    if (now - self->last_read_ > lim.idle_timeout && now - self->last_frames_written_ > lim.idle_timeout) {
       spdlog::warn("conn {}: idle for more than {} ms", self->id_, lim.idle_timeout.count());
       self->stop("idle timeout");
       return;

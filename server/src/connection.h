@@ -159,7 +159,9 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   std::vector<std::string> hold_heads_;
   std::string tls_out_;  // with TLS: the write in flight in one piece (one record per 16 KiB, not per buffer)
   bool secured_ = false;   // the TLS handshake is done (or there is no TLS): writing may start
+  bool writing_frames_ = false;  // the write in flight holds frames
   Clock::time_point write_started_{}, last_read_{}, last_write_{};
+  Clock::time_point last_frames_written_{};  // the last write that held frames completed
   net::steady_timer watchdog_;
   ConnectionCounters counters_;
 };

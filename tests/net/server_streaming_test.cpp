@@ -390,6 +390,42 @@ TEST(Streaming, HeartbeatsKeepAQuietClientConnected) {
   EXPECT_TRUE(quiet.wait_closed(std::chrono::seconds(10)));
 }
 
+// A client that only listens (no heartbeat, no request) keeps a TCP
+// subscription streaming past the idle timeout: the frames the server writes
+// are the activity. Once its subscription ends it is idle, and closed.
+TEST(Streaming, AListenOnlyTcpSubscriberOutlivesTheIdleTimeout) {
+  server::ServerConfig cfg;
+  cfg.idle_timeout = std::chrono::milliseconds(300);
+  cfg.heartbeat_interval = std::chrono::milliseconds(100);
+  TestServer s(cfg);
+  RawConnection c(s.port());
+  c.handshake();
+  auto create = request(2);
+  create.mutable_create_view()->set_motion("walk");
+  c.send(create);
+  const auto view = c.reply();
+  ASSERT_TRUE(view && view->has_view());
+  auto sub = request(3);
+  sub.mutable_subscribe()->set_view_id(view->view().view_id());
+  sub.mutable_subscribe()->set_rate_hz(50);
+  sub.mutable_subscribe()->set_max_frames(75);  // 1.5 s: 5 idle timeouts
+  c.send(sub);
+  const auto subscribed = c.reply();
+  ASSERT_TRUE(subscribed && subscribed->has_subscribed());
+  std::size_t frames = 0;
+  bool ended = false;
+  while (!ended && !c.closed()) {
+    const auto m = c.receive(std::chrono::seconds(5));
+    if (!m) break;
+    frames += m->has_frame() ? 1 : 0;
+    ended = m->has_subscription_ended();
+  }
+  EXPECT_TRUE(ended);
+  EXPECT_EQ(frames, 75u);
+  // Nothing more to write, nothing read: idle, closed.
+  EXPECT_TRUE(c.wait_closed(std::chrono::seconds(10)));
+}
+
 TEST(Streaming, GracefulStopEndsClientsAndReturns) {
   auto s = std::make_unique<TestServer>();
   auto c = s->connect();
