@@ -70,14 +70,35 @@ Result<int> View::joint_index(const std::string& name) const {
   return j;
 }
 
+namespace {
+
+// The same joints (names, in the same order) with the same parents and soft
+// links: what a client's joint indices and skeleton mean.
+bool same_structure(const Skeleton& a, const Skeleton& b) {
+  if (a.size() != b.size()) return false;
+  for (int j = 0; j < static_cast<int>(a.size()); ++j) {
+    const Joint& x = a.joint(j);
+    const Joint& y = b.joint(j);
+    if (x.name != y.name || x.parent != y.parent || x.soft_parent != y.soft_parent) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
 void View::replace(std::shared_ptr<const Motion> motion, int relative_to,
                    std::shared_ptr<const CompiledForm> compiled) {
   auto c = std::make_shared<ViewContent>();
   if (!compiled || compiled->motion() != motion) compiled = std::make_shared<const CompiledForm>(motion);
+  // The version moves only when what a client sees changes: the joints, their
+  // order and links, or the frame the coordinates are in. An edit that gives
+  // the same structure (a shift to the root it has, stripping a motion with no
+  // zero-length bone) keeps it.
+  const bool same = relative_to == content_->relative_to && same_structure(motion->skeleton, content_->motion->skeleton);
   c->motion = std::move(motion);
   c->compiled = std::move(compiled);
   c->relative_to = relative_to;
-  c->skeleton_version = content_->skeleton_version + 1;
+  c->skeleton_version = content_->skeleton_version + (same ? 0 : 1);
   content_ = std::move(c);
 }
 

@@ -193,7 +193,9 @@ TEST(Streaming, SharedStreamsNeverMixSkeletonVersions) {
   auto va = a->create_view("turn");
   auto vb = b->create_view("turn");
   ASSERT_TRUE(va.ok() && vb.ok());
-  auto edited = a->set_coordinates(va->id, "");  // world to world: same content, a new version
+  // To a joint's frame and back to world: the same content, a new version.
+  ASSERT_TRUE(a->set_coordinates(va->id, "head").ok());
+  auto edited = a->set_coordinates(va->id, "");
   ASSERT_TRUE(edited.ok()) << edited.error().to_string();
   ASSERT_NE(edited->skeleton_version, vb->skeleton_version);
   client::SubscribeOptions o;
@@ -364,6 +366,37 @@ TEST(Streaming, AStructureChangeMidStreamBumpsTheSkeletonVersion) {
   // Stripping nothing keeps the subscription; a viewer can be set mid-stream.
   EXPECT_TRUE(c->set_coordinates(v->id, "head").ok());
   EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+}
+
+// The skeleton version moves only when the structure or the coordinate frame
+// does: an edit that changes neither keeps it, and frames say so.
+TEST(Streaming, EditsThatChangeNothingKeepTheSkeletonVersion) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  const std::string root = v->skeleton.joint(v->skeleton.roots().front()).name;
+  auto same_root = c->shift_root(v->id, root);
+  ASSERT_TRUE(same_root.ok()) << same_root.error().to_string();
+  EXPECT_EQ(same_root->skeleton_version, v->skeleton_version) << "shift to the root it has";
+  auto stripped = c->strip_dummies(v->id);
+  ASSERT_TRUE(stripped.ok()) << stripped.error().to_string();
+  auto once = c->strip_dummies(v->id);
+  ASSERT_TRUE(once.ok());
+  EXPECT_EQ(once->skeleton_version, stripped->skeleton_version) << "nothing left to strip";
+  auto viewer = c->set_coordinates(v->id, "head");
+  ASSERT_TRUE(viewer.ok());
+  EXPECT_NE(viewer->skeleton_version, once->skeleton_version) << "another coordinate frame";
+  auto again = c->set_coordinates(v->id, "head");
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->skeleton_version, viewer->skeleton_version) << "the same viewer again";
+  auto moved = c->shift_root(v->id, "l_hand");
+  ASSERT_TRUE(moved.ok());
+  EXPECT_NE(moved->skeleton_version, again->skeleton_version) << "a new root";
+  auto q = c->query(v->id, 0, 1, false, {"head"});
+  ASSERT_TRUE(q.ok());
+  EXPECT_EQ(q->skeleton_version, moved->skeleton_version);
 }
 
 TEST(Streaming, HeartbeatsKeepAQuietClientConnected) {
