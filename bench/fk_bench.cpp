@@ -21,6 +21,7 @@
 #include "bench_data.h"
 #include "gmr/fast/fast_fk.h"
 #include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/view/viewpoint.h"
 
 namespace gmr::bench {
 namespace {
@@ -156,6 +157,43 @@ void BM_SingleGmr(benchmark::State& state) {
   run_single(state, m);
 }
 BENCHMARK(BM_SingleGmr)->Name("single_frame/gmr_one_root")->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// What a server's float32 stream does per frame and subscriber-visible view:
+// FK with orientations, then the viewpoint, quaternions and (arg 1) an
+// engine's conventions (Unreal: a mirror and a unit change) for every joint.
+void BM_ServerFrame(benchmark::State& state) {
+  const Motion& m = bvh();
+  auto cm = CompiledMotion::compile(m).value();
+  const std::size_t n = cm.joint_count();
+  std::vector<float> ws(fast::fk_workspace_size(cm)), pos(n * 3), rot(n * 9), out_p(n * 3), out_q(n * 4);
+  std::vector<int> joints(n);
+  for (std::size_t j = 0; j < n; ++j) joints[j] = static_cast<int>(j);
+#if __has_include("gmr/view/conventions.h")
+  Conventions c;
+  if (state.range(0) == 1) {
+    c.preset = ConventionPreset::kUnreal;
+    c.source_metres_per_unit = 0.0254;
+  }
+  const OutputBasis basis = output_basis(c).value();
+#else
+  if (state.range(0) == 1) state.SkipWithError("no conventions in this tree");
+#endif
+  for (auto _ : state) {
+    for (std::size_t f = 0; f < cm.frame_count(); ++f) {
+      FkFrameJob{.motion = &cm, .frame = f, .out_positions = pos, .out_orientations = rot, .workspace = ws}.run();
+#if __has_include("gmr/view/conventions.h")
+      view_frame_float(pos, rot, -1, joints, out_p, out_q, basis);
+#else
+      view_frame_float(pos, rot, -1, joints, out_p, out_q);
+#endif
+      benchmark::DoNotOptimize(out_p.data());
+      benchmark::DoNotOptimize(out_q.data());
+    }
+  }
+  set_counters(state, cm.frame_count(), n * 7 * sizeof(float));
+  state.SetLabel(fast::simd_target_name());
+}
+BENCHMARK(BM_ServerFrame)->Name("server_frame/bvh")->ArgName("unreal")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 // The floor for every path: writing the output bytes. In cache (the 2752
 // frames' positions, 1.25 MB, fit L2+L3) and from a 64 MB buffer (DRAM).

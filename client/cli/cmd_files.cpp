@@ -17,6 +17,7 @@
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/motion/motion.h"
 #include "gmr/ops/convert.h"
+#include "gmr/view/viewpoint.h"
 
 namespace gmr::cli {
 namespace {
@@ -144,6 +145,7 @@ void run_positions(const PositionsOptions& o) {
   const Motion m = transform_for_positions(load(o.file, o.asf, o.fps, warnings), o);
   if (o.view.any() && !o.orientations.empty())
     throw CommandError("--orientations cannot be combined with --roots, --strip-dummies or --relative-to");
+  const OutputBasis basis = o.view.basis();
   if (o.view.any()) {
     write_view_positions(m, o.view, requested, std::cout);
     std::cout.flush();
@@ -168,8 +170,8 @@ void run_positions(const PositionsOptions& o) {
       p.resize((e - f) * joints);
       w.resize((e - f) * joints);
       for (std::size_t k = f; k < e; ++k) {
-        compute_frame(pre, k, std::span(p).subspan((k - f) * joints, joints),
-                      std::span(w).subspan((k - f) * joints, joints));
+        view_frame(pre, -1, k, std::span(p).subspan((k - f) * joints, joints),
+                   std::span(w).subspan((k - f) * joints, joints), basis);
       }
       write_poses_csv_rows(std::cout, pre.skeleton, p, w, f, columns);
     }
@@ -177,7 +179,8 @@ void run_positions(const PositionsOptions& o) {
     write_positions_csv_header(std::cout);
     for (std::size_t f = r.begin; f < r.end; f += kChunk) {
       const std::size_t e = std::min(r.end, f + kChunk);
-      const auto p = compute_positions(m, f, e);
+      auto p = compute_positions(m, f, e);
+      for (auto& x : p) x = basis.position(x);
       write_positions_csv_rows(std::cout, m.skeleton, p, f);
     }
   }

@@ -116,7 +116,8 @@ void run_query(const QueryOptions& o) {
   bool have_order = false;
   for (std::size_t f = r.begin; f < r.end; f += chunk) {
     const std::size_t e = std::min(r.end, f + chunk);
-    const auto q = take(c->query(v.id, static_cast<std::uint32_t>(f), static_cast<std::uint32_t>(e)));
+    const auto q =
+        take(c->query(v.id, static_cast<std::uint32_t>(f), static_cast<std::uint32_t>(e), false, {}, o.view.engine()));
     if (!have_order) {
       order = row_order(source, v.skeleton, q.joints);
       have_order = true;
@@ -162,6 +163,7 @@ void run_stream(const StreamOptions& o) {
   so.end_frame = static_cast<std::uint32_t>(r.end);
   if (!o.joints.empty()) so.joints = split_list(o.joints);
   so.float64 = !o.summary;  // CSV prints exact numbers
+  so.conventions = o.view.engine();
 
   struct State {
     std::mutex mutex;

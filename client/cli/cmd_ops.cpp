@@ -135,11 +135,28 @@ CLI::App* add_op(CLI::App& app, const char* name, const char* help, const std::s
 
 }  // namespace
 
+Conventions ViewOptions::engine() const {
+  Conventions c;
+  c.preset = preset_named(conventions).value_or(ConventionPreset::kNative);
+  c.source_metres_per_unit = metres_per_unit;
+  return c;
+}
+
+OutputBasis ViewOptions::basis() const { return take(output_basis(engine())); }
+
 void add_view_options(CLI::App& cmd, ViewOptions& o) {
   cmd.add_option("--roots", o.roots, "Joints to make the roots, A,B,C (all frames; positions do not change)");
   cmd.add_flag("--strip-dummies", o.strip_dummies, "Remove zero-length joints (e.g. CMU LHipJoint) before printing");
   cmd.add_option("--relative-to", o.relative_to,
                  "Give coordinates in this joint's frame (its GMR bone frame, see docs/operations.md)");
+  cmd.add_option("--conventions", o.conventions,
+                 "An engine's axes, handedness and unit: native (as in the file), unreal, unity, blender, godot")
+      ->check(CLI::IsMember({"native", "unreal", "unity", "blender", "godot"}))
+      ->capture_default_str();
+  cmd.add_option("--metres-per-unit", o.metres_per_unit,
+                 "The motion's unit in metres (0.0254: inches), for --conventions to change units (default: unknown, "
+                 "positions keep the motion's units)")
+      ->check(CLI::PositiveNumber);
 }
 
 void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out) {
@@ -150,11 +167,14 @@ void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange
   const MotionView view = take(apply_view(motion, spec));
   const FrameRange r = clamp_frame_range(requested, view.motion.frame_count);
   const Skeleton names = view_names(view);
+  const OutputBasis basis = o.basis();
   write_positions_csv_header(out);
   constexpr std::size_t kChunk = 1024;  // keeps memory flat for long motions
   for (std::size_t f = r.begin; f < r.end; f += kChunk) {
     const std::size_t e = std::min(r.end, f + kChunk);
-    write_positions_csv_rows(out, names, view_positions(view, f, e), f);
+    std::vector<Eigen::Vector3d> p = view_positions(view, f, e);
+    for (auto& x : p) x = basis.position(x);
+    write_positions_csv_rows(out, names, p, f);
   }
 }
 

@@ -8,6 +8,7 @@
 
 #include "cli_util.h"
 #include "gmr/motion/motion.h"
+#include "gmr/view/conventions.h"
 
 namespace gmr::cli {
 
@@ -15,10 +16,17 @@ struct ViewOptions {
   std::string roots;         // "A,B,C": the joints that become roots
   bool strip_dummies = false;
   std::string relative_to;   // joint whose frame the coordinates are in
+  // An engine's axes and unit (gmr/view/conventions.h), applied last.
+  std::string conventions = "native";
+  double metres_per_unit = 0.0;  // the motion's unit in metres; 0: unknown
+  // Options that change the skeleton or the frame (not the conventions).
   bool any() const { return !roots.empty() || strip_dummies || !relative_to.empty(); }
+  Conventions engine() const;
+  OutputBasis basis() const;  // throws CommandError for a bad combination
 };
 
-// Registers --roots, --strip-dummies and --relative-to on `cmd`.
+// Registers --roots, --strip-dummies, --relative-to, --conventions and
+// --metres-per-unit on `cmd`.
 void add_view_options(CLI::App& cmd, ViewOptions& o);
 
 // Writes the positions CSV (header and rows, same contract as plain `gmr

@@ -28,6 +28,20 @@ using udp = net::ip::udp;
 
 namespace {
 
+// A native convention is sent as nothing at all (what an old client sends).
+void to_proto(const Conventions& c, pb::Conventions& out) {
+  if (c.preset == ConventionPreset::kNative) return;
+  out.set_preset(static_cast<pb::ConventionPreset>(c.preset));
+  if (c.preset == ConventionPreset::kCustom) {
+    out.set_up(c.up);
+    out.set_forward(c.forward);
+    out.set_left_handed(c.left_handed);
+    out.set_target_metres_per_unit(c.target_metres_per_unit);
+  }
+  out.set_source_metres_per_unit(c.source_metres_per_unit);
+}
+
+
 std::int64_t now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
       .count();
@@ -580,7 +594,7 @@ Result<ViewState> Client::set_coordinates(std::uint32_t view, const std::string&
 }
 
 Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, bool orientations,
-                                  const std::vector<std::string>& joints) {
+                                  const std::vector<std::string>& joints, const Conventions& conventions) {
   pb::ClientMessage m;
   auto* q = m.mutable_query_frames();
   q->set_view_id(view);
@@ -588,6 +602,7 @@ Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::
   q->set_end(end);
   q->set_orientations(orientations);
   for (const auto& j : joints) q->add_joints(j);
+  to_proto(conventions, *q->mutable_conventions());
   auto r = impl_->expect(m, pb::ServerMessage::kFrames);
   if (!r.ok()) return r.error();
   auto b = wire::decode_block(r->frames());
@@ -645,6 +660,7 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   s->set_transport(o.udp ? pb::TRANSPORT_UDP : pb::TRANSPORT_TCP);
   s->set_precision(o.float64 ? pb::PRECISION_FLOAT64 : pb::PRECISION_FLOAT32);
   s->set_shared(o.shared);
+  to_proto(o.conventions, *s->mutable_conventions());
   s->set_max_frames(o.max_frames);
   auto sub = std::make_shared<Impl::Sub>(Impl::Sub{std::move(on_frame), std::move(on_end)});
   // Registered on the I/O thread as the reply is read, before any frame.

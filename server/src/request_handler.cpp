@@ -12,6 +12,25 @@
 
 namespace gmr::server {
 
+static_assert(static_cast<int>(pb::CONVENTION_PRESET_CUSTOM) == static_cast<int>(ConventionPreset::kCustom) &&
+              static_cast<int>(pb::CONVENTION_PRESET_GODOT) == static_cast<int>(ConventionPreset::kGodot));
+
+Result<OutputBasis> output_basis_of(const pb::Conventions& c) {
+  // proto3 keeps enum values it does not know: refuse them rather than guess.
+  if (!pb::ConventionPreset_IsValid(c.preset())) {
+    return make_error("unknown conventions preset " + std::to_string(c.preset()));
+  }
+  Conventions g;
+  g.preset = static_cast<ConventionPreset>(c.preset());
+  g.up = c.up();
+  g.forward = c.forward();
+  g.left_handed = c.left_handed();
+  g.target_metres_per_unit = c.target_metres_per_unit() == 0.0 ? 1.0 : c.target_metres_per_unit();
+  g.source_metres_per_unit = c.source_metres_per_unit();
+  return output_basis(g);
+}
+
+
 RequestHandler::RequestHandler(Server::Impl& server, const std::shared_ptr<Outbox>& outbox)
     : server_(server),
       connection_(outbox),
@@ -299,6 +318,8 @@ Reply RequestHandler::query(const pb::QueryFrames& r) const {
   }
   auto joints = resolve_joints(*v, {r.joints().begin(), r.joints().end()});
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
+  const auto basis = output_basis_of(r.conventions());
+  if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   // Refuse before computing anything a reply too big to send.
   const std::uint64_t per_frame = joints->size() * (3 + (r.orientations() ? 4 : 0)) * 9 + 8;
   const std::uint64_t estimate = (end - begin) * per_frame + 64;
@@ -321,7 +342,7 @@ Reply RequestHandler::query(const pb::QueryFrames& r) const {
   std::vector<Eigen::Matrix3d> rot(r.orientations() || viewer >= 0 ? n : 0);
   b->mutable_positions()->Reserve(static_cast<int>((end - begin) * joints->size() * 3));
   for (std::uint64_t f = begin; f < end; ++f) {
-    view_frame(m, viewer, f, pos, rot);
+    view_frame(m, viewer, f, pos, rot, *basis);
     for (int j : *joints) {
       const auto& p = pos[static_cast<std::size_t>(j)];
       b->add_positions(p.x());

@@ -14,10 +14,16 @@
 #include <vector>
 
 #include "connection.h"
+#include "gmr/view/conventions.h"
 #include "server_state.h"
 #include "stream.h"
 
 namespace gmr::server {
+
+// The output basis a request's conventions ask for (docs/protocol.md,
+// "Conventions"): an error message for unknown presets or bad axes/units.
+Result<OutputBasis> output_basis_of(const pb::Conventions& c);
+
 
 class SubscriptionTarget;
 

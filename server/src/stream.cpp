@@ -154,7 +154,8 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
     if (job.run()) {
       w.positions_f32.resize(joints.size() * 3);
       w.orientations_f32.resize(settings_.orientations ? joints.size() * 4 : 0);
-      view_frame_float(w.fk_positions, w.fk_orientations, viewer, joints, w.positions_f32, w.orientations_f32);
+      view_frame_float(w.fk_positions, w.fk_orientations, viewer, joints, w.positions_f32, w.orientations_f32,
+                       settings_.basis);
       c.positions = w.positions_f32;
       c.orientations = w.orientations_f32;
       ++counters_.frames_computed_float;
@@ -164,7 +165,7 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
   if (!done) {
     w.all_positions.resize(n);
     w.all_orientations.resize(settings_.orientations || viewer >= 0 ? n : 0);
-    view_frame(m, viewer, frame, w.all_positions, w.all_orientations);
+    view_frame(m, viewer, frame, w.all_positions, w.all_orientations, settings_.basis);
     w.positions_f64.clear();
     w.orientations_f64.clear();
     for (int j : joints) {

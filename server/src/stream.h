@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "gmr/server/view.h"
+#include "gmr/view/conventions.h"
 #include "net.h"
 
 namespace gmr::server {
@@ -66,6 +67,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
     std::vector<int> joints;  // sent, in this order
     bool orientations = false;
     bool float64 = false;
+    OutputBasis basis;  // the subscriber's conventions
     Schedule schedule;
     std::chrono::milliseconds max_catch_up{250};
   };

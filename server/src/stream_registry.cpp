@@ -20,6 +20,9 @@ std::string StreamRegistry::share_key(const std::string& motion_name, const View
                     std::to_string(c.loop) + "|" + std::to_string(c.speed) + "|" + std::to_string(c.rate) + "|" +
                     std::to_string(c.skip_repeats) + "|";
   for (int j : s.joints) key += std::to_string(j) + ",";
+  key += "|";
+  for (int i = 0; i < 9; ++i) key += std::to_string(s.basis.b(i / 3, i % 3)) + ",";
+  key += std::to_string(s.basis.scale);
   return key;
 }
 

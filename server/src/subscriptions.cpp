@@ -74,6 +74,8 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   const std::vector<std::string> names(r.joints().begin(), r.joints().end());
   auto joints = resolve_joints(*v, names);
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
+  auto basis = output_basis_of(r.conventions());
+  if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   // Admission: the rates all subscribers asked for stay within what the
   // server can send (docs/protocol.md, "Admission").
   const auto rate_mhz = static_cast<std::uint64_t>(std::llround(s.rate * 1000.0));
@@ -89,6 +91,7 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   }
   settings.joints = std::move(joints).value();
   settings.orientations = r.orientations();
+  settings.basis = *basis;
   settings.float64 = r.precision() == pb::PRECISION_FLOAT64;
   settings.max_catch_up = cfg.max_catch_up;
 

@@ -399,6 +399,85 @@ TEST(Streaming, EditsThatChangeNothingKeepTheSkeletonVersion) {
   EXPECT_EQ(q->skeleton_version, moved->skeleton_version);
 }
 
+// Conventions per query and per subscription: the server's values are the
+// native ones put in the engine's axes and unit (p' = s B p, W' = B W B^T),
+// on the double and the float path; unknown presets and bad axes are refused;
+// subscriptions in different conventions never share a stream.
+TEST(Streaming, ConventionsPerQueryAndPerSubscription) {
+  TestServer s;
+  Sink native_sink, unreal_sink, blender_sink;  // before the client: its thread calls into them
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Conventions unreal;
+  unreal.preset = ConventionPreset::kUnreal;
+  unreal.source_metres_per_unit = 0.01;  // the demo motions are in centimetres, as Unreal
+  const OutputBasis ub = output_basis(unreal).value();
+  auto native = c->query(v->id, 0, 20, true);
+  auto in_unreal = c->query(v->id, 0, 20, true, {}, unreal);
+  ASSERT_TRUE(native.ok() && in_unreal.ok());
+  ASSERT_EQ(native->positions.size(), in_unreal->positions.size());
+  double size = 0;  // the skeleton's size: farthest joint from the root in frame 0
+  for (std::size_t j = 0; j < v->skeleton.size(); ++j) size = std::max(size, (native->positions[j] - native->positions[0]).norm());
+  ASSERT_GT(size, 0.5);
+  for (std::size_t i = 0; i < native->positions.size(); ++i) {
+    const Eigen::Vector3d& p = native->positions[i];
+    EXPECT_LE((in_unreal->positions[i] - Eigen::Vector3d(p.z(), -p.x(), p.y())).norm(), 1e-12 * size);
+    const Eigen::Matrix3d w = native->orientations[i].toRotationMatrix();
+    EXPECT_LE((in_unreal->orientations[i].toRotationMatrix() - ub.b * w * ub.b.transpose()).cwiseAbs().maxCoeff(), 1e-12);
+  }
+  // Streams, float32 and float64, against the query in the same conventions.
+  Conventions blender;
+  blender.preset = ConventionPreset::kBlender;
+  blender.source_metres_per_unit = 0.01;  // centimetres to Blender's metres
+  auto in_blender = c->query(v->id, 0, 20, false, {}, blender);
+  ASSERT_TRUE(in_blender.ok());
+  client::SubscribeOptions o;
+  o.end_frame = 20;
+  o.speed = 10;  // every frame once, ten times faster
+  o.shared = true;
+  o.conventions = blender;
+  ASSERT_TRUE(c->subscribe(v->id, o, blender_sink.on_frame(), blender_sink.on_end()).ok());
+  client::SubscribeOptions o64 = o;
+  o64.float64 = true;
+  o64.conventions = unreal;
+  ASSERT_TRUE(c->subscribe(v->id, o64, unreal_sink.on_frame(), unreal_sink.on_end()).ok());
+  client::SubscribeOptions plain = o;
+  plain.conventions = {};
+  auto native_sub = c->subscribe(v->id, plain, native_sink.on_frame(), native_sink.on_end());
+  ASSERT_TRUE(native_sub.ok());
+  EXPECT_FALSE(native_sub->joined_running) << "another convention: another stream";
+  ASSERT_TRUE(blender_sink.ended.wait().has_value());
+  ASSERT_TRUE(unreal_sink.ended.wait().has_value());
+  ASSERT_TRUE(native_sink.ended.wait().has_value());
+  const std::size_t joints = v->skeleton.size();
+  const auto bf = blender_sink.copy(), uf = unreal_sink.copy(), nf = native_sink.copy();
+  ASSERT_EQ(bf.size(), 20u);
+  ASSERT_EQ(uf.size(), 20u);
+  ASSERT_EQ(nf.size(), 20u);
+  for (std::size_t f = 0; f < 20; ++f) {
+    for (std::size_t j = 0; j < joints; ++j) {
+      const std::size_t k = f * joints + j;
+      EXPECT_LE((bf[f].positions[j] - in_blender->positions[k]).norm(), 1e-5 * size * 0.01) << "float32";
+      EXPECT_LE((uf[f].positions[j] - in_unreal->positions[k]).norm(), 1e-12 * size) << "float64";
+      EXPECT_LE((nf[f].positions[j] - native->positions[k]).norm(), 1e-5 * size);
+    }
+  }
+  // Refused: an unknown preset (a newer client), up and forward on one axis.
+  Conventions bad;
+  bad.preset = ConventionPreset::kCustom;
+  bad.up = 2;
+  bad.forward = -2;
+  auto r = c->query(v->id, 0, 1, false, {}, bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("up and forward must be different axes"), std::string::npos) << r.error().message;
+  bad.preset = static_cast<ConventionPreset>(9);
+  r = c->query(v->id, 0, 1, false, {}, bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("unknown conventions preset 9"), std::string::npos) << r.error().message;
+}
+
 TEST(Streaming, HeartbeatsKeepAQuietClientConnected) {
   server::ServerConfig cfg;
   cfg.idle_timeout = std::chrono::milliseconds(300);

@@ -21,6 +21,7 @@
 
 #include "gmr/core/error.h"
 #include "gmr/skeleton/skeleton.h"
+#include "gmr/view/conventions.h"
 #include "gmr/wire/frame_values.h"
 
 // The public types are plain structs: a program using the client needs no
@@ -114,6 +115,7 @@ struct SubscribeOptions {
   bool float64 = false;
   bool shared = false;           // join a running stream with the same content and schedule
   std::uint64_t max_frames = 0;  // 0: no limit
+  Conventions conventions;       // an engine's axes and unit (gmr/view/conventions.h); default: the motion's own
 };
 
 // A frame as it arrived: ids, frame index and motion time, sequence,
@@ -202,7 +204,7 @@ class Client {
   Result<ViewState> strip_dummies(std::uint32_t view);
   Result<ViewState> set_coordinates(std::uint32_t view, const std::string& relative_to);  // "" = world
   Result<QueryResult> query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, bool orientations = false,
-                            const std::vector<std::string>& joints = {});
+                            const std::vector<std::string>& joints = {}, const Conventions& conventions = {});
   // Frames start after the reply; `on_frame` runs on the I/O thread (for UDP
   // frames too), `on_end` when the server ends the subscription. With
   // options.udp the client first registers its UDP endpoint.

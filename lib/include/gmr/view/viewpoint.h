@@ -15,6 +15,7 @@
 #include <span>
 
 #include "gmr/motion/motion.h"
+#include "gmr/view/conventions.h"
 
 namespace gmr {
 
@@ -47,8 +48,9 @@ class Viewpoint {
 // motion.skeleton.size() entries; a view from a joint needs out_orientations
 // (the viewer's frame comes from it), a world view may leave it empty.
 // Requires f < motion.frame_count and viewer < motion.skeleton.size().
+// Last, `basis` puts the result in an engine's conventions (conventions.h).
 void view_frame(const Motion& motion, int viewer, std::size_t f, std::span<Eigen::Vector3d> out_positions,
-                std::span<Eigen::Matrix3d> out_orientations = {});
+                std::span<Eigen::Matrix3d> out_orientations = {}, const OutputBasis& basis = {});
 
 // The float path, after gmr::fast::FkFrameJob: `fk_positions` (3 floats per
 // joint) and `fk_orientations` (9 per joint, row-major; may be empty for a
@@ -58,7 +60,9 @@ void view_frame(const Motion& motion, int viewer, std::size_t f, std::span<Eigen
 // The viewpoint and the quaternions are computed in double from the float
 // inputs and rounded once, so only storage is float. Requires every span to
 // be large enough and every index in range (asserted in debug builds).
+// `basis` as for view_frame.
 void view_frame_float(std::span<const float> fk_positions, std::span<const float> fk_orientations, int viewer,
-                      std::span<const int> joints, std::span<float> out_positions, std::span<float> out_quaternions);
+                      std::span<const int> joints, std::span<float> out_positions, std::span<float> out_quaternions,
+                      const OutputBasis& basis = {});
 
 }  // namespace gmr
