@@ -91,6 +91,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   struct Sub {
     FrameCallback on_frame;
     EndCallback on_end;
+    SkeletonCallback on_skeleton;
   };
   std::map<std::uint32_t, std::shared_ptr<Sub>> subs;
   // A UDP frame can overtake the TCP reply to its Subscribe: frames for an
@@ -258,6 +259,24 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
         }
       }
       if (sub && sub->on_end) sub->on_end(end_of(m.subscription_ended()));
+    } else if (m.has_skeleton_changed()) {
+      const auto& c = m.skeleton_changed();
+      std::shared_ptr<Sub> sub;
+      {
+        std::lock_guard lock(mutex);
+        if (auto it = subs.find(c.subscription_id()); it != subs.end()) sub = it->second;
+      }
+      auto sk = wire::from_proto(c.skeleton());
+      if (sub && sub->on_skeleton && sk.ok()) {
+        SkeletonChange change;
+        change.subscription_id = c.subscription_id();
+        change.view_id = c.view_id();
+        change.skeleton_version = c.skeleton_version();
+        change.skeleton = std::move(sk).value();
+        for (std::uint32_t j : c.joints()) change.joints.push_back(static_cast<int>(j));
+        change.relative_to = c.relative_to();
+        sub->on_skeleton(change);
+      }
     } else if (m.has_udp_registered()) {
       std::lock_guard lock(mutex);
       udp_registered = true;
@@ -642,7 +661,7 @@ Status Client::register_udp() {
 }
 
 Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOptions& o, FrameCallback on_frame,
-                                           EndCallback on_end) {
+                                           EndCallback on_end, SkeletonCallback on_skeleton) {
   if (o.udp) {
     if (auto s = register_udp(); !s.ok()) return s.error();
   }
@@ -662,7 +681,7 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   s->set_shared(o.shared);
   to_proto(o.conventions, *s->mutable_conventions());
   s->set_max_frames(o.max_frames);
-  auto sub = std::make_shared<Impl::Sub>(Impl::Sub{std::move(on_frame), std::move(on_end)});
+  auto sub = std::make_shared<Impl::Sub>(Impl::Sub{std::move(on_frame), std::move(on_end), std::move(on_skeleton)});
   // Registered on the I/O thread as the reply is read, before any frame.
   {
     std::lock_guard lock(impl_->mutex);

@@ -52,6 +52,7 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
     std::shared_ptr<SubscriptionTarget> target;
     std::vector<std::string> joint_names;  // empty: every joint
     std::uint64_t rate_mhz = 0;            // committed against the send budget
+    std::uint32_t skeleton_version = 0;    // of the frames it last got word of
   };
 
   void send(const pb::ServerMessage& m);

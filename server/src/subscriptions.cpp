@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "gmr/wire/convert.h"
 #include "gmr/wire/framing.h"
 #include "request_handler.h"
 #include "targets.h"
@@ -110,7 +111,7 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
     target = std::make_shared<TcpTarget>(weak_from_this(), connection_, id, v->id());
   }
   stream->add(target, r.max_frames());
-  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz};
+  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version};
   server_.committed_mhz += rate_mhz;
   if (!joined) stream->start();
 
@@ -190,6 +191,21 @@ void RequestHandler::view_changed(const View& v) {
     if (!joints.ok()) {
       ended.emplace_back(id, "the view changed: " + joints.error().message);
       continue;
+    }
+    // The new skeleton goes out before any frame of its version: replies
+    // and pushes are written before waiting frames (connection.h).
+    if (v.content()->skeleton_version != sub.skeleton_version) {
+      sub.skeleton_version = v.content()->skeleton_version;
+      pb::ServerMessage m;
+      auto* c = m.mutable_skeleton_changed();
+      c->set_subscription_id(id);
+      c->set_view_id(v.id());
+      c->set_skeleton_version(sub.skeleton_version);
+      wire::to_proto(v.motion().skeleton, *c->mutable_skeleton());
+      for (int j : *joints) c->add_joints(static_cast<std::uint32_t>(j));
+      const int viewer = v.content()->relative_to;
+      if (viewer >= 0) c->set_relative_to(v.motion().skeleton.joint(viewer).name);
+      send(m);
     }
     detach(sub)->set_content(v.content(), std::move(joints).value());
   }

@@ -368,6 +368,75 @@ TEST(Streaming, AStructureChangeMidStreamBumpsTheSkeletonVersion) {
   EXPECT_TRUE(c->unsubscribe(sub->id).ok());
 }
 
+// A structure change mid-stream: the subscription gets the new skeleton (its
+// version, joints and the order of the values) before any frame of that
+// version; an edit that changes nothing sends none.
+TEST(Streaming, TheNewSkeletonComesBeforeItsFrames) {
+  TestServer s;
+  std::mutex mutex;
+  std::vector<std::uint32_t> versions_seen;  // frames' versions, in arrival order
+  std::vector<client::SkeletonChange> changes;
+  std::vector<std::size_t> change_at;  // frames received before each change
+  Latch<bool> reached;
+  std::uint32_t wanted = 0;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 300;
+  o.joints = {"l_hand", "head"};
+  auto sub = c->subscribe(
+      v->id, o,
+      [&](const ReceivedFrame& f) {
+        std::lock_guard lock(mutex);
+        versions_seen.push_back(f.skeleton_version);
+        if (wanted != 0 && f.skeleton_version == wanted) reached.set(true);
+      },
+      {},
+      [&](const client::SkeletonChange& ch) {
+        std::lock_guard lock(mutex);
+        changes.push_back(ch);
+        change_at.push_back(versions_seen.size());
+      });
+  ASSERT_TRUE(sub.ok());
+  const auto root = v->skeleton.joint(v->skeleton.roots().front()).name;
+  ASSERT_TRUE(c->shift_root(v->id, root).ok());  // changes nothing: no notice
+  auto shifted = c->shift_root(v->id, "l_hand");
+  ASSERT_TRUE(shifted.ok());
+  {
+    std::lock_guard lock(mutex);
+    wanted = shifted->skeleton_version;
+  }
+  ASSERT_TRUE(reached.wait().has_value());
+  EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+  std::lock_guard lock(mutex);
+  ASSERT_EQ(changes.size(), 1u);
+  const client::SkeletonChange& ch = changes[0];
+  EXPECT_EQ(ch.subscription_id, sub->id);
+  EXPECT_EQ(ch.skeleton_version, shifted->skeleton_version);
+  ASSERT_EQ(ch.skeleton.size(), shifted->skeleton.size());
+  EXPECT_EQ(ch.skeleton.joint(ch.skeleton.roots().front()).name, "l_hand");
+  ASSERT_EQ(ch.joints.size(), 2u);
+  EXPECT_EQ(ch.skeleton.joint(ch.joints[0]).name, "l_hand");
+  EXPECT_EQ(ch.skeleton.joint(ch.joints[1]).name, "head");
+  // No frame of the new version before the notice; after it, frames that
+  // were already waiting may still carry the old one, never after a new one.
+  bool seen_new = false;
+  for (std::size_t i = 0; i < versions_seen.size(); ++i) {
+    if (i < change_at[0]) {
+      EXPECT_EQ(versions_seen[i], v->skeleton_version) << i;
+    } else if (versions_seen[i] == shifted->skeleton_version) {
+      seen_new = true;
+    } else {
+      EXPECT_FALSE(seen_new) << "an old frame after a new one, at " << i;
+      EXPECT_EQ(versions_seen[i], v->skeleton_version) << i;
+    }
+  }
+  EXPECT_TRUE(seen_new);
+}
+
 // The skeleton version moves only when the structure or the coordinate frame
 // does: an edit that changes neither keeps it, and frames say so.
 TEST(Streaming, EditsThatChangeNothingKeepTheSkeletonVersion) {

@@ -168,6 +168,19 @@ struct ServerCounters {
 using FrameCallback = std::function<void(const ReceivedFrame&)>;
 using EndCallback = std::function<void(const SubscriptionEnd&)>;
 
+// A running subscription's view changed structure or coordinate frame: the
+// skeleton of the frames that follow (their skeleton_version), sent before
+// the first of them.
+struct SkeletonChange {
+  std::uint32_t subscription_id = 0;
+  std::uint32_t view_id = 0;
+  std::uint32_t skeleton_version = 0;
+  Skeleton skeleton;
+  std::vector<int> joints;  // indices into skeleton of each frame's values, in order
+  std::string relative_to;  // empty: world coordinates
+};
+using SkeletonCallback = std::function<void(const SkeletonChange&)>;
+
 // Counters of what arrived; read any time.
 struct ClientCounters {
   std::uint64_t frames_tcp = 0;
@@ -208,8 +221,10 @@ class Client {
   // Frames start after the reply; `on_frame` runs on the I/O thread (for UDP
   // frames too), `on_end` when the server ends the subscription. With
   // options.udp the client first registers its UDP endpoint.
+  // `on_skeleton` runs on the I/O thread when the view's skeleton version
+  // changes, before the first frame of the new version.
   Result<SubscriptionInfo> subscribe(std::uint32_t view, const SubscribeOptions& options, FrameCallback on_frame,
-                                     EndCallback on_end = {});
+                                     EndCallback on_end = {}, SkeletonCallback on_skeleton = {});
   Status unsubscribe(std::uint32_t subscription);
   Status pause(std::uint32_t subscription);
   Status resume(std::uint32_t subscription);
