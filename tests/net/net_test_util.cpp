@@ -166,6 +166,16 @@ pb::HelloReply RawConnection::handshake() {
   return r && r->has_hello() ? r->hello() : pb::HelloReply{};
 }
 
+std::optional<std::uint32_t> RawConnection::create_view(std::uint64_t id, const std::string& motion) {
+  pb::ClientMessage m;
+  m.set_request_id(id);
+  m.mutable_create_view()->set_motion(motion);
+  send(m);
+  const auto r = reply();
+  if (!r || !r->has_view()) return std::nullopt;
+  return r->view().view_id();
+}
+
 pb::ClientMessage request(std::uint64_t id) {
   pb::ClientMessage m;
   m.set_request_id(id);

@@ -63,6 +63,8 @@ class RawConnection {
   void shutdown_send();
   // Hello + reply; returns the reply.
   pb::HelloReply handshake();
+  // CreateView (request `id`) and its reply: the view's id, or nothing.
+  std::optional<std::uint32_t> create_view(std::uint64_t id, const std::string& motion);
 
  private:
   bool read_exact(char* out, std::size_t n, std::chrono::steady_clock::time_point deadline);

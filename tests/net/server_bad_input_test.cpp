@@ -303,14 +303,11 @@ TEST(BadInput, UnknownTransportOrPrecisionIsABadRequest) {
   TestServer s;
   RawConnection c(s.port());
   c.handshake();
-  auto create = request(2);
-  create.mutable_create_view()->set_motion("walk");
-  c.send(create);
-  const auto view = c.reply();
-  ASSERT_TRUE(view && view->has_view());
+  const auto view = c.create_view(2, "walk");
+  ASSERT_TRUE(view);
   for (const auto& [transport, precision] : {std::pair{7, 0}, std::pair{0, 9}, std::pair{-1, 0}}) {
     auto m = request(3);
-    m.mutable_subscribe()->set_view_id(view->view().view_id());
+    m.mutable_subscribe()->set_view_id(*view);
     m.mutable_subscribe()->set_transport(static_cast<pb::Transport>(transport));
     m.mutable_subscribe()->set_precision(static_cast<pb::Precision>(precision));
     c.send(m);

@@ -225,13 +225,10 @@ TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {
   // The slow client: subscribes to a heavy stream, then never reads.
   RawConnection slow(s.port(), 4096);
   slow.handshake();
-  auto m = request(2);
-  m.mutable_create_view()->set_motion("walk");
-  slow.send(m);
-  auto view = slow.reply();
-  ASSERT_TRUE(view && view->has_view());
+  const auto view = slow.create_view(2, "walk");
+  ASSERT_TRUE(view);
   auto sub = request(3);
-  sub.mutable_subscribe()->set_view_id(view->view().view_id());
+  sub.mutable_subscribe()->set_view_id(*view);
   sub.mutable_subscribe()->set_loop(true);
   sub.mutable_subscribe()->set_rate_hz(2000);
   sub.mutable_subscribe()->set_orientations(true);
@@ -581,13 +578,10 @@ TEST(Streaming, AListenOnlyTcpSubscriberOutlivesTheIdleTimeout) {
   TestServer s(cfg);
   RawConnection c(s.port());
   c.handshake();
-  auto create = request(2);
-  create.mutable_create_view()->set_motion("walk");
-  c.send(create);
-  const auto view = c.reply();
-  ASSERT_TRUE(view && view->has_view());
+  const auto view = c.create_view(2, "walk");
+  ASSERT_TRUE(view);
   auto sub = request(3);
-  sub.mutable_subscribe()->set_view_id(view->view().view_id());
+  sub.mutable_subscribe()->set_view_id(*view);
   sub.mutable_subscribe()->set_rate_hz(50);
   sub.mutable_subscribe()->set_max_frames(75);  // 1.5 s: 5 idle timeouts
   c.send(sub);
