@@ -54,6 +54,11 @@ int main(int argc, char** argv) {
   // Memory (docs/protocol.md, "Memory budget").
   MotionLimits motion_limits;
   gmr::LoadOptions library_files;
+  double library_unit = 0.0;
+  app.add_option("--metres-per-unit", library_unit,
+                 "The unit of the library's files in metres (0.0254: inches), for clients' engine conventions "
+                 "(default: unknown; the built-in demo is in centimetres)")
+      ->check(CLI::PositiveNumber);
   app.add_option("--amc-fps", library_files.amc_fps,
                  "Frames per second of the library's .amc files, which do not say (default 120, the CMU captures')")
       ->check(CLI::PositiveNumber);
@@ -166,6 +171,7 @@ int main(int argc, char** argv) {
       spdlog::info("library: {} motions loaded, {} files rejected, {} other files skipped", loaded->entries.size(),
                    loaded->rejected.size(), loaded->skipped);
       library = std::move(loaded->entries);
+      for (auto& e : library) e.metres_per_unit = library_unit;
     }
     Server server(cfg, std::move(library));
     server.start();

@@ -136,7 +136,8 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
 std::vector<LibraryEntry> builtin_library() {
   std::vector<LibraryEntry> out;
   for (auto& m : demo_library()) {
-    out.push_back({m.name, "builtin", std::make_shared<const Motion>(std::move(m.motion))});
+    // The demo skeletons are built in centimetres (gmr/demo/demo_library.h).
+    out.push_back({m.name, "builtin", std::make_shared<const Motion>(std::move(m.motion)), 0.01});
   }
   return out;
 }

@@ -15,7 +15,7 @@ namespace gmr::server {
 static_assert(static_cast<int>(pb::CONVENTION_PRESET_CUSTOM) == static_cast<int>(ConventionPreset::kCustom) &&
               static_cast<int>(pb::CONVENTION_PRESET_GODOT) == static_cast<int>(ConventionPreset::kGodot));
 
-Result<OutputBasis> output_basis_of(const pb::Conventions& c) {
+Result<OutputBasis> output_basis_of(const pb::Conventions& c, double motion_metres_per_unit) {
   // proto3 keeps enum values it does not know: refuse them rather than guess.
   if (!pb::ConventionPreset_IsValid(c.preset())) {
     return make_error("unknown conventions preset " + std::to_string(c.preset()));
@@ -26,7 +26,8 @@ Result<OutputBasis> output_basis_of(const pb::Conventions& c) {
   g.forward = c.forward();
   g.left_handed = c.left_handed();
   g.target_metres_per_unit = c.target_metres_per_unit() == 0.0 ? 1.0 : c.target_metres_per_unit();
-  g.source_metres_per_unit = c.source_metres_per_unit();
+  // The request's word on the motion's unit, else the library's.
+  g.source_metres_per_unit = c.source_metres_per_unit() != 0.0 ? c.source_metres_per_unit() : motion_metres_per_unit;
   return output_basis(g);
 }
 
@@ -227,6 +228,7 @@ Reply RequestHandler::list_motions() const {
     m->set_frame_count(e.motion->frame_count);
     m->set_frame_time(e.motion->frame_time);
     m->set_source(e.source);
+    m->set_metres_per_unit(e.metres_per_unit);
   }
   return out;
 }
@@ -318,7 +320,7 @@ Reply RequestHandler::query(const pb::QueryFrames& r) const {
   }
   auto joints = resolve_joints(*v, {r.joints().begin(), r.joints().end()});
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
-  const auto basis = output_basis_of(r.conventions());
+  const auto basis = output_basis_of(r.conventions(), motion_unit(*v));
   if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   // Refuse before computing anything a reply too big to send.
   const std::uint64_t per_frame = joints->size() * (3 + (r.orientations() ? 4 : 0)) * 9 + 8;
@@ -426,6 +428,11 @@ pb::ViewInfo RequestHandler::view_info(const View& v) const {
   info.set_frame_count(v.motion().frame_count);
   info.set_frame_time(v.motion().frame_time);
   return info;
+}
+
+double RequestHandler::motion_unit(const View& v) const {
+  const auto it = server_.by_name.find(v.motion_name());
+  return it == server_.by_name.end() ? 0.0 : server_.library[it->second].metres_per_unit;
 }
 
 }  // namespace gmr::server

@@ -22,7 +22,9 @@ namespace gmr::server {
 
 // The output basis a request's conventions ask for (docs/protocol.md,
 // "Conventions"): an error message for unknown presets or bad axes/units.
-Result<OutputBasis> output_basis_of(const pb::Conventions& c);
+// motion_metres_per_unit: the library's word on the motion's unit (0: unknown),
+// used when the request gives none.
+Result<OutputBasis> output_basis_of(const pb::Conventions& c, double motion_metres_per_unit);
 
 
 class SubscriptionTarget;
@@ -83,6 +85,8 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   // After a view edit: its subscriptions follow it onto their own streams,
   // or end when a subscribed joint is gone.
   void view_changed(const View& v);
+  // The unit of a view's library motion in metres (0: unknown).
+  double motion_unit(const View& v) const;
   void drop_subscription(std::uint32_t id);
   // The subscription's stream, now its alone (split off a shared one).
   std::shared_ptr<Stream> detach(Subscription& s);

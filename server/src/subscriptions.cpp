@@ -75,7 +75,7 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   const std::vector<std::string> names(r.joints().begin(), r.joints().end());
   auto joints = resolve_joints(*v, names);
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
-  auto basis = output_basis_of(r.conventions());
+  auto basis = output_basis_of(r.conventions(), motion_unit(*v));
   if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   // Admission: the rates all subscribers asked for stay within what the
   // server can send (docs/protocol.md, "Admission").

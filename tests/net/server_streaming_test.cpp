@@ -530,6 +530,21 @@ TEST(Streaming, ConventionsPerQueryAndPerSubscription) {
       EXPECT_LE((nf[f].positions[j] - native->positions[k]).norm(), 1e-5 * size);
     }
   }
+  // The library knows the demo's unit (centimetres): a request that does not
+  // say gets metres in Unity's axes all the same.
+  auto motions = c->list_motions();
+  ASSERT_TRUE(motions.ok());
+  const auto walk = std::find_if(motions->begin(), motions->end(), [](const auto& m) { return m.name == "walk"; });
+  ASSERT_NE(walk, motions->end());
+  EXPECT_EQ(walk->metres_per_unit, 0.01);
+  Conventions unity;
+  unity.preset = ConventionPreset::kUnity;
+  auto in_unity = c->query(v->id, 0, 20, false, {}, unity);
+  ASSERT_TRUE(in_unity.ok());
+  for (std::size_t i = 0; i < native->positions.size(); ++i) {
+    const Eigen::Vector3d& p = native->positions[i];
+    EXPECT_LE((in_unity->positions[i] - 0.01 * Eigen::Vector3d(-p.x(), p.y(), p.z())).norm(), 1e-12 * size);
+  }
   // Refused: an unknown preset (a newer client), up and forward on one axis.
   Conventions bad;
   bad.preset = ConventionPreset::kCustom;

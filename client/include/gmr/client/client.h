@@ -79,6 +79,7 @@ struct MotionInfo {
   std::uint64_t frame_count = 0;
   double frame_time = 0.0;
   std::string source;  // the file it came from, or "builtin"
+  double metres_per_unit = 0.0;  // the motion's unit in metres; 0: unknown
 };
 
 // A view as the server last described it.

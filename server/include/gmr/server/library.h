@@ -16,6 +16,7 @@ struct LibraryEntry {
   std::string name;                     // unique: path relative to the folder without extension, '/'-separated
   std::string source;                   // the file it came from, relative to the library folder, or "builtin"
   std::shared_ptr<const Motion> motion;  // pre-rotation (GMR), validated
+  double metres_per_unit = 0.0;          // the motion's unit in metres (conventions); 0: unknown
 };
 
 struct Rejection {
