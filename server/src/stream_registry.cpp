@@ -1,5 +1,6 @@
 #include "stream_registry.h"
 
+#include <cstdio>
 #include <functional>
 #include <string>
 
@@ -20,9 +21,13 @@ std::string StreamRegistry::share_key(const std::string& motion_name, const View
                     std::to_string(c.loop) + "|" + std::to_string(c.speed) + "|" + std::to_string(c.rate) + "|" +
                     std::to_string(c.skip_repeats) + "|";
   for (int j : s.joints) key += std::to_string(j) + ",";
+  // The conventions, exactly (to_string's six decimals would let two unit
+  // scales that differ past them share a stream).
+  char number[32];
   key += "|";
-  for (int i = 0; i < 9; ++i) key += std::to_string(s.basis.b(i / 3, i % 3)) + ",";
-  key += std::to_string(s.basis.scale);
+  for (int i = 0; i < 9; ++i) key += std::to_string(static_cast<int>(s.basis.b(i / 3, i % 3))) + ",";
+  std::snprintf(number, sizeof number, "%.17g", s.basis.scale);
+  key += number;
   return key;
 }
 

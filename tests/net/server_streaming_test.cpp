@@ -545,6 +545,25 @@ TEST(Streaming, ConventionsPerQueryAndPerSubscription) {
     const Eigen::Vector3d& p = native->positions[i];
     EXPECT_LE((in_unity->positions[i] - 0.01 * Eigen::Vector3d(-p.x(), p.y(), p.z())).norm(), 1e-12 * size);
   }
+  // Units that differ only past six decimals are other streams; the same
+  // conventions again join the running one.
+  {
+    client::SubscribeOptions shared;
+    shared.loop = true;
+    shared.shared = true;
+    shared.conventions = blender;
+    shared.conventions.source_metres_per_unit = 0.00000254;
+    auto first = c->subscribe(v->id, shared, [](const ReceivedFrame&) {});
+    shared.conventions.source_metres_per_unit = 0.00000255;
+    auto other = c->subscribe(v->id, shared, [](const ReceivedFrame&) {});
+    shared.conventions.source_metres_per_unit = 0.00000254;
+    auto same = c->subscribe(v->id, shared, [](const ReceivedFrame&) {});
+    ASSERT_TRUE(first.ok() && other.ok() && same.ok());
+    EXPECT_FALSE(other->joined_running);
+    EXPECT_TRUE(same->joined_running);
+    EXPECT_EQ(same->stream_id, first->stream_id);
+    for (const auto* sub : {&*first, &*other, &*same}) EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+  }
   // Refused: an unknown preset (a newer client), up and forward on one axis.
   Conventions bad;
   bad.preset = ConventionPreset::kCustom;

@@ -65,8 +65,7 @@ Result<Motion> to_post_rotation(const Motion& motion) {
   const std::size_t frames = in.frames;
 
   std::vector<int> subtree(static_cast<std::size_t>(n), 1);  // joints in each subtree
-  for (int j = n - 1; j >= 0; --j) {
-    // Parents may follow their children in index order: walk up instead.
+  for (int j = 0; j < n; ++j) {
     for (int p = in[j].parent; p != kNoParent; p = in[p].parent) ++subtree[static_cast<std::size_t>(p)];
   }
 
