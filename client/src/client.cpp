@@ -273,6 +273,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
         change.view_id = c.view_id();
         change.skeleton_version = c.skeleton_version();
         change.skeleton = std::move(sk).value();
+        change.rest = wire::rest_from_proto(c.skeleton());
         for (std::uint32_t j : c.joints()) change.joints.push_back(static_cast<int>(j));
         change.relative_to = c.relative_to();
         sub->on_skeleton(change);
@@ -417,6 +418,7 @@ Result<ViewState> to_view(Result<pb::ServerMessage> r) {
   s.motion = v.motion();
   s.skeleton_version = v.skeleton_version();
   s.skeleton = std::move(sk).value();
+  s.rest = wire::rest_from_proto(v.skeleton());
   s.relative_to = v.relative_to();
   s.frame_count = v.frame_count();
   s.frame_time = v.frame_time();
@@ -559,6 +561,15 @@ Result<Skeleton> Client::skeleton(const std::string& motion) {
   return wire::from_proto(r->skeleton().skeleton());
 }
 
+Result<RestPose> Client::rest_pose(const std::string& motion, const Conventions& conventions) {
+  pb::ClientMessage m;
+  m.mutable_get_skeleton()->set_motion(motion);
+  to_proto(conventions, *m.mutable_get_skeleton()->mutable_conventions());
+  auto r = impl_->expect(m, pb::ServerMessage::kSkeleton);
+  if (!r.ok()) return r.error();
+  return wire::rest_from_proto(r->skeleton().skeleton());
+}
+
 Result<ViewState> Client::create_view(const std::string& motion) {
   pb::ClientMessage m;
   m.mutable_create_view()->set_motion(motion);
@@ -614,14 +625,19 @@ Result<ViewState> Client::set_coordinates(std::uint32_t view, const std::string&
 
 Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, bool orientations,
                                   const std::vector<std::string>& joints, const Conventions& conventions) {
+  return query(view, begin, end, QueryOptions{orientations, false, joints, conventions});
+}
+
+Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, const QueryOptions& o) {
   pb::ClientMessage m;
   auto* q = m.mutable_query_frames();
   q->set_view_id(view);
   q->set_begin(begin);
   q->set_end(end);
-  q->set_orientations(orientations);
-  for (const auto& j : joints) q->add_joints(j);
-  to_proto(conventions, *q->mutable_conventions());
+  q->set_orientations(o.orientations);
+  q->set_local_transforms(o.local_transforms);
+  for (const auto& j : o.joints) q->add_joints(j);
+  to_proto(o.conventions, *q->mutable_conventions());
   auto r = impl_->expect(m, pb::ServerMessage::kFrames);
   if (!r.ok()) return r.error();
   auto b = wire::decode_block(r->frames());
@@ -633,6 +649,8 @@ Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::
   out.joints = std::move(b->joints);
   out.positions = std::move(b->positions);
   out.orientations = std::move(b->orientations);
+  out.local_rotations = std::move(b->local_rotations);
+  out.local_translations = std::move(b->local_translations);
   return out;
 }
 
@@ -675,6 +693,7 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   s->set_rate_hz(o.rate_hz);
   s->set_skip_repeats(o.skip_repeats);
   s->set_orientations(o.orientations);
+  s->set_local_transforms(o.local_transforms);
   for (const auto& j : o.joints) s->add_joints(j);
   s->set_transport(o.udp ? pb::TRANSPORT_UDP : pb::TRANSPORT_TCP);
   s->set_precision(o.float64 ? pb::PRECISION_FLOAT64 : pb::PRECISION_FLOAT32);
@@ -713,6 +732,13 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   info.rate_hz = sr.rate_hz();
   info.stream_id = sr.stream_id();
   info.joined_running = sr.joined_running();
+  if (sr.has_skeleton()) {  // older servers send none
+    auto sk = wire::from_proto(sr.skeleton());
+    if (!sk.ok()) return make_error("the server sent an invalid skeleton: " + sk.error().message);
+    info.skeleton = std::move(sk).value();
+    info.rest = wire::rest_from_proto(sr.skeleton());
+  }
+  info.relative_to = sr.relative_to();
   return info;
 }
 

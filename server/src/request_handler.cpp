@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <new>
 
+#include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
 #include "gmr/wire/convert.h"
 #include "gmr/wire/framing.h"
@@ -236,9 +237,12 @@ Reply RequestHandler::list_motions() const {
 Reply RequestHandler::get_skeleton(const pb::GetSkeleton& r) const {
   auto it = server_.by_name.find(r.motion());
   if (it == server_.by_name.end()) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
+  const LibraryEntry& e = server_.library[it->second];
+  const auto basis = output_basis_of(r.conventions(), e.metres_per_unit);
+  if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   pb::ServerMessage out;
   out.mutable_skeleton()->set_motion(it->first);
-  wire::to_proto(server_.library[it->second].motion->skeleton, *out.mutable_skeleton()->mutable_skeleton());
+  wire::to_proto(*e.motion, *basis, *out.mutable_skeleton()->mutable_skeleton());
   return out;
 }
 
@@ -323,7 +327,8 @@ Reply RequestHandler::query(const pb::QueryFrames& r) const {
   const auto basis = output_basis_of(r.conventions(), motion_unit(*v));
   if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   // Refuse before computing anything a reply too big to send.
-  const std::uint64_t per_frame = joints->size() * (3 + (r.orientations() ? 4 : 0)) * 9 + 8;
+  const std::uint64_t per_frame =
+      joints->size() * (3 + (r.orientations() ? 4 : 0) + (r.local_transforms() ? 7 : 0)) * 9 + 8;
   const std::uint64_t estimate = (end - begin) * per_frame + 64;
   if (estimate > server_.cfg.max_message_bytes) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
@@ -341,10 +346,23 @@ Reply RequestHandler::query(const pb::QueryFrames& r) const {
   const std::size_t n = m.skeleton.size();
   const int viewer = v->content()->relative_to;
   std::vector<Eigen::Vector3d> pos(n);
-  std::vector<Eigen::Matrix3d> rot(r.orientations() || viewer >= 0 ? n : 0);
+  std::vector<Eigen::Matrix3d> rot(r.orientations() || viewer >= 0 || r.local_transforms() ? n : 0);
+  const std::vector<int> own_frames = r.local_transforms() ? own_frame_sources(m) : std::vector<int>{};
+  std::vector<Eigen::Quaterniond> local_rotations(r.local_transforms() ? joints->size() : 0);
+  std::vector<Eigen::Vector3d> local_translations(local_rotations.size());
   b->mutable_positions()->Reserve(static_cast<int>((end - begin) * joints->size() * 3));
   for (std::uint64_t f = begin; f < end; ++f) {
     view_frame(m, viewer, f, pos, rot, *basis);
+    if (r.local_transforms()) {
+      engine_locals(m.skeleton, own_frames, pos, rot, *joints, local_rotations, local_translations);
+      for (std::size_t i = 0; i < joints->size(); ++i) {
+        const auto& q = local_rotations[i];
+        const auto& t = local_translations[i];
+        const double qv[] = {q.x(), q.y(), q.z(), q.w()}, tv[] = {t.x(), t.y(), t.z()};
+        b->mutable_local_rotations()->Add(std::begin(qv), std::end(qv));
+        b->mutable_local_translations()->Add(std::begin(tv), std::end(tv));
+      }
+    }
     for (int j : *joints) {
       const auto& p = pos[static_cast<std::size_t>(j)];
       b->add_positions(p.x());
@@ -423,7 +441,7 @@ pb::ViewInfo RequestHandler::view_info(const View& v) const {
   info.set_view_id(v.id());
   info.set_motion(v.motion_name());
   info.set_skeleton_version(v.content()->skeleton_version);
-  wire::to_proto(v.motion().skeleton, *info.mutable_skeleton());
+  wire::to_proto(v.motion(), OutputBasis{}, *info.mutable_skeleton());
   if (v.content()->relative_to >= 0) info.set_relative_to(v.motion().skeleton.joint(v.content()->relative_to).name);
   info.set_frame_count(v.motion().frame_count);
   info.set_frame_time(v.motion().frame_time);

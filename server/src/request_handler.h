@@ -55,6 +55,7 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
     std::vector<std::string> joint_names;  // empty: every joint
     std::uint64_t rate_mhz = 0;            // committed against the send budget
     std::uint32_t skeleton_version = 0;    // of the frames it last got word of
+    OutputBasis basis;                     // its conventions (of the rest pose it is sent)
   };
 
   void send(const pb::ServerMessage& m);

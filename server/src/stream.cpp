@@ -6,6 +6,7 @@
 
 #include "gmr/fast/compiled_motion.h"
 #include "gmr/fast/fast_fk.h"
+#include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
 #include "gmr/wire/frames.h"
 
@@ -13,7 +14,9 @@ namespace gmr::server {
 
 Stream::Stream(net::io_context& io, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
                StreamCounters& counters)
-    : io_(io), id_(id), content_(std::move(content)), settings_(std::move(settings)), counters_(counters), timer_(io) {}
+    : io_(io), id_(id), content_(std::move(content)), settings_(std::move(settings)), counters_(counters), timer_(io) {
+  if (settings_.local_transforms) own_frames_ = own_frame_sources(*content_->motion);
+}
 
 void Stream::add(std::shared_ptr<Target> target, std::uint64_t max_frames) {
   targets_.push_back(Entry{std::move(target), 0, max_frames});
@@ -84,6 +87,7 @@ void Stream::seek(std::uint32_t frame) {
 void Stream::set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints) {
   content_ = std::move(content);
   settings_.joints = std::move(joints);
+  if (settings_.local_transforms) own_frames_ = own_frame_sources(*content_->motion);
   last_frame_ = -1;
 }
 
@@ -118,11 +122,34 @@ struct Scratch {
   std::vector<double> positions_f64, orientations_f64;
   std::vector<float> fk_positions, fk_orientations, workspace;  // float path
   std::vector<float> positions_f32, orientations_f32;
+  std::vector<Eigen::Quaterniond> local_rotations;  // local transforms
+  std::vector<Eigen::Vector3d> local_translations;
+  std::vector<double> local_rotations_f64, local_translations_f64;
+  std::vector<float> local_rotations_f32, local_translations_f32;
 };
 
 Scratch& scratch() {
   static thread_local Scratch s;
   return s;
+}
+
+// The local transforms of `joints` from every joint's pose in w.all_*, as
+// float64 and float32 values.
+void encode_locals(const Skeleton& skeleton, std::span<const int> own_frames, std::span<const int> joints, Scratch& w) {
+  w.local_rotations.resize(joints.size());
+  w.local_translations.resize(joints.size());
+  engine_locals(skeleton, own_frames, w.all_positions, w.all_orientations, joints, w.local_rotations,
+                w.local_translations);
+  w.local_rotations_f64.clear();
+  w.local_translations_f64.clear();
+  for (std::size_t i = 0; i < joints.size(); ++i) {
+    const auto& q = w.local_rotations[i];
+    const auto& t = w.local_translations[i];
+    w.local_rotations_f64.insert(w.local_rotations_f64.end(), {q.x(), q.y(), q.z(), q.w()});
+    w.local_translations_f64.insert(w.local_translations_f64.end(), {t.x(), t.y(), t.z()});
+  }
+  w.local_rotations_f32.assign(w.local_rotations_f64.begin(), w.local_rotations_f64.end());
+  w.local_translations_f32.assign(w.local_translations_f64.begin(), w.local_translations_f64.end());
 }
 
 }  // namespace
@@ -146,7 +173,7 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
   bool done = false;
   if (cm != nullptr && cm->joint_count() == n && frame < cm->frame_count() && viewer < static_cast<int>(n)) {
     // The viewer's orientation is needed even when the client wants none.
-    const bool orient = settings_.orientations || viewer >= 0;
+    const bool orient = settings_.orientations || viewer >= 0 || settings_.local_transforms;
     w.fk_positions.resize(n * 3);
     w.fk_orientations.resize(orient ? n * 9 : 0);
     w.workspace.resize(std::max(w.workspace.size(), content_->compiled->workspace_floats()));
@@ -158,14 +185,34 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
                        settings_.basis);
       c.positions = w.positions_f32;
       c.orientations = w.orientations_f32;
+      if (settings_.local_transforms) {
+        // Every joint's pose in double (a joint's parent and own frame may
+        // not be among those sent), then the locals of those sent.
+        w.all_positions.resize(n);
+        w.all_orientations.resize(n);
+        const Viewpoint from =
+            viewer < 0 ? Viewpoint() : Viewpoint::of_joint(w.fk_positions, w.fk_orientations, static_cast<std::size_t>(viewer));
+        for (std::size_t j = 0; j < n; ++j) {
+          const float* p = w.fk_positions.data() + 3 * j;
+          const float* o = w.fk_orientations.data() + 9 * j;
+          Eigen::Matrix3d r;
+          r << o[0], o[1], o[2], o[3], o[4], o[5], o[6], o[7], o[8];
+          w.all_positions[j] = settings_.basis.position(from.position(Eigen::Vector3d(p[0], p[1], p[2])));
+          w.all_orientations[j] = settings_.basis.orientation(from.orientation(r));
+        }
+        encode_locals(m.skeleton, own_frames_, joints, w);
+        c.local_rotations = w.local_rotations_f32;
+        c.local_translations = w.local_translations_f32;
+      }
       ++counters_.frames_computed_float;
       done = true;
     }
   }
   if (!done) {
     w.all_positions.resize(n);
-    w.all_orientations.resize(settings_.orientations || viewer >= 0 ? n : 0);
+    w.all_orientations.resize(settings_.orientations || viewer >= 0 || settings_.local_transforms ? n : 0);
     view_frame(m, viewer, frame, w.all_positions, w.all_orientations, settings_.basis);
+    if (settings_.local_transforms) encode_locals(m.skeleton, own_frames_, joints, w);
     w.positions_f64.clear();
     w.orientations_f64.clear();
     for (int j : joints) {
@@ -179,11 +226,19 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
     if (settings_.float64) {
       c.positions_f64 = w.positions_f64;
       c.orientations_f64 = w.orientations_f64;
+      if (settings_.local_transforms) {
+        c.local_rotations_f64 = w.local_rotations_f64;
+        c.local_translations_f64 = w.local_translations_f64;
+      }
     } else {  // a float32 stream whose motion did not compile: rounded once here
       w.positions_f32.assign(w.positions_f64.begin(), w.positions_f64.end());
       w.orientations_f32.assign(w.orientations_f64.begin(), w.orientations_f64.end());
       c.positions = w.positions_f32;
       c.orientations = w.orientations_f32;
+      if (settings_.local_transforms) {
+        c.local_rotations = w.local_rotations_f32;
+        c.local_translations = w.local_translations_f32;
+      }
     }
   }
   ++counters_.frames_computed;

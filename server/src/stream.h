@@ -66,6 +66,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   struct Settings {
     std::vector<int> joints;  // sent, in this order
     bool orientations = false;
+    bool local_transforms = false;  // each joint's rotation and translation relative to its parent
     bool float64 = false;
     OutputBasis basis;  // the subscriber's conventions
     Schedule schedule;
@@ -122,6 +123,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   net::io_context& io_;
   std::uint64_t id_;
   std::shared_ptr<const ViewContent> content_;
+  std::vector<int> own_frames_;  // own_frame_sources of content_'s motion, when local_transforms
   Settings settings_;
   StreamCounters& counters_;
   net::steady_timer timer_;

@@ -92,6 +92,7 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   }
   settings.joints = std::move(joints).value();
   settings.orientations = r.orientations();
+  settings.local_transforms = r.local_transforms();
   settings.basis = *basis;
   settings.float64 = r.precision() == pb::PRECISION_FLOAT64;
   settings.max_catch_up = cfg.max_catch_up;
@@ -111,7 +112,7 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
     target = std::make_shared<TcpTarget>(weak_from_this(), connection_, id, v->id());
   }
   stream->add(target, r.max_frames());
-  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version};
+  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version, settings.basis};
   server_.committed_mhz += rate_mhz;
   if (!joined) stream->start();
 
@@ -124,6 +125,8 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   sub->set_rate_hz(s.rate);
   sub->set_stream_id(stream->id());
   sub->set_joined_running(joined);
+  wire::to_proto(v->motion(), settings.basis, *sub->mutable_skeleton());
+  if (v->content()->relative_to >= 0) sub->set_relative_to(v->motion().skeleton.joint(v->content()->relative_to).name);
   spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", connection_id_, id, v->id(),
                 stream->id(), use_udp ? "UDP" : "TCP", s.rate);
   return out;
@@ -201,7 +204,7 @@ void RequestHandler::view_changed(const View& v) {
       c->set_subscription_id(id);
       c->set_view_id(v.id());
       c->set_skeleton_version(sub.skeleton_version);
-      wire::to_proto(v.motion().skeleton, *c->mutable_skeleton());
+      wire::to_proto(v.motion(), sub.basis, *c->mutable_skeleton());
       for (int j : *joints) c->add_joints(static_cast<std::uint32_t>(j));
       const int viewer = v.content()->relative_to;
       if (viewer >= 0) c->set_relative_to(v.motion().skeleton.joint(viewer).name);

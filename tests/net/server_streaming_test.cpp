@@ -578,6 +578,150 @@ TEST(Streaming, ConventionsPerQueryAndPerSubscription) {
   EXPECT_NE(r.error().message.find("unknown conventions preset 9"), std::string::npos) << r.error().message;
 }
 
+// Composes engine-bone locals from the roots down (O_j = O_p Q_j,
+// P_j = P_p + O_p T_j) into world positions; values for every joint.
+std::vector<Eigen::Vector3d> compose_locals(const Skeleton& skeleton, std::span<const Eigen::Quaterniond> q,
+                                            std::span<const Eigen::Vector3d> t) {
+  std::vector<Eigen::Vector3d> p(skeleton.size());
+  std::vector<Eigen::Matrix3d> o(skeleton.size());
+  for (int j = 0; j < static_cast<int>(skeleton.size()); ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    const int parent = skeleton.joint(j).parent;
+    if (parent == kNoParent) {
+      o[u] = q[u].toRotationMatrix();
+      p[u] = t[u];
+    } else {
+      const auto pu = static_cast<std::size_t>(parent);
+      o[u] = o[pu] * q[u].toRotationMatrix();
+      p[u] = p[pu] + o[pu] * t[u];
+    }
+  }
+  return p;
+}
+
+// Local transforms (engine bones) per query and per subscription, and the
+// rest pose in the subscriber's conventions: composed from the roots, the
+// locals give back the positions the server sends, on a re-rooted view (whose
+// joints' outgoing bones have different frames), in Blender's conventions, on
+// the double and the float path; the rest pose is the offsets in metres and
+// Blender's axes; a subscription that asks for none gets none.
+TEST(Streaming, LocalTransformsAndRestPoseInTheSubscribersConventions) {
+  TestServer s;
+  Sink f64_sink, f32_sink, plain_sink;
+  Latch<client::SkeletonChange> changed;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Conventions blender;
+  blender.preset = ConventionPreset::kBlender;
+  const OutputBasis bb = [&] {
+    Conventions c2 = blender;
+    c2.source_metres_per_unit = 0.01;  // the demo is in centimetres (MotionInfo says so)
+    return output_basis(c2).value();
+  }();
+
+  // The rest pose of the library motion: offsets, turned and scaled.
+  auto rest = c->rest_pose("walk", blender);
+  ASSERT_TRUE(rest.ok()) << rest.error().to_string();
+  ASSERT_EQ(rest->translations.size(), v->skeleton.size());
+  std::size_t offsets = 0;
+  for (int j = 0; j < static_cast<int>(v->skeleton.size()); ++j) {
+    const Joint& joint = v->skeleton.joint(j);
+    const auto u = static_cast<std::size_t>(j);
+    EXPECT_LE(rest->rotations[u].angularDistance(Eigen::Quaterniond::Identity()), 1e-12) << joint.name;
+    if (joint.has_translation()) continue;
+    EXPECT_LE((rest->translations[u] - bb.position(joint.offset)).norm(), 1e-12) << joint.name;
+    ++offsets;
+  }
+  EXPECT_GT(offsets, v->skeleton.size() / 2);
+  EXPECT_EQ(v->rest.translations.size(), v->skeleton.size()) << "ViewInfo carries the rest pose too";
+
+  auto moved = c->shift_root(v->id, "l_hand");
+  ASSERT_TRUE(moved.ok());
+  const Skeleton& sk = moved->skeleton;
+  const std::size_t n = sk.size();
+  client::QueryOptions qo;
+  qo.local_transforms = true;
+  qo.conventions = blender;
+  auto q = c->query(v->id, 0, 30, qo);
+  ASSERT_TRUE(q.ok()) << q.error().to_string();
+  ASSERT_EQ(q->local_rotations.size(), 30 * n);
+  ASSERT_EQ(q->local_translations.size(), 30 * n);
+  double size = 0;
+  for (std::size_t j = 0; j < n; ++j) size = std::max(size, (q->positions[j] - q->positions[0]).norm());
+  ASSERT_GT(size, 0.3) << "metres";
+  double worst = 0;
+  for (std::size_t f = 0; f < 30; ++f) {
+    const auto p = compose_locals(sk, std::span(q->local_rotations).subspan(f * n, n),
+                                  std::span(q->local_translations).subspan(f * n, n));
+    for (std::size_t j = 0; j < n; ++j) worst = std::max(worst, (p[j] - q->positions[f * n + j]).norm());
+  }
+  EXPECT_LE(worst, 1e-12 * size);
+
+  // Streams: float64 equals the query, float32 within float precision.
+  client::SubscribeOptions o;
+  o.end_frame = 30;
+  o.speed = 10;
+  o.local_transforms = true;
+  o.conventions = blender;
+  client::SubscribeOptions o64 = o;
+  o64.float64 = true;
+  auto sub64 = c->subscribe(v->id, o64, f64_sink.on_frame(), f64_sink.on_end(),
+                            [&](const client::SkeletonChange& ch) { changed.set(ch); });
+  ASSERT_TRUE(sub64.ok()) << sub64.error().to_string();
+  ASSERT_TRUE(c->subscribe(v->id, o, f32_sink.on_frame(), f32_sink.on_end()).ok());
+  client::SubscribeOptions plain;
+  plain.end_frame = 30;
+  plain.speed = 10;
+  ASSERT_TRUE(c->subscribe(v->id, plain, plain_sink.on_frame(), plain_sink.on_end()).ok());
+  // The subscription's skeleton, with the rest pose in its conventions.
+  ASSERT_EQ(sub64->skeleton.size(), n);
+  ASSERT_EQ(sub64->rest.translations.size(), n);
+  for (int j = 0; j < static_cast<int>(n); ++j) {
+    if (sk.joint(j).has_translation() || sk.is_root(j)) continue;
+    EXPECT_LE((sub64->rest.translations[static_cast<std::size_t>(j)] - bb.position(sk.joint(j).offset)).norm(), 1e-12);
+  }
+  ASSERT_TRUE(f64_sink.ended.wait().has_value());
+  ASSERT_TRUE(f32_sink.ended.wait().has_value());
+  ASSERT_TRUE(plain_sink.ended.wait().has_value());
+  const auto a = f64_sink.copy(), b = f32_sink.copy(), none = plain_sink.copy();
+  ASSERT_EQ(a.size(), 30u);
+  ASSERT_EQ(b.size(), 30u);
+  ASSERT_EQ(none.size(), 30u);
+  for (std::size_t f = 0; f < 30; ++f) {
+    ASSERT_EQ(a[f].local_rotations.size(), n);
+    ASSERT_EQ(b[f].local_translations.size(), n);
+    EXPECT_TRUE(none[f].local_rotations.empty() && none[f].local_translations.empty());
+    for (std::size_t j = 0; j < n; ++j) {
+      const std::size_t k = f * n + j;
+      EXPECT_LE(a[f].local_rotations[j].angularDistance(q->local_rotations[k]), 1e-12);
+      EXPECT_LE((a[f].local_translations[j] - q->local_translations[k]).norm(), 1e-12 * size);
+      EXPECT_LE(b[f].local_rotations[j].angularDistance(q->local_rotations[k]), 1e-5);
+      EXPECT_LE((b[f].local_translations[j] - q->local_translations[k]).norm(), 1e-5 * size);
+    }
+  }
+
+  // A view change on a running subscription: the pushed skeleton carries the
+  // rest pose in the subscription's conventions.
+  client::SubscribeOptions looping = o64;
+  looping.end_frame = 0;
+  looping.loop = true;
+  auto live = c->subscribe(v->id, looping, [](const ReceivedFrame&) {}, {},
+                           [&](const client::SkeletonChange& ch) { changed.set(ch); });
+  ASSERT_TRUE(live.ok());
+  ASSERT_TRUE(c->shift_root(v->id, "head").ok());
+  auto ch = changed.wait();
+  ASSERT_TRUE(ch.has_value());
+  ASSERT_EQ(ch->rest.translations.size(), ch->skeleton.size());
+  for (int j = 0; j < static_cast<int>(ch->skeleton.size()); ++j) {
+    const Joint& joint = ch->skeleton.joint(j);
+    if (joint.has_translation() || ch->skeleton.is_root(j)) continue;
+    EXPECT_LE((ch->rest.translations[static_cast<std::size_t>(j)] - bb.position(joint.offset)).norm(), 1e-12) << joint.name;
+  }
+  EXPECT_TRUE(c->unsubscribe(live->id).ok());
+}
+
 TEST(Streaming, HeartbeatsKeepAQuietClientConnected) {
   server::ServerConfig cfg;
   cfg.idle_timeout = std::chrono::milliseconds(300);

@@ -202,6 +202,19 @@ TEST(FrameDecoding, RefusesCountsThatDoNotFormWholeValues) {
   EXPECT_FALSE(gmr::wire::decode_frame(f).ok());
   for (int i = 0; i < 3; ++i) f.add_orientations(0.0f);
   EXPECT_TRUE(gmr::wire::decode_frame(f).ok());
+  // Local transforms: both or neither, one per position.
+  for (int i = 0; i < 8; ++i) f.add_local_rotations(i % 4 == 3 ? 1.0f : 0.0f);
+  auto no_translations = gmr::wire::decode_frame(f);
+  ASSERT_FALSE(no_translations.ok());
+  EXPECT_NE(no_translations.error().message.find("8 local rotation and 0 local translation values for 2 positions"),
+            std::string::npos)
+      << no_translations.error().message;
+  for (int i = 0; i < 6; ++i) f.add_local_translations(static_cast<float>(i));
+  auto locals = gmr::wire::decode_frame(f);
+  ASSERT_TRUE(locals.ok()) << locals.error().to_string();
+  ASSERT_EQ(locals->local_rotations.size(), 2u);
+  EXPECT_EQ(locals->local_rotations[1].w(), 1.0);
+  EXPECT_EQ(locals->local_translations[1], Eigen::Vector3d(3, 4, 5));
 
   pb::FrameBlock b;
   b.set_begin(2);

@@ -19,6 +19,37 @@ void to_proto(const Skeleton& skeleton, pb::Skeleton& out) {
   }
 }
 
+void to_proto(const Motion& motion, const OutputBasis& basis, pb::Skeleton& out) {
+  to_proto(motion.skeleton, out);
+  const RestPose rest = engine_rest_pose(motion, basis);
+  for (int i = 0; i < out.joints_size(); ++i) {
+    const auto u = static_cast<std::size_t>(i);
+    pb::Joint* m = out.mutable_joints(i);
+    m->mutable_rest_translation()->set_x(rest.translations[u].x());
+    m->mutable_rest_translation()->set_y(rest.translations[u].y());
+    m->mutable_rest_translation()->set_z(rest.translations[u].z());
+    m->mutable_rest_rotation()->set_x(rest.rotations[u].x());
+    m->mutable_rest_rotation()->set_y(rest.rotations[u].y());
+    m->mutable_rest_rotation()->set_z(rest.rotations[u].z());
+    m->mutable_rest_rotation()->set_w(rest.rotations[u].w());
+  }
+}
+
+RestPose rest_from_proto(const pb::Skeleton& message) {
+  RestPose rest;
+  for (const pb::Joint& m : message.joints()) {
+    if (m.has_rest_rotation()) {
+      const auto& q = m.rest_rotation();
+      rest.rotations.emplace_back(q.w(), q.x(), q.y(), q.z());
+    } else {
+      rest.rotations.push_back(Eigen::Quaterniond::Identity());
+    }
+    const auto& t = m.has_rest_translation() ? m.rest_translation() : m.offset();
+    rest.translations.emplace_back(t.x(), t.y(), t.z());
+  }
+  return rest;
+}
+
 Result<Skeleton> from_proto(const pb::Skeleton& message) {
   std::vector<Joint> joints;
   joints.reserve(static_cast<std::size_t>(message.joints_size()));

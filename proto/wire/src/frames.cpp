@@ -41,9 +41,13 @@ std::string encode_frame_body(const FrameContent& c) {
   if (c.float64) {
     f.mutable_positions_f64()->Add(c.positions_f64.begin(), c.positions_f64.end());
     f.mutable_orientations_f64()->Add(c.orientations_f64.begin(), c.orientations_f64.end());
+    f.mutable_local_rotations_f64()->Add(c.local_rotations_f64.begin(), c.local_rotations_f64.end());
+    f.mutable_local_translations_f64()->Add(c.local_translations_f64.begin(), c.local_translations_f64.end());
   } else {
     f.mutable_positions()->Add(c.positions.begin(), c.positions.end());
     f.mutable_orientations()->Add(c.orientations.begin(), c.orientations.end());
+    f.mutable_local_rotations()->Add(c.local_rotations.begin(), c.local_rotations.end());
+    f.mutable_local_translations()->Add(c.local_translations.begin(), c.local_translations.end());
   }
   return f.SerializeAsString();
 }
@@ -104,6 +108,31 @@ Status unpack(const Values& positions, const Values& orientations, std::vector<E
   return Ok{};
 }
 
+// Local rotations (x y z w) and translations (x y z) of n joints, or none.
+template <class Values>
+Status unpack_locals(const Values& rotations, const Values& translations, std::size_t n,
+                     std::vector<Eigen::Quaterniond>& out_rotations, std::vector<Eigen::Vector3d>& out_translations) {
+  if (rotations.empty() && translations.empty()) {
+    out_rotations.clear();
+    out_translations.clear();
+    return Ok{};
+  }
+  if (static_cast<std::size_t>(rotations.size()) != 4 * n || static_cast<std::size_t>(translations.size()) != 3 * n) {
+    return make_error(ErrorKind::kInvalidData, std::to_string(rotations.size()) + " local rotation and " +
+                                                   std::to_string(translations.size()) + " local translation values for " +
+                                                   std::to_string(n) + " positions (expected 0 and 0, or " +
+                                                   std::to_string(4 * n) + " and " + std::to_string(3 * n) + ")");
+  }
+  out_rotations.resize(n);
+  out_translations.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const int k = static_cast<int>(4 * i), t = static_cast<int>(3 * i);
+    out_rotations[i] = Eigen::Quaterniond(rotations.Get(k + 3), rotations.Get(k), rotations.Get(k + 1), rotations.Get(k + 2));
+    out_translations[i] = Eigen::Vector3d(translations.Get(t), translations.Get(t + 1), translations.Get(t + 2));
+  }
+  return Ok{};
+}
+
 }  // namespace
 
 Result<FrameValues> decode_frame(const pb::Frame& f) {
@@ -117,8 +146,14 @@ Result<FrameValues> decode_frame(const pb::Frame& f) {
   d.sequence = f.sequence();
   d.server_send_time_ns = f.server_send_time_ns();
   d.float64 = f.positions_f64_size() > 0;
-  const Status s = d.float64 ? unpack(f.positions_f64(), f.orientations_f64(), d.positions, d.orientations)
-                             : unpack(f.positions(), f.orientations(), d.positions, d.orientations);
+  Status s = d.float64 ? unpack(f.positions_f64(), f.orientations_f64(), d.positions, d.orientations)
+                       : unpack(f.positions(), f.orientations(), d.positions, d.orientations);
+  if (s.ok()) {
+    s = d.float64 ? unpack_locals(f.local_rotations_f64(), f.local_translations_f64(), d.positions.size(),
+                                  d.local_rotations, d.local_translations)
+                  : unpack_locals(f.local_rotations(), f.local_translations(), d.positions.size(), d.local_rotations,
+                                  d.local_translations);
+  }
   if (!s.ok()) return make_error(ErrorKind::kInvalidData, "frame " + std::to_string(d.frame_index) + ": " + s.error().message);
   return d;
 }
@@ -131,6 +166,11 @@ Result<DecodedBlock> decode_block(const pb::FrameBlock& b) {
   d.end = b.end();
   d.joints.assign(b.joints().begin(), b.joints().end());
   if (auto s = unpack(b.positions(), b.orientations(), d.positions, d.orientations); !s.ok()) return s.error();
+  if (auto s = unpack_locals(b.local_rotations(), b.local_translations(), d.positions.size(), d.local_rotations,
+                             d.local_translations);
+      !s.ok()) {
+    return s.error();
+  }
   const std::uint64_t frames = d.end >= d.begin ? d.end - d.begin : 0;
   if (d.end < d.begin || d.positions.size() != frames * d.joints.size()) {
     return make_error(ErrorKind::kInvalidData, std::to_string(d.positions.size()) + " positions for frames [" +

@@ -20,6 +20,8 @@
 #include "gmr/ops/shift_root.h"
 #include "gmr/ops/split_tree.h"
 #include "gmr/ops/strip_dummies.h"
+#include "gmr/view/engine_pose.h"
+#include "gmr/view/viewpoint.h"
 #include "ops_test_util.h"
 #include "test_data.h"
 
@@ -266,6 +268,121 @@ TEST(StripDummiesOnCmuFiles, RemovesOnlyZeroLengthJoints) {
     }
   }
   EXPECT_GE(cmu_files, 5);
+}
+
+// Engine bones (gmr/view/engine_pose.h): on a motion read from BVH, each
+// joint's local translation is the file's offset (position channels
+// substituted) and its local rotation the file's rotation, every frame; the
+// rest pose is the offsets with no rotation.
+TEST(EngineLocalsOnCorpus, AreTheFilesOffsetsAndRotations) {
+  GMR_REQUIRE_DATA();
+  ASSERT_FALSE(corpus().empty());
+  std::size_t files = 0, checked = 0;
+  for (const Loaded& l : corpus()) {
+    SCOPED_TRACE(label(l));
+    const Motion& m = l.pre;
+    const std::size_t n = m.skeleton.size();
+    const auto sources = own_frame_sources(m);
+    std::vector<int> all(n), post_index(n);
+    for (std::size_t j = 0; j < n; ++j) {
+      all[j] = static_cast<int>(j);
+      post_index[j] = l.post.skeleton.find(m.skeleton.joint(static_cast<int>(j)).name);
+      ASSERT_GE(post_index[j], 0);
+    }
+    std::vector<Eigen::Vector3d> pos(n), t(n);
+    std::vector<Eigen::Matrix3d> rot(n);
+    std::vector<Eigen::Quaterniond> q(n);
+    double worst_t = 0.0, worst_q = 0.0;
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      view_frame(m, -1, f, pos, rot);
+      engine_locals(m.skeleton, sources, pos, rot, all, q, t);
+      for (std::size_t j = 0; j < n; ++j) {
+        worst_t = std::max(worst_t, (t[j] - l.post.local_offset(f, post_index[j])).norm());
+        // A BVH leaf's rotation moves no position and GMR keeps none: identity.
+        const Eigen::Matrix3d file_rotation = l.post.skeleton.children(post_index[j]).empty()
+                                                  ? Eigen::Matrix3d::Identity()
+                                                  : l.post.local_rotation(f, post_index[j]);
+        worst_q = std::max(worst_q, (q[j].toRotationMatrix() - file_rotation).cwiseAbs().maxCoeff());
+        ++checked;
+      }
+    }
+    EXPECT_LE(worst_t, 1e-9 * l.size);
+    EXPECT_LE(worst_q, 1e-9);
+    const RestPose rest = engine_rest_pose(m);
+    for (std::size_t j = 0; j < n; ++j) {
+      const Joint& pj = l.post.skeleton.joint(post_index[j]);
+      Eigen::Vector3d expected = pj.offset;
+      for (std::size_t c = 0; c < pj.channels.size(); ++c) {  // zero position channels replace the offset
+        if (pj.channels[c] == ChannelType::kXposition) expected.x() = 0;
+        if (pj.channels[c] == ChannelType::kYposition) expected.y() = 0;
+        if (pj.channels[c] == ChannelType::kZposition) expected.z() = 0;
+      }
+      EXPECT_LE((rest.translations[j] - expected).norm(), 1e-12 * l.size) << pj.name;
+      EXPECT_LE(rest.rotations[j].angularDistance(Eigen::Quaterniond::Identity()), 1e-12) << pj.name;
+    }
+    ++files;
+  }
+  EXPECT_EQ(files, test::expected_data_files("bvh", ".bvh"));
+  EXPECT_GT(checked, 0u);
+}
+
+// Composing the locals, O_j = O_p Q_j and P_j = P_p + O_p T_j from the roots
+// down, gives back every position of views whose joints have outgoing bones
+// in different frames (re-rooted, several roots), seen from a joint and in
+// Unreal's conventions; every frame.
+TEST(EngineLocalsOnCorpus, ComposeToEveryPositionOfReRootedViews) {
+  GMR_REQUIRE_DATA();
+  Conventions unreal;
+  unreal.preset = ConventionPreset::kUnreal;
+  unreal.source_metres_per_unit = 0.0254;
+  const OutputBasis basis = output_basis(unreal).value();
+  std::size_t views = 0, small = 0;
+  for (const Loaded& l : corpus()) {
+    SCOPED_TRACE(label(l));
+    const int n = static_cast<int>(l.pre.skeleton.size());
+    if (n < 4) {  // parser fixtures of one to three joints
+      ++small;
+      continue;
+    }
+    auto shifted_r = shift_root(l.pre, n - 1);  // a leaf's end, usually
+    ASSERT_TRUE(shifted_r.ok()) << shifted_r.error().to_string();
+    std::vector<int> three{1, n / 2, n - 2};
+    three.erase(std::unique(three.begin(), three.end()), three.end());
+    auto forest_r = set_roots(l.pre, three);
+    ASSERT_TRUE(forest_r.ok()) << forest_r.error().to_string();
+    const Motion shifted = std::move(shifted_r).value(), forest = std::move(forest_r).value();
+    for (const Motion* m : {&shifted, &forest}) {
+      const auto sources = own_frame_sources(*m);
+      std::vector<int> all(static_cast<std::size_t>(n));
+      std::iota(all.begin(), all.end(), 0);
+      std::vector<Eigen::Vector3d> pos(all.size()), t(all.size()), composed(all.size());
+      std::vector<Eigen::Matrix3d> rot(all.size()), frame(all.size());
+      std::vector<Eigen::Quaterniond> q(all.size());
+      const int viewer = n / 4;
+      double worst = 0.0;
+      for (std::size_t f = 0; f < m->frame_count; ++f) {
+        view_frame(*m, viewer, f, pos, rot, basis);
+        engine_locals(m->skeleton, sources, pos, rot, all, q, t);
+        for (int j = 0; j < n; ++j) {
+          const auto u = static_cast<std::size_t>(j);
+          const int p = m->skeleton.joint(j).parent;
+          if (p == kNoParent) {
+            frame[u] = q[u].toRotationMatrix();
+            composed[u] = t[u];
+          } else {
+            const auto pu = static_cast<std::size_t>(p);
+            frame[u] = frame[pu] * q[u].toRotationMatrix();
+            composed[u] = composed[pu] + frame[pu] * t[u];
+          }
+          worst = std::max(worst, (composed[u] - pos[u]).norm());
+        }
+      }
+      EXPECT_LE(worst, 1e-9 * l.size * basis.scale);
+      ++views;
+    }
+  }
+  EXPECT_EQ(views + 2 * small, 2 * test::expected_data_files("bvh", ".bvh"));
+  EXPECT_LE(small, 2u);
 }
 
 }  // namespace

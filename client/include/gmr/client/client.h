@@ -22,6 +22,7 @@
 #include "gmr/core/error.h"
 #include "gmr/skeleton/skeleton.h"
 #include "gmr/view/conventions.h"
+#include "gmr/view/engine_pose.h"
 #include "gmr/wire/frame_values.h"
 
 // The public types are plain structs: a program using the client needs no
@@ -88,6 +89,7 @@ struct ViewState {
   std::string motion;
   std::uint32_t skeleton_version = 0;
   Skeleton skeleton;
+  RestPose rest;            // each joint's rest translation and rotation as an engine bone (motion's conventions)
   std::string relative_to;  // empty: world coordinates
   std::uint64_t frame_count = 0;
   double frame_time = 0.0;
@@ -101,6 +103,15 @@ struct QueryResult {
   std::vector<int> joints;                     // indices, in the order of the values
   std::vector<Eigen::Vector3d> positions;      // frame-major, joints.size() per frame
   std::vector<Eigen::Quaterniond> orientations;  // when asked
+  std::vector<Eigen::Quaterniond> local_rotations;  // when asked: relative to the parent's frame
+  std::vector<Eigen::Vector3d> local_translations;
+};
+
+struct QueryOptions {
+  bool orientations = false;
+  bool local_transforms = false;    // each joint's rotation and translation relative to its parent
+  std::vector<std::string> joints;  // empty: every joint
+  Conventions conventions;
 };
 
 struct SubscribeOptions {
@@ -111,6 +122,7 @@ struct SubscribeOptions {
   double rate_hz = 0.0;          // 0: the motion's own rate times speed
   bool skip_repeats = false;
   bool orientations = false;
+  bool local_transforms = false;    // each joint's rotation and translation relative to its parent (engine bones)
   std::vector<std::string> joints;  // empty: every joint
   bool udp = false;
   bool float64 = false;
@@ -135,6 +147,9 @@ struct SubscriptionInfo {
   double rate_hz = 0.0;
   std::uint64_t stream_id = 0;
   bool joined_running = false;
+  Skeleton skeleton;        // the view's, as the frames' values follow it
+  RestPose rest;            // in the subscription's conventions
+  std::string relative_to;  // empty: world coordinates
 };
 
 // The server ended a subscription (end of motion, max_frames, a view change
@@ -177,6 +192,7 @@ struct SkeletonChange {
   std::uint32_t view_id = 0;
   std::uint32_t skeleton_version = 0;
   Skeleton skeleton;
+  RestPose rest;            // in the subscription's conventions
   std::vector<int> joints;  // indices into skeleton of each frame's values, in order
   std::string relative_to;  // empty: world coordinates
 };
@@ -209,6 +225,8 @@ class Client {
   // its code ("NOT_FOUND: unknown motion 'x'").
   Result<std::vector<MotionInfo>> list_motions();
   Result<Skeleton> skeleton(const std::string& motion);
+  // The motion's rest pose as engine bones, in `conventions`.
+  Result<RestPose> rest_pose(const std::string& motion, const Conventions& conventions = {});
   Result<ViewState> create_view(const std::string& motion);
   Status close_view(std::uint32_t view);
   Result<ViewState> shift_root(std::uint32_t view, const std::string& joint);
@@ -219,6 +237,7 @@ class Client {
   Result<ViewState> set_coordinates(std::uint32_t view, const std::string& relative_to);  // "" = world
   Result<QueryResult> query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, bool orientations = false,
                             const std::vector<std::string>& joints = {}, const Conventions& conventions = {});
+  Result<QueryResult> query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, const QueryOptions& options);
   // Frames start after the reply; `on_frame` runs on the I/O thread (for UDP
   // frames too), `on_end` when the server ends the subscription. With
   // options.udp the client first registers its UDP endpoint.

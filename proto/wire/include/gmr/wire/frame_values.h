@@ -22,6 +22,10 @@ struct FrameValues {
   bool float64 = false;                          // the precision it travelled in
   std::vector<Eigen::Vector3d> positions;        // one per joint sent
   std::vector<Eigen::Quaterniond> orientations;  // empty, or one per joint sent
+  // Local transforms (relative to the parent's frame), when subscribed: empty,
+  // or one per joint sent.
+  std::vector<Eigen::Quaterniond> local_rotations;
+  std::vector<Eigen::Vector3d> local_translations;
 };
 
 }  // namespace gmr::wire

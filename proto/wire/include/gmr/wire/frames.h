@@ -37,6 +37,11 @@ struct FrameContent {
   std::span<const float> orientations;
   std::span<const double> positions_f64;
   std::span<const double> orientations_f64;
+  // Local transforms: 4 values (x y z w) and 3 per joint, or empty.
+  std::span<const float> local_rotations;
+  std::span<const float> local_translations;
+  std::span<const double> local_rotations_f64;
+  std::span<const double> local_translations_f64;
 };
 
 // The shared body: serialized Frame fields >= 16.
@@ -54,7 +59,8 @@ std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id,
 
 // A pushed frame as values, from whichever precision it carries. Fails
 // (kInvalidData) when the value counts do not form whole positions and
-// quaternions, or the orientations are neither absent nor one per position.
+// quaternions, or the orientations or local transforms are neither absent nor
+// one per position.
 Result<FrameValues> decode_frame(const stream::v1::Frame& frame);
 
 // A query's frames as values: frame-major, joints.size() per frame.
@@ -65,6 +71,8 @@ struct DecodedBlock {
   std::vector<int> joints;
   std::vector<Eigen::Vector3d> positions;
   std::vector<Eigen::Quaterniond> orientations;  // empty unless asked for
+  std::vector<Eigen::Quaterniond> local_rotations;  // empty unless asked for
+  std::vector<Eigen::Vector3d> local_translations;
 };
 // Fails (kInvalidData) when the counts do not match (end - begin) x joints.
 Result<DecodedBlock> decode_block(const stream::v1::FrameBlock& batch);
