@@ -17,6 +17,7 @@ packages=(
   libprotobuf-dev protobuf-compiler # the wire protocol
   gnuplot-nox               # the Figure 4 plot (gmr-bench figure4)
   python3                   # the layout check (tests/layout/check_layout.py)
+  python3-protobuf python3-numpy # the Python client (client/python) and the Blender add-on
   clang libclang-rt-14-dev  # the sanitizer build uses clang (gmr builds with GCC and clang)
   blender                   # the interop test: Blender's own BVH importer reads what gmr writes
   nodejs npm                # the interop test: three.js's BVHLoader (npm, tests/interop/package.json)

@@ -56,8 +56,9 @@ int main(int argc, char** argv) {
   gmr::LoadOptions library_files;
   double library_unit = 0.0;
   app.add_option("--metres-per-unit", library_unit,
-                 "The unit of the library's files in metres (0.0254: inches), for clients' engine conventions "
-                 "(default: unknown; the built-in demo is in centimetres)")
+                 "The unit of the library's files in metres (0.0254: inches), for clients' engine conventions, "
+                 "for files that declare none (an .amc takes its .asf's; default: unknown; the built-in demo is in "
+                 "centimetres)")
       ->check(CLI::PositiveNumber);
   app.add_option("--amc-fps", library_files.amc_fps,
                  "Frames per second of the library's .amc files, which do not say (default 120, the CMU captures')")
@@ -171,7 +172,11 @@ int main(int argc, char** argv) {
       spdlog::info("library: {} motions loaded, {} files rejected, {} other files skipped", loaded->entries.size(),
                    loaded->rejected.size(), loaded->skipped);
       library = std::move(loaded->entries);
-      for (auto& e : library) e.metres_per_unit = library_unit;
+      // A file's own unit (an ASF declares one) comes first; --metres-per-unit
+      // covers the files that declare none.
+      for (auto& e : library) {
+        if (e.metres_per_unit == 0.0) e.metres_per_unit = library_unit;
+      }
     }
     Server server(cfg, std::move(library));
     server.start();

@@ -139,7 +139,13 @@ Motion transform_for_positions(Motion m, const PositionsOptions& o) {
   return m;
 }
 
-void run_positions(const PositionsOptions& o) {
+void run_positions(const PositionsOptions& given) {
+  PositionsOptions o = given;
+  if (o.view.metres_per_unit == 0.0) {  // the file's own unit, as gmr-server takes it
+    LoadOptions lo;
+    lo.asf = o.asf;
+    o.view.metres_per_unit = declared_metres_per_unit(o.file, lo);
+  }
   const FrameRange requested = parse_frame_range(o.frames);
   Warnings warnings;
   const Motion m = transform_for_positions(load(o.file, o.asf, o.fps, warnings), o);

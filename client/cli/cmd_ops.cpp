@@ -154,8 +154,8 @@ void add_view_options(CLI::App& cmd, ViewOptions& o) {
       ->check(CLI::IsMember({"native", "unreal", "unity", "blender", "godot"}))
       ->capture_default_str();
   cmd.add_option("--metres-per-unit", o.metres_per_unit,
-                 "The motion's unit in metres (0.0254: inches), for --conventions to change units (default: unknown, "
-                 "positions keep the motion's units)")
+                 "The motion's unit in metres (0.0254: inches), for --conventions to change units (default: the "
+                 "file's own, which only an .asf declares; else unknown, positions keep the motion's units)")
       ->check(CLI::PositiveNumber);
 }
 

@@ -45,7 +45,8 @@ Result<LibraryEntry> load_one(const Job& job) {
   if (pre->frame_count == 0) return Error{job.path.string(), 0, 0, "the motion has no frames"};
   if (!(pre->frame_time > 0.0)) return Error{job.path.string(), 0, 0, "the motion has no frame time"};
   if (auto s = check_motion_limits(*pre, job.limits); !s.ok()) return Error{job.path.string(), 0, 0, s.error().message};
-  return LibraryEntry{job.name, job.source, std::make_shared<const Motion>(std::move(pre).value())};
+  return LibraryEntry{job.name, job.source, std::make_shared<const Motion>(std::move(pre).value()),
+                      declared_metres_per_unit(job.path, job.options)};
 }
 
 }  // namespace

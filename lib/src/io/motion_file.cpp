@@ -94,6 +94,16 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
   return unknown_extension(path, "read");
 }
 
+double declared_metres_per_unit(const std::filesystem::path& path, const LoadOptions& options) {
+  if (lower_extension(path) != ".amc") return 0.0;
+  auto asf_path = find_asf(path, options);
+  if (!asf_path) return 0.0;
+  auto asf = read_asf(*asf_path);
+  if (!asf) return 0.0;
+  const double length = asf->units.length;
+  return std::isfinite(length) && length > 0.0 ? 0.0254 / length : 0.0;
+}
+
 // ---- saving ------------------------------------------------------------
 
 namespace {

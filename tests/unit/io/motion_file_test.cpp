@@ -84,6 +84,22 @@ TEST(LoadMotion, AmcPicksTheAsfOfItsSubjectAmongSeveral) {
   EXPECT_THAT(two.error().message, HasSubstr("--asf"));
 }
 
+// The unit a file declares: an ASF's `units length` (CMU: inches / 0.45),
+// nothing for BVH or GMR, nothing for an .amc whose skeleton cannot be read.
+TEST(DeclaredUnit, AsfLengthIsInchesOverLength) {
+  TempDir d;
+  ASSERT_TRUE(write_file_atomic(d.path / "a.bvh", kBvh).ok());
+  EXPECT_EQ(declared_metres_per_unit(d.path / "a.bvh"), 0.0);
+  ASSERT_TRUE(write_file_atomic(d.path / "t.amc", ":FULLY-SPECIFIED\n").ok());
+  EXPECT_EQ(declared_metres_per_unit(d.path / "t.amc"), 0.0) << "no .asf beside it";
+  ASSERT_TRUE(write_file_atomic(d.path / "t.asf", ":version 1.10\n:name t\n:units\n  mass 1.0\n  length 0.5\n  angle deg\n"
+                                                  ":root\n  order TX TY TZ RX RY RZ\n  axis XYZ\n  position 0 0 0\n"
+                                                  "  orientation 0 0 0\n:bonedata\n:hierarchy\n  begin\n  end\n").ok());
+  EXPECT_DOUBLE_EQ(declared_metres_per_unit(d.path / "t.amc"), 0.0254 / 0.5);
+  if (!test::have_data() && !test::in_ci()) return;
+  EXPECT_DOUBLE_EQ(declared_metres_per_unit(test::data_file("asfamc/07/07_05-walk.amc")), 0.0254 / 0.45);
+}
+
 TEST(SaveMotion, UnknownExtension) {
   Motion m;
   const Status s = save_motion(m, "out.xyz");

@@ -34,6 +34,13 @@ struct LoadOptions {
 Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions& options = {},
                            Warnings* out_warnings = nullptr);
 
+// The unit a motion file declares, in metres per unit, or 0 when it declares
+// none. Only Acclaim skeletons do: CMU's ASF lengths are inches divided by
+// `units length` (0.45 in every CMU file), so an .amc's unit is
+// 0.0254 / length of its .asf (found as load_motion finds it). BVH, GMR and
+// GMRB carry no unit. Never fails: an unreadable skeleton declares nothing.
+double declared_metres_per_unit(const std::filesystem::path& path, const LoadOptions& options = {});
+
 // Saves by extension, converting between conventions as needed (.bvh wants
 // post-rotation, and gets the form every common reader reads alike:
 // to_bvh_interchange; .gmr, .gmrb and .amc pre-rotation). Atomic. For .amc the

@@ -1,0 +1,665 @@
+"""A client for gmr-server (docs/protocol.md), in plain Python with numpy.
+
+One Client is one TCP connection (and, for UDP subscriptions, one UDP
+socket). It is synchronous and single-threaded: a request waits for its
+reply, and frames are read whenever the client reads (a request, `poll()`,
+or iterating a subscription). Nothing runs in the background, so the caller
+decides when the socket is read: a game loop or Blender's timer calls
+`poll()` (or `Subscription.latest()`) and never blocks.
+
+    with Client(port=7400) as c:
+        view = c.create_view("walk")
+        c.shift_root(view.id, "head")
+        q = c.query(view.id, 0, 10)                 # q.positions: (10, joints, 3)
+        sub = c.subscribe(view.id, max_frames=100, conventions="blender")
+        for frame in sub:                           # frame.positions: (joints, 3)
+            ...
+"""
+
+import collections
+import dataclasses
+import select
+import socket
+import time
+from typing import List, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _wire
+from . import stream_pb2 as pb
+
+PROTOCOL_VERSION = 1
+DEFAULT_PORT = 7400
+_DEFAULT_MAX_MESSAGE_BYTES = 4 << 20
+_MAX_QUEUED_FRAMES = 1024  # per subscription; older frames give way (counted)
+_CHANNELS = ["Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"]
+
+
+class GmrError(Exception):
+    """A refusal from the server (`code` is its name, e.g. "NOT_FOUND"), or a
+    broken connection or malformed message (`code` "CONNECTION" or "PROTOCOL")."""
+
+    def __init__(self, code: str, message: str):
+        super().__init__(f"{code}: {message}")
+        self.code = code
+        self.message = message
+
+
+PRESETS = {"native": 0, "unreal": 1, "unity": 2, "blender": 3, "godot": 4, "custom": 5}
+
+
+@dataclasses.dataclass
+class Conventions:
+    """An engine's axes, handedness and unit (docs/protocol.md, "Conventions").
+
+    preset: "native", "unreal", "unity", "blender", "godot" or "custom".
+    For "custom": signed axes (1 = +X, 2 = +Y, 3 = +Z, -1 = -X, ...), handedness
+    and the target's unit in metres. source_metres_per_unit: the motion's unit
+    (0: the library's, or none).
+    """
+
+    preset: str = "native"
+    up: int = 2
+    forward: int = 3
+    left_handed: bool = False
+    target_metres_per_unit: float = 0.0
+    source_metres_per_unit: float = 0.0
+
+    def to_proto(self, out) -> None:
+        if self.preset not in PRESETS:
+            raise ValueError(f"unknown conventions preset '{self.preset}' (one of {', '.join(PRESETS)})")
+        out.preset = PRESETS[self.preset]
+        if self.preset == "custom":
+            out.up = self.up
+            out.forward = self.forward
+            out.left_handed = self.left_handed
+            out.target_metres_per_unit = self.target_metres_per_unit
+        out.source_metres_per_unit = self.source_metres_per_unit
+
+
+ConventionsLike = Union[None, str, Conventions]
+
+
+def _set_conventions(conventions: ConventionsLike, out) -> None:
+    if conventions is None:
+        return
+    if isinstance(conventions, str):
+        conventions = Conventions(preset=conventions)
+    conventions.to_proto(out)
+
+
+@dataclasses.dataclass
+class Skeleton:
+    """Joints in index order, parents before children. The rest pose is each
+    joint's translation and rotation (x, y, z, w) relative to its parent's
+    frame (roots: to the world) with every channel zero, as engine bones."""
+
+    names: List[str]
+    parents: np.ndarray        # (n,) int, -1 for a root
+    soft_parents: np.ndarray   # (n,) int, roots only: the parent a split removed; -1 if none
+    offsets: np.ndarray        # (n, 3)
+    channels: List[List[str]]  # per joint, BVH channel names in order
+    rest_translations: np.ndarray  # (n, 3)
+    rest_rotations: np.ndarray     # (n, 4) x, y, z, w
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no joint '{name}' in this skeleton") from None
+
+    @property
+    def roots(self) -> List[int]:
+        return [j for j, p in enumerate(self.parents) if p < 0]
+
+    @staticmethod
+    def from_proto(m) -> "Skeleton":
+        n = len(m.joints)
+        names = [j.name for j in m.joints]
+        parents = np.array([j.parent for j in m.joints], dtype=np.int32)
+        for j, p in enumerate(parents):
+            if not -1 <= p < j:
+                raise GmrError("PROTOCOL", f"joint {j} ('{names[j]}') has parent {p}: parents come before children")
+        offsets = np.array([[j.offset.x, j.offset.y, j.offset.z] for j in m.joints], dtype=np.float64).reshape(n, 3)
+        rest_t = np.array(
+            [[t.x, t.y, t.z] for t in (j.rest_translation if j.HasField("rest_translation") else j.offset for j in m.joints)],
+            dtype=np.float64).reshape(n, 3)
+        rest_q = np.array(
+            [[j.rest_rotation.x, j.rest_rotation.y, j.rest_rotation.z, j.rest_rotation.w]
+             if j.HasField("rest_rotation") else [0.0, 0.0, 0.0, 1.0] for j in m.joints],
+            dtype=np.float64).reshape(n, 4)
+        channels = []
+        for j in m.joints:
+            if any(not 0 <= c < 6 for c in j.channels):
+                raise GmrError("PROTOCOL", f"joint '{j.name}' has an unknown channel type")
+            channels.append([_CHANNELS[c] for c in j.channels])
+        return Skeleton(names, parents, np.array([j.soft_parent for j in m.joints], dtype=np.int32), offsets,
+                        channels, rest_t, rest_q)
+
+
+@dataclasses.dataclass
+class MotionInfo:
+    name: str
+    joint_count: int
+    frame_count: int
+    frame_time: float
+    source: str
+    metres_per_unit: float  # 0: unknown
+
+
+@dataclasses.dataclass
+class View:
+    id: int
+    motion: str
+    skeleton_version: int
+    skeleton: Skeleton
+    relative_to: str  # empty: world coordinates
+    frame_count: int
+    frame_time: float
+    removed: List[str]
+    join_offset_spread: float
+
+
+@dataclasses.dataclass
+class QueryResult:
+    skeleton_version: int
+    begin: int
+    end: int
+    joints: np.ndarray                         # (J,) joint indices of the values
+    positions: np.ndarray                      # (frames, J, 3)
+    orientations: Optional[np.ndarray]         # (frames, J, 4) x y z w, when asked
+    local_rotations: Optional[np.ndarray]      # (frames, J, 4), when asked
+    local_translations: Optional[np.ndarray]   # (frames, J, 3), when asked
+
+
+@dataclasses.dataclass
+class Frame:
+    subscription_id: int
+    view_id: int
+    stream_id: int
+    skeleton_version: int
+    frame_index: int
+    motion_time: float
+    sequence: int
+    server_send_time_ns: int
+    receive_time_ns: int
+    udp: bool
+    positions: np.ndarray                     # (J, 3)
+    orientations: Optional[np.ndarray]        # (J, 4) x y z w
+    local_rotations: Optional[np.ndarray]     # (J, 4)
+    local_translations: Optional[np.ndarray]  # (J, 3)
+
+
+def _values(flat, width: int, count: Optional[int], what: str) -> Optional[np.ndarray]:
+    """A repeated field as (count, width) values; None when empty."""
+    if len(flat) == 0:
+        return None
+    a = np.asarray(flat, dtype=np.float64)
+    if a.size % width != 0 or (count is not None and a.size != count * width):
+        expected = f"{count * width}" if count is not None else f"a multiple of {width}"
+        raise GmrError("PROTOCOL", f"{a.size} {what} values (expected {expected})")
+    return a.reshape(-1, width)
+
+
+def _decode_frame(f, udp: bool) -> Frame:
+    f64 = len(f.positions_f64) > 0
+    positions = _values(f.positions_f64 if f64 else f.positions, 3, None, "position")
+    if positions is None:
+        positions = np.zeros((0, 3))
+    n = positions.shape[0]
+    orientations = _values(f.orientations_f64 if f64 else f.orientations, 4, n, "orientation")
+    local_r = _values(f.local_rotations_f64 if f64 else f.local_rotations, 4, n, "local rotation")
+    local_t = _values(f.local_translations_f64 if f64 else f.local_translations, 3, n, "local translation")
+    if (local_r is None) != (local_t is None):
+        raise GmrError("PROTOCOL", "local rotations without local translations, or the other way round")
+    return Frame(f.subscription_id, f.view_id, f.stream_id, f.skeleton_version, f.frame_index, f.motion_time,
+                 f.sequence, f.server_send_time_ns, time.time_ns(), udp, positions, orientations, local_r, local_t)
+
+
+class Subscription:
+    """A running subscription. Iterate it for its frames (blocking until the
+    next one, ending when the server ends it), or call `latest()` from a loop
+    that must not block. `skeleton`, `joints` and `skeleton_version` follow
+    the server's SkeletonChanged pushes: each frame's values follow the
+    skeleton of the version it carries."""
+
+    def __init__(self, client: "Client", reply):
+        self._client = client
+        self.id = reply.subscription_id
+        self.view_id = reply.view_id
+        self.skeleton_version = reply.skeleton_version
+        self.joints = np.array(reply.joints, dtype=np.int32)
+        self.rate_hz = reply.rate_hz
+        self.stream_id = reply.stream_id
+        self.joined_running = reply.joined_running
+        self.skeleton = Skeleton.from_proto(reply.skeleton) if reply.HasField("skeleton") else None
+        self.relative_to = reply.relative_to
+        self.ended = None  # dict(reason, frames_sent, frames_dropped, frames_skipped) once ended
+        self.skeleton_changes = 0
+        self.frames_overflowed = 0  # frames this client queued but nobody read in time
+        self._frames = collections.deque()
+
+    def _push(self, frame: Frame) -> None:
+        if len(self._frames) >= _MAX_QUEUED_FRAMES:
+            self._frames.popleft()
+            self.frames_overflowed += 1
+        self._frames.append(frame)
+
+    def _skeleton_changed(self, c) -> None:
+        self.skeleton_version = c.skeleton_version
+        self.skeleton = Skeleton.from_proto(c.skeleton)
+        self.joints = np.array(c.joints, dtype=np.int32)
+        self.relative_to = c.relative_to
+        self.skeleton_changes += 1
+
+    def __iter__(self):
+        while True:
+            if self._frames:
+                yield self._frames.popleft()
+            elif self.ended is not None:
+                return
+            else:
+                self._client._pump(self._client.timeout)
+
+    def frames(self) -> List[Frame]:
+        """Every frame that arrived and was not read yet (reads the sockets first, without blocking)."""
+        self._client.poll(0.0)
+        out = list(self._frames)
+        self._frames.clear()
+        return out
+
+    def latest(self) -> Optional[Frame]:
+        """The newest frame that arrived, dropping older unread ones; None if none (never blocks)."""
+        frames = self.frames()
+        return frames[-1] if frames else None
+
+    def unsubscribe(self) -> None:
+        self._client.unsubscribe(self.id)
+
+
+class Client:
+    def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *, name: str = "gmr-python",
+                 token: str = "", timeout: float = 5.0):
+        self.timeout = timeout
+        self._next_request = 1
+        self._replies = {}
+        self._subs = {}
+        self._early = collections.defaultdict(list)  # frames that came before their Subscribed reply
+        self._subscribing = False
+        self._buffer = bytearray()
+        self._udp = None
+        self._udp_registered = False
+        self._reassembler = _wire.Reassembler()
+        self._max_message = _DEFAULT_MAX_MESSAGE_BYTES
+        self.frames_malformed = 0
+        try:
+            self._sock = socket.create_connection((host, port), timeout=timeout)
+        except OSError as e:
+            raise GmrError("CONNECTION", f"cannot connect to {host}:{port}: {e.strerror or e}") from None
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._host = self._sock.getpeername()[0]
+        self._last_send = time.monotonic()
+        m = pb.ClientMessage()
+        m.hello.protocol_version = PROTOCOL_VERSION
+        m.hello.client_name = name
+        m.hello.auth_token = token
+        self.hello = self._request(m, "hello")
+        if self.hello.max_message_bytes:
+            self._max_message = self.hello.max_message_bytes
+
+    # ------------------------------------------------------------ lifetime
+
+    def close(self) -> None:
+        for s in (self._sock, self._udp):
+            if s is not None:
+                s.close()
+        self._sock = None
+        self._udp = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ------------------------------------------------------------ requests
+
+    def list_motions(self) -> List[MotionInfo]:
+        m = pb.ClientMessage()
+        m.list_motions.SetInParent()
+        r = self._request(m, "motions")
+        return [MotionInfo(x.name, x.joint_count, x.frame_count, x.frame_time, x.source, x.metres_per_unit)
+                for x in r.motions]
+
+    def skeleton(self, motion: str, conventions: ConventionsLike = None) -> Skeleton:
+        """The motion's skeleton, with its rest pose in `conventions`."""
+        m = pb.ClientMessage()
+        m.get_skeleton.motion = motion
+        _set_conventions(conventions, m.get_skeleton.conventions)
+        return Skeleton.from_proto(self._request(m, "skeleton").skeleton)
+
+    def create_view(self, motion: str) -> View:
+        m = pb.ClientMessage()
+        m.create_view.motion = motion
+        return self._view(m)
+
+    def close_view(self, view: int) -> None:
+        m = pb.ClientMessage()
+        m.close_view.view_id = view
+        self._request(m, "ack")
+
+    def shift_root(self, view: int, joint: str) -> View:
+        m = pb.ClientMessage()
+        m.shift_root.view_id = view
+        m.shift_root.joint = joint
+        return self._view(m)
+
+    def split(self, view: int, joint: str) -> View:
+        m = pb.ClientMessage()
+        m.split.view_id = view
+        m.split.joint = joint
+        return self._view(m)
+
+    def join(self, view: int, root: str) -> View:
+        m = pb.ClientMessage()
+        m.join.view_id = view
+        m.join.root = root
+        return self._view(m)
+
+    def set_roots(self, view: int, roots: Sequence[str]) -> View:
+        m = pb.ClientMessage()
+        m.set_roots.view_id = view
+        m.set_roots.roots.extend(roots)
+        return self._view(m)
+
+    def strip_dummies(self, view: int) -> View:
+        m = pb.ClientMessage()
+        m.strip_dummies.view_id = view
+        return self._view(m)
+
+    def set_coordinates(self, view: int, relative_to: str = "") -> View:
+        """World coordinates (""), or the motion seen from joint `relative_to`."""
+        m = pb.ClientMessage()
+        m.set_coordinates.view_id = view
+        m.set_coordinates.relative_to = relative_to
+        return self._view(m)
+
+    def query(self, view: int, begin: int, end: int = 0, *, orientations: bool = False,
+              local_transforms: bool = False, joints: Sequence[str] = (),
+              conventions: ConventionsLike = None) -> QueryResult:
+        """Frames [begin, end) (end 0: begin + 1) of a view, in float64."""
+        m = pb.ClientMessage()
+        q = m.query_frames
+        q.view_id = view
+        q.begin = begin
+        q.end = end
+        q.orientations = orientations
+        q.local_transforms = local_transforms
+        q.joints.extend(joints)
+        _set_conventions(conventions, q.conventions)
+        b = self._request(m, "frames")
+        frames = b.end - b.begin if b.end >= b.begin else -1
+        count = frames * len(b.joints)
+        if frames < 0:
+            raise GmrError("PROTOCOL", f"a frame block for frames [{b.begin}, {b.end})")
+
+        def shaped(flat, width, what):
+            v = _values(flat, width, count, what)
+            return None if v is None else v.reshape(frames, len(b.joints), width)
+
+        positions = shaped(b.positions, 3, "position")
+        if positions is None:
+            positions = np.zeros((frames, len(b.joints), 3))
+        local_r = shaped(b.local_rotations, 4, "local rotation")
+        local_t = shaped(b.local_translations, 3, "local translation")
+        return QueryResult(b.skeleton_version, b.begin, b.end, np.array(b.joints, dtype=np.int32), positions,
+                           shaped(b.orientations, 4, "orientation"), local_r, local_t)
+
+    def subscribe(self, view: int, *, start_frame: int = 0, end_frame: int = 0, loop: bool = False,
+                  speed: float = 1.0, rate_hz: float = 0.0, skip_repeats: bool = False, orientations: bool = False,
+                  local_transforms: bool = False, joints: Sequence[str] = (), udp: bool = False,
+                  float64: bool = False, shared: bool = False, max_frames: int = 0,
+                  conventions: ConventionsLike = None) -> Subscription:
+        """Starts streaming frames of a view (docs/protocol.md, "Streams")."""
+        if udp:
+            self.register_udp()
+        m = pb.ClientMessage()
+        s = m.subscribe
+        s.view_id = view
+        s.start_frame = start_frame
+        s.end_frame = end_frame
+        s.loop = loop
+        s.speed = speed
+        s.rate_hz = rate_hz
+        s.skip_repeats = skip_repeats
+        s.orientations = orientations
+        s.local_transforms = local_transforms
+        s.joints.extend(joints)
+        s.transport = pb.TRANSPORT_UDP if udp else pb.TRANSPORT_TCP
+        s.precision = pb.PRECISION_FLOAT64 if float64 else pb.PRECISION_FLOAT32
+        s.shared = shared
+        s.max_frames = max_frames
+        _set_conventions(conventions, s.conventions)
+        # Frames can come before the reply is handled (in the same read, or by
+        # UDP): they wait in _early until the subscription exists.
+        self._subscribing = True
+        try:
+            reply = self._request(m, "subscribed")
+        finally:
+            self._subscribing = False
+        sub = Subscription(self, reply)
+        self._subs[sub.id] = sub
+        for frame in self._early.pop(sub.id, []):
+            sub._push(frame)
+        self._early.clear()
+        return sub
+
+    def unsubscribe(self, subscription: int) -> None:
+        m = pb.ClientMessage()
+        m.unsubscribe.subscription_id = subscription
+        self._request(m, "ack")
+        sub = self._subs.pop(subscription, None)
+        if sub is not None and sub.ended is None:
+            sub.ended = {"reason": "unsubscribed", "frames_sent": 0, "frames_dropped": 0, "frames_skipped": 0}
+
+    def pause(self, subscription: int) -> None:
+        m = pb.ClientMessage()
+        m.pause.subscription_id = subscription
+        self._request(m, "ack")
+
+    def resume(self, subscription: int) -> None:
+        m = pb.ClientMessage()
+        m.resume.subscription_id = subscription
+        self._request(m, "ack")
+
+    def seek(self, subscription: int, frame: int) -> None:
+        m = pb.ClientMessage()
+        m.seek.subscription_id = subscription
+        m.seek.frame = frame
+        self._request(m, "ack")
+
+    def stats(self):
+        m = pb.ClientMessage()
+        m.get_stats.SetInParent()
+        return self._request(m, "stats")
+
+    def register_udp(self) -> None:
+        """Registers this connection's UDP endpoint (register, challenge, confirm; docs/protocol.md, "UDP")."""
+        if self._udp_registered:
+            return
+        if not self.hello.udp_port:
+            raise GmrError("FAILED_PRECONDITION", "the server offers no UDP")
+        if self._udp is None:
+            family = socket.AF_INET6 if ":" in self._host else socket.AF_INET
+            self._udp = socket.socket(family, socket.SOCK_DGRAM)
+            self._udp.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+            self._udp.bind(("::" if family == socket.AF_INET6 else "0.0.0.0", 0))
+        server = (self._host, self.hello.udp_port)
+        token = bytes(self.hello.udp_token)
+        deadline = time.monotonic() + self.timeout
+        next_send = 0.0
+        while not self._udp_registered:
+            now = time.monotonic()
+            if now >= deadline:
+                raise GmrError("CONNECTION", "the server did not confirm the UDP registration in time")
+            if now >= next_send:  # datagrams can be lost: resend until confirmed
+                self._udp.sendto(_wire.register_datagram(token), server)
+                next_send = now + 0.05
+            self._pump(min(0.05, deadline - now), udp_handshake=(token, server))
+
+    def poll(self, timeout: float = 0.0) -> None:
+        """Reads whatever has arrived (frames go to their subscriptions), waiting
+        at most `timeout` seconds for the first message. Sends a heartbeat when
+        the connection has been quiet for the server's heartbeat interval."""
+        self._pump(timeout)
+        while self._pump(0.0):
+            pass
+
+    # ------------------------------------------------------------ internals
+
+    def _send(self, m) -> None:
+        if self._sock is None:
+            raise GmrError("CONNECTION", "the client is closed")
+        data = m.SerializeToString()
+        try:
+            self._sock.sendall(_wire.frame_message(data))
+        except OSError as e:
+            self.close()
+            raise GmrError("CONNECTION", f"the connection broke: {e}") from None
+        self._last_send = time.monotonic()
+
+    def _request(self, m, expect: str):
+        m.request_id = self._next_request
+        self._next_request += 1
+        self._send(m)
+        deadline = time.monotonic() + self.timeout
+        while m.request_id not in self._replies:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise GmrError("CONNECTION", f"no reply to request {m.request_id} within {self.timeout} s")
+            self._pump(left)
+        r = self._replies.pop(m.request_id)
+        which = r.WhichOneof("body")
+        if which == "error":
+            raise GmrError(pb.ErrorCode.Name(r.error.code).replace("ERROR_CODE_", ""), r.error.message)
+        if which != expect:
+            raise GmrError("PROTOCOL", f"expected a '{expect}' reply, got '{which}'")
+        return getattr(r, which)
+
+    def _view(self, m) -> View:
+        v = self._request(m, "view")
+        return View(v.view_id, v.motion, v.skeleton_version, Skeleton.from_proto(v.skeleton), v.relative_to,
+                    v.frame_count, v.frame_time, list(v.removed), v.join_offset_spread)
+
+    def _pump(self, timeout: float, udp_handshake=None) -> bool:
+        """Waits up to `timeout` for data and handles one batch of it. True if anything was read."""
+        if self._sock is None:
+            raise GmrError("CONNECTION", "the client is closed")
+        interval = (self.hello.heartbeat_interval_ms / 1000.0) if hasattr(self, "hello") else 0
+        if interval and time.monotonic() - self._last_send > interval:
+            h = pb.ClientMessage()
+            h.heartbeat.client_time_ns = time.time_ns()
+            self._send(h)
+        if self._take_buffered():
+            return True
+        sockets = [self._sock] + ([self._udp] if self._udp is not None else [])
+        ready, _, _ = select.select(sockets, [], [], max(0.0, timeout))
+        got = False
+        if self._udp is not None and self._udp in ready:
+            got = True
+            for _ in range(256):  # what is waiting, without starving TCP
+                try:
+                    datagram, source = self._udp.recvfrom(65536)
+                except BlockingIOError:
+                    break
+                self._on_datagram(datagram, udp_handshake)
+                if not select.select([self._udp], [], [], 0)[0]:
+                    break
+        if self._sock in ready:
+            try:
+                data = self._sock.recv(1 << 20)
+            except OSError as e:
+                self.close()
+                raise GmrError("CONNECTION", f"the connection broke: {e}") from None
+            if not data:
+                self.close()
+                raise GmrError("CONNECTION", "the server closed the connection")
+            self._buffer += data
+            got = True
+            self._take_buffered()
+        return got
+
+    def _take_buffered(self) -> bool:
+        took = False
+        while len(self._buffer) >= 4:
+            (length,) = _wire.LENGTH_PREFIX.unpack_from(self._buffer, 0)
+            if length > self._max_message:
+                self.close()
+                raise GmrError("PROTOCOL", f"a message of {length} bytes, above the limit of {self._max_message}")
+            if len(self._buffer) < 4 + length:
+                break
+            body = bytes(self._buffer[4:4 + length])
+            del self._buffer[:4 + length]
+            msg = pb.ServerMessage()
+            try:
+                msg.ParseFromString(body)
+            except Exception as e:  # the library's DecodeError
+                self.close()
+                raise GmrError("PROTOCOL", f"a malformed message: {e}") from None
+            self._on_message(msg, udp=False)
+            took = True
+        return took
+
+    def _on_datagram(self, datagram: bytes, udp_handshake) -> None:
+        if udp_handshake is not None:
+            cookie = _wire.challenge_cookie(datagram)
+            if cookie is not None:
+                token, server = udp_handshake
+                self._udp.sendto(_wire.confirm_datagram(token, cookie), server)
+                return
+        message = self._reassembler.feed(datagram)
+        if message is None:
+            return
+        msg = pb.ServerMessage()
+        try:
+            msg.ParseFromString(message)
+        except Exception:
+            self.frames_malformed += 1
+            return
+        if msg.HasField("frame"):
+            self._on_message(msg, udp=True)
+
+    def _on_message(self, msg, udp: bool) -> None:
+        which = msg.WhichOneof("body")
+        if which == "frame":
+            try:
+                frame = _decode_frame(msg.frame, udp)
+            except GmrError:
+                self.frames_malformed += 1
+                return
+            sub = self._subs.get(frame.subscription_id)
+            if sub is not None:
+                sub._push(frame)
+            elif self._subscribing and len(self._early[frame.subscription_id]) < _MAX_QUEUED_FRAMES:
+                self._early[frame.subscription_id].append(frame)
+        elif which == "subscription_ended":
+            e = msg.subscription_ended
+            sub = self._subs.pop(e.subscription_id, None)
+            if sub is not None:
+                sub.ended = {"reason": e.reason, "frames_sent": e.frames_sent, "frames_dropped": e.frames_dropped,
+                             "frames_skipped": e.frames_skipped}
+        elif which == "skeleton_changed":
+            sub = self._subs.get(msg.skeleton_changed.subscription_id)
+            if sub is not None:
+                sub._skeleton_changed(msg.skeleton_changed)
+        elif which == "udp_registered":
+            self._udp_registered = True
+        elif which == "heartbeat":
+            pass
+        elif msg.request_id:
+            self._replies[msg.request_id] = msg
+        elif which == "error":  # an error about no request: the server is closing the connection
+            raise GmrError(pb.ErrorCode.Name(msg.error.code).replace("ERROR_CODE_", ""), msg.error.message)

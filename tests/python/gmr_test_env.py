@@ -1,0 +1,116 @@
+"""What the Python-side tests share: where the build and the corpus are, how
+a test that cannot run says so (exit 77 outside CI, a failure under CI=true),
+a gmr-server started on loopback for the test, and `gmr positions` as numpy."""
+
+import csv
+import io
+import os
+import pathlib
+import subprocess
+import sys
+import tempfile
+import time
+
+SKIP = 77
+IN_CI = os.environ.get("CI") == "true"
+REPO = pathlib.Path(__file__).resolve().parents[2]
+
+
+def skip_or_fail(reason: str):
+    """Outside CI: skip the whole test program (exit 77). Under CI=true: fail."""
+    if IN_CI:
+        print(f"FAIL (CI=true): {reason}", file=sys.stderr)
+        sys.exit(1)
+    print(f"SKIP: {reason}", file=sys.stderr)
+    sys.exit(SKIP)
+
+
+def data_dir() -> pathlib.Path:
+    return pathlib.Path(os.environ.get("GMR_DATA_DIR", REPO.parent / "shared" / "data"))
+
+
+def have_data() -> bool:
+    return data_dir().is_dir()
+
+
+class Server:
+    """gmr-server on 127.0.0.1 with any free port, stopped on exit."""
+
+    def __init__(self, bin_dir, *args, library=None):
+        self.bin_dir = pathlib.Path(bin_dir)
+        self._tmp = tempfile.TemporaryDirectory(prefix="gmr_py_")
+        port_file = pathlib.Path(self._tmp.name) / "port"
+        cmd = [str(self.bin_dir / "gmr-server"), "--port", "0", "--port-file", str(port_file), "--log-level", "warn"]
+        if library is not None:
+            cmd += ["--library", str(library)]
+        cmd += list(args)
+        self.process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60
+        while not port_file.exists() or not port_file.read_text().strip():
+            if self.process.poll() is not None:
+                raise RuntimeError(f"gmr-server exited with {self.process.returncode}: {self.process.stderr.read()}")
+            if time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError("gmr-server did not start listening within 60 s")
+            time.sleep(0.02)
+        self.port = int(port_file.read_text())
+
+    def stop(self):
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        if self.process.stderr:
+            self.process.stderr.close()
+        self._tmp.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+def gmr_positions(bin_dir, path, *args):
+    """`gmr positions PATH ARGS` as (frames, joints, 3) float64 and the joint names."""
+    import numpy as np
+    out = subprocess.run([str(pathlib.Path(bin_dir) / "gmr"), "positions", str(path), *args], check=True,
+                         capture_output=True, text=True).stdout
+    rows = list(csv.reader(io.StringIO(out)))
+    assert rows[0][:5] == ["frame", "joint", "x", "y", "z"], rows[0]
+    names = []
+    values = []
+    for r in rows[1:]:
+        if r[0] == rows[1][0]:
+            names.append(r[1])
+        values.append([float(r[2]), float(r[3]), float(r[4])])
+    a = np.array(values, dtype=np.float64)
+    return a.reshape(-1, len(names), 3), names
+
+
+def compose_locals(parents, rotations, translations):
+    """World positions from engine-bone locals (O_j = O_p Q_j, P_j = P_p + O_p T_j); quaternions x, y, z, w."""
+    import numpy as np
+
+    def matrix(q):
+        x, y, z, w = q
+        return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+    n = len(parents)
+    frames = [None] * n
+    positions = np.zeros((n, 3))
+    for j in range(n):
+        r = matrix(rotations[j])
+        p = parents[j]
+        if p < 0:
+            frames[j] = r
+            positions[j] = translations[j]
+        else:
+            frames[j] = frames[p] @ r
+            positions[j] = positions[p] + frames[p] @ translations[j]
+    return positions

@@ -1,0 +1,308 @@
+"""The Python client (client/python/gmr_client) against a gmr-server started
+here: every request, queries and streams equal to `gmr positions`, TCP and
+UDP (fragmented frames), conventions, local transforms and the rest pose,
+skeleton changes, liveness of a client that only listens, and errors.
+
+    test_python_client.py --bin-dir build/bin --python-dir build/python
+
+Exits 77 (skipped) outside CI when numpy or python3-protobuf is missing; the
+tests on real files skip the same way without ../shared/data. Under CI=true
+both are failures.
+"""
+
+import argparse
+import os
+import pathlib
+import sys
+import tempfile
+import time
+import unittest
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import gmr_test_env as env  # noqa: E402
+
+ARGS = None
+BLENDER_B = None  # the blender preset's basis: (x, y, z) -> (x, -z, y)
+
+
+def blender(p):
+    import numpy as np
+    return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
+
+
+class DemoLibrary(unittest.TestCase):
+    """The built-in demo library (centimetres, lower-case joint names)."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.server = env.Server(ARGS.bin_dir)
+        cls.client = gmr_client.Client(port=cls.server.port, name="python test")
+        cls.demo_dir = tempfile.TemporaryDirectory(prefix="gmr_demo_")
+        import subprocess
+        subprocess.run([str(pathlib.Path(ARGS.bin_dir) / "gmr"), "demo", cls.demo_dir.name, "--format", "gmr"],
+                       check=True, capture_output=True)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.client.close()
+        cls.server.stop()
+        cls.demo_dir.cleanup()
+
+    def test_list_and_skeleton_with_rest_pose(self):
+        motions = {m.name: m for m in self.client.list_motions()}
+        self.assertEqual(sorted(motions), ["jump", "turn", "walk", "wave"])
+        self.assertEqual(motions["walk"].metres_per_unit, 0.01)
+        native = self.client.skeleton("walk")
+        in_blender = self.client.skeleton("walk", "blender")
+        self.assertEqual(len(native), motions["walk"].joint_count)
+        self.assertEqual(native.names, in_blender.names)
+        moving = [j for j, ch in enumerate(native.channels) if any(c.endswith("position") for c in ch)]
+        still = [j for j in range(len(native)) if j not in moving]
+        self.assertGreater(len(still), len(native) // 2)
+        np.testing.assert_allclose(native.rest_translations[still], native.offsets[still], atol=1e-12)
+        np.testing.assert_allclose(in_blender.rest_translations[still], 0.01 * blender(native.offsets[still]),
+                                   atol=1e-12)
+        np.testing.assert_allclose(in_blender.rest_rotations, np.tile([0.0, 0.0, 0.0, 1.0], (len(native), 1)),
+                                   atol=1e-12)
+
+    def test_view_operations_and_errors(self):
+        c = self.client
+        v = c.create_view("walk")
+        self.assertEqual(v.skeleton.roots, [0])
+        shifted = c.shift_root(v.id, "head")
+        self.assertEqual(shifted.skeleton.names[shifted.skeleton.roots[0]], "head")
+        self.assertNotEqual(shifted.skeleton_version, v.skeleton_version)
+        split = c.split(v.id, "l_knee")
+        self.assertEqual(len(split.skeleton.roots), 2)
+        joined = c.join(v.id, "l_knee")
+        self.assertEqual(len(joined.skeleton.roots), 1)
+        self.assertLess(joined.join_offset_spread, 1e-6)
+        roots = c.set_roots(v.id, ["pelvis", "l_hand"])
+        self.assertEqual(sorted(roots.skeleton.names[r] for r in roots.skeleton.roots), ["l_hand", "pelvis"])
+        seen = c.set_coordinates(v.id, "head")
+        self.assertEqual(seen.relative_to, "head")
+        c.strip_dummies(v.id)
+        with self.assertRaises(gmr_client.GmrError) as e:
+            c.shift_root(v.id, "no_such_joint")
+        self.assertEqual(e.exception.code, "NOT_FOUND")
+        self.assertIn("no_such_joint", e.exception.message)
+        with self.assertRaises(gmr_client.GmrError) as e:
+            c.join(v.id, "pelvis")  # a root with no soft link
+        self.assertEqual(e.exception.code, "FAILED_PRECONDITION")
+        with self.assertRaises(gmr_client.GmrError) as e:
+            c.query(v.id, 0, 100000)
+        self.assertEqual(e.exception.code, "BAD_REQUEST")
+        self.assertIn("not within the motion's", e.exception.message)
+        with self.assertRaises(gmr_client.GmrError) as e:
+            c.create_view("nope")
+        self.assertEqual(e.exception.code, "NOT_FOUND")
+        with self.assertRaises(ValueError):
+            c.query(v.id, 0, 1, conventions="maya")
+        c.close_view(v.id)
+        with self.assertRaises(gmr_client.GmrError):
+            c.query(v.id, 0, 1)
+
+    def test_query_equals_gmr_positions(self):
+        c = self.client
+        v = c.create_view("walk")
+        c.set_roots(v.id, ["head", "l_toe"])
+        c.set_coordinates(v.id, "l_hand")
+        q = c.query(v.id, 0, v.frame_count, conventions="blender")
+        want, names = env.gmr_positions(ARGS.bin_dir, pathlib.Path(self.demo_dir.name) / "walk.gmr", "--roots",
+                                        "head,l_toe", "--relative-to", "l_hand", "--conventions", "blender",
+                                        "--metres-per-unit", "0.01")
+        self.assertEqual(q.positions.shape, (v.frame_count, len(names), 3))
+        sk = c.set_coordinates(v.id, "l_hand").skeleton
+        order = [sk.index(n) for n in names]
+        size = np.abs(want).max()
+        self.assertLess(np.abs(q.positions[:, order] - want).max(), 1e-9 * size)
+        c.close_view(v.id)
+
+    def test_streams_tcp_and_udp_equal_the_query(self):
+        c = self.client
+        v = c.create_view("jump")
+        c.shift_root(v.id, "l_hand")
+        end = 40
+        q = c.query(v.id, 0, end, orientations=True, local_transforms=True, conventions="unreal")
+        size = np.abs(q.positions).max()
+        for udp in (False, True):
+            for float64 in (True, False):
+                with self.subTest(udp=udp, float64=float64):
+                    sub = c.subscribe(v.id, end_frame=end, speed=8, udp=udp, float64=float64, orientations=True,
+                                      local_transforms=True, conventions="unreal")
+                    self.assertEqual(len(sub.skeleton), len(v.skeleton))
+                    got = {}
+                    deadline = time.monotonic() + 20
+                    while len(got) < end and time.monotonic() < deadline:
+                        for f in sub.frames():
+                            got[f.frame_index] = f
+                        c.poll(0.05)
+                    self.assertEqual(sorted(got), list(range(end)))
+                    tol = 1e-12 if float64 else 1e-5
+                    for i, f in got.items():
+                        self.assertEqual(f.udp, udp)
+                        self.assertLess(np.abs(f.positions - q.positions[i]).max(), tol * size)
+                        dots = np.abs(np.sum(f.orientations * q.orientations[i], axis=1))  # q and -q alike
+                        self.assertLess(np.abs(1 - dots).max(), tol * 10)
+                        self.assertLess(np.abs(f.local_translations - q.local_translations[i]).max(), tol * size)
+        # The float64 frames with orientations and locals of 22 joints take
+        # more than one datagram: UDP reassembled them.
+        self.assertGreater(len(v.skeleton) * 14 * 8, gmr_client._wire.MAX_FRAGMENT_PAYLOAD)
+        c.close_view(v.id)
+
+    def test_local_transforms_compose_to_the_positions(self):
+        c = self.client
+        v = c.create_view("wave")
+        sk = c.shift_root(v.id, "r_hand").skeleton
+        q = c.query(v.id, 0, 30, local_transforms=True, conventions="godot")
+        size = np.abs(q.positions).max()
+        for f in range(30):
+            p = env.compose_locals(sk.parents, q.local_rotations[f], q.local_translations[f])
+            self.assertLess(np.abs(p - q.positions[f]).max(), 1e-9 * size)
+        c.close_view(v.id)
+
+    def test_skeleton_change_reaches_a_running_subscription(self):
+        c = self.client
+        v = c.create_view("turn")
+        sub = c.subscribe(v.id, loop=True, rate_hz=200, float64=True, local_transforms=True)
+        first = next(iter(sub))
+        self.assertEqual(first.skeleton_version, sub.skeleton_version)
+        changed = c.shift_root(v.id, "r_ankle")
+        deadline = time.monotonic() + 10
+        while sub.skeleton_changes == 0 and time.monotonic() < deadline:
+            c.poll(0.05)
+        self.assertEqual(sub.skeleton_changes, 1)
+        self.assertEqual(sub.skeleton_version, changed.skeleton_version)
+        self.assertEqual(sub.skeleton.names[sub.skeleton.roots[0]], "r_ankle")
+        frames = []
+        while not frames and time.monotonic() < deadline:
+            frames = [f for f in sub.frames() if f.skeleton_version == changed.skeleton_version]
+            c.poll(0.05)
+        self.assertTrue(frames)
+        p = env.compose_locals(sub.skeleton.parents, frames[0].local_rotations, frames[0].local_translations)
+        self.assertLess(np.abs(p - frames[0].positions).max(), 1e-9 * np.abs(p).max())
+        c.unsubscribe(sub.id)
+        self.assertIsNotNone(sub.ended)
+        c.close_view(v.id)
+
+    def test_a_listening_client_outlives_the_idle_timeout(self):
+        # This server closes connections silent for 0.6 s and its heartbeat
+        # interval is 5 s, so this client sends nothing while it reads 2 s of
+        # frames: the server's own frames keep it open.
+        strict = env.Server(ARGS.bin_dir, "--idle-timeout-ms", "600", "--heartbeat-ms", "5000")
+        self.addCleanup(strict.stop)
+        c = gmr_client.Client(port=strict.port)
+        v = c.create_view("walk")
+        sub = c.subscribe(v.id, loop=True, rate_hz=30)
+        start = time.monotonic()
+        count = 0
+        for _ in sub:
+            count += 1
+            if time.monotonic() - start > 2.0:
+                break
+        self.assertGreater(count, 40)
+        self.assertIsNone(sub.ended)
+        self.assertEqual(len(c.list_motions()), 4)
+        # Silent and not subscribed, it is closed.
+        c.unsubscribe(sub.id)
+        time.sleep(1.5)
+        with self.assertRaises(gmr_client.GmrError) as e:
+            c.list_motions()
+        self.assertEqual(e.exception.code, "CONNECTION")
+        c.close()
+
+    def test_connection_errors_are_clear(self):
+        with self.assertRaises(gmr_client.GmrError) as e:
+            gmr_client.Client(port=1, timeout=2)
+        self.assertEqual(e.exception.code, "CONNECTION")
+        self.assertIn("127.0.0.1:1", str(e.exception))
+
+
+class RealFiles(unittest.TestCase):
+    """A CMU BVH and a CMU ASF/AMC take served from a folder: every frame of
+    the query equals `gmr positions` with the same roots, viewpoint and
+    conventions; the ASF's unit comes from the file."""
+
+    @classmethod
+    def setUpClass(cls):
+        if not env.have_data():
+            if env.IN_CI:
+                raise AssertionError(f"the corpus is missing at {env.data_dir()} (CI=true)")
+            raise unittest.SkipTest(f"the corpus is missing at {env.data_dir()}")
+        cls.lib = tempfile.TemporaryDirectory(prefix="gmr_lib_")
+        root = pathlib.Path(cls.lib.name)
+        d = env.data_dir()
+        (root / "07").mkdir()
+        os.symlink(d / "bvh/cmu/02_01.bvh", root / "02_01.bvh")
+        os.symlink(d / "asfamc/07/07-walk.asf", root / "07/07-walk.asf")
+        os.symlink(d / "asfamc/07/07_05-walk.amc", root / "07/07_05-walk.amc")
+        cls.server = env.Server(ARGS.bin_dir, "--metres-per-unit", "0.0254", library=root)
+        cls.client = gmr_client.Client(port=cls.server.port)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.client.close()
+        cls.server.stop()
+        cls.lib.cleanup()
+
+    def check(self, motion, path, roots, viewer, unit, *cli_unit):
+        c = self.client
+        v = c.create_view(motion)
+        c.set_roots(v.id, roots)
+        view = c.set_coordinates(v.id, viewer)
+        q = c.query(v.id, 0, view.frame_count, conventions="blender", local_transforms=True)
+        want, names = env.gmr_positions(ARGS.bin_dir, path, "--roots", ",".join(roots), "--relative-to", viewer,
+                                        "--conventions", "blender", *cli_unit)
+        order = [view.skeleton.index(n) for n in names]
+        size = np.abs(want).max()
+        self.assertEqual(q.positions.shape[0], want.shape[0])
+        self.assertLess(np.abs(q.positions[:, order] - want).max(), 1e-9 * size)
+        for f in range(0, view.frame_count, 7):
+            p = env.compose_locals(view.skeleton.parents, q.local_rotations[f], q.local_translations[f])
+            self.assertLess(np.abs(p - q.positions[f]).max(), 1e-9 * size)
+        self.assertGreater(size, 0.5, "metres")
+        self.assertLess(size, 5.0, "metres")
+        motions = {m.name: m for m in c.list_motions()}
+        self.assertAlmostEqual(motions[motion].metres_per_unit, unit, places=15)
+        c.close_view(v.id)
+        return want.shape[0]
+
+    def test_cmu_bvh(self):
+        # The folder's unit (--metres-per-unit 0.0254) for a file that declares none.
+        frames = self.check("02_01", pathlib.Path(self.lib.name) / "02_01.bvh", ["Head", "LeftFoot"], "LeftHand",
+                            0.0254, "--metres-per-unit", "0.0254")
+        self.assertEqual(frames, 344)
+
+    def test_cmu_asf_amc(self):
+        # The ASF's own unit (length 0.45: inches / 0.45) wins over the folder's.
+        frames = self.check("07/07_05-walk", pathlib.Path(self.lib.name) / "07/07_05-walk.amc", ["head", "rfoot"],
+                            "lhand", 0.0254 / 0.45)
+        self.assertEqual(frames, 517)
+
+
+def main():
+    global ARGS, gmr_client, np
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--bin-dir", required=True)
+    parser.add_argument("--python-dir", required=True)
+    ARGS, rest = parser.parse_known_args()
+    try:
+        import numpy as np  # noqa: F401
+        import google.protobuf  # noqa: F401
+    except ImportError as e:
+        env.skip_or_fail(f"{e.name} is missing for {sys.executable} (scripts/install-deps.sh installs "
+                         "python3-numpy and python3-protobuf)")
+    sys.path.insert(0, ARGS.python_dir)
+    import gmr_client  # noqa: F811
+    globals()["gmr_client"] = gmr_client
+    globals()["np"] = np
+    import gmr_client._wire  # noqa: F401
+    result = unittest.main(argv=[sys.argv[0]] + rest, exit=False, verbosity=2).result
+    ran = result.testsRun - len(result.skipped)
+    if not result.wasSuccessful():
+        sys.exit(1)
+    print(f"{ran} tests ran, {len(result.skipped)} skipped")
+
+
+if __name__ == "__main__":
+    main()
