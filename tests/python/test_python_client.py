@@ -186,9 +186,10 @@ class DemoLibrary(unittest.TestCase):
         c.close_view(v.id)
 
     def test_a_listening_client_outlives_the_idle_timeout(self):
-        # This server closes connections silent for 0.6 s and its heartbeat
-        # interval is 5 s, so this client sends nothing while it reads 2 s of
-        # frames: the server's own frames keep it open.
+        # This server closes connections silent for 0.6 s (and would send its
+        # own heartbeats only after 5 s): a client that only reads 2 s of
+        # frames stays connected (the server counts the frames it writes, the
+        # client heartbeats at a third of the idle timeout while it reads).
         strict = env.Server(ARGS.bin_dir, "--idle-timeout-ms", "600", "--heartbeat-ms", "5000")
         self.addCleanup(strict.stop)
         c = gmr_client.Client(port=strict.port)

@@ -558,7 +558,10 @@ class Client:
         """Waits up to `timeout` for data and handles one batch of it. True if anything was read."""
         if self._sock is None:
             raise GmrError("CONNECTION", "the client is closed")
-        interval = (self.hello.heartbeat_interval_ms / 1000.0) if hasattr(self, "hello") else 0
+        interval = 0.0
+        if hasattr(self, "hello"):  # a heartbeat well within the server's idle timeout
+            intervals = [x / 1000.0 for x in (self.hello.heartbeat_interval_ms, self.hello.idle_timeout_ms / 3) if x]
+            interval = min(intervals) if intervals else 0.0
         if interval and time.monotonic() - self._last_send > interval:
             h = pb.ClientMessage()
             h.heartbeat.client_time_ns = time.time_ns()

@@ -1,0 +1,220 @@
+"""The live link without the UI: a subscription to a gmr-server view that
+drives an armature, in Blender's conventions (Z up, -Y forward, metres).
+
+The armature is built from the skeleton the subscription carries: one bone
+per joint, its head at the joint's rest position, its tail toward the child
+that gives the joint its frame (docs/protocol.md, "Local transforms and rest
+pose"). Each frame's local transforms are composed from the roots down into
+every joint's frame O_j and position P_j, and each pose bone gets the
+transform that puts its head at P_j turned by O_j from its rest:
+
+    pose_j = [O_j A_j | P_j]      (A_j: the bone's rest orientation)
+    matrix_basis_j = rest_j^-1 rest_p pose_p^-1 pose_j   (rest_j^-1 pose_j for a root)
+
+`tick()` never blocks: it reads what has arrived and applies the newest
+frame. The add-on runs it on a bpy.app.timers timer; a script can call it.
+"""
+
+import time
+
+import bpy
+from mathutils import Matrix, Quaternion, Vector
+
+import gmr_client
+
+
+def _own_frame_children(parents):
+    """For each joint, the child whose bone gives it its frame (largest subtree, first on a tie), or -1."""
+    n = len(parents)
+    subtree = [1] * n
+    for j in range(n - 1, -1, -1):
+        if parents[j] >= 0:
+            subtree[parents[j]] += subtree[j]
+    best = [-1] * n
+    for j in range(n):
+        p = parents[j]
+        if p >= 0 and (best[p] < 0 or subtree[j] > subtree[best[p]]):
+            best[p] = j
+    return best
+
+
+class LiveLink:
+    def __init__(self, host="127.0.0.1", port=gmr_client.DEFAULT_PORT, token="", name="blender"):
+        self.client = gmr_client.Client(host, port, name=name, token=token)
+        self.view = None
+        self.sub = None
+        self.object = None
+        self.version = None      # skeleton version the armature was built for
+        self.frames_applied = 0
+        self.last_frame = None   # the gmr Frame applied last
+        self.record = False      # insert keyframes into the armature's Action
+        self.recorded = 0
+        self._rest = []          # per joint: the bone's rest matrix (armature space)
+
+    # ------------------------------------------------------------ set-up
+
+    def motions(self):
+        return self.client.list_motions()
+
+    def open(self, motion, roots=(), viewpoint="", rate_hz=0.0, speed=1.0, loop=True, udp=False, max_frames=0):
+        """A view of `motion` with these roots and viewpoint, a subscription in
+        Blender's conventions with local transforms, and its armature."""
+        self.close_stream()
+        self.view = self.client.create_view(motion)
+        if roots:
+            self.client.set_roots(self.view.id, list(roots))
+        if viewpoint:
+            self.client.set_coordinates(self.view.id, viewpoint)
+        self.sub = self.client.subscribe(self.view.id, loop=loop, rate_hz=rate_hz, speed=speed, udp=udp,
+                                         local_transforms=True, float64=True, max_frames=max_frames,
+                                         conventions="blender")
+        self.build_armature(motion)
+        return self.object
+
+    def set_roots(self, roots):
+        """Asks the server for other roots; the new skeleton comes on the subscription and the armature follows."""
+        return self.client.set_roots(self.view.id, list(roots))
+
+    def set_viewpoint(self, joint):
+        return self.client.set_coordinates(self.view.id, joint)
+
+    def close_stream(self):
+        if self.sub is not None and self.sub.ended is None:
+            try:
+                self.sub.unsubscribe()
+            except gmr_client.GmrError:
+                pass
+        if self.view is not None:
+            try:
+                self.client.close_view(self.view.id)
+            except gmr_client.GmrError:
+                pass
+        self.sub = None
+        self.view = None
+
+    def close(self):
+        self.close_stream()
+        self.client.close()
+
+    # ------------------------------------------------------------ the armature
+
+    def build_armature(self, name):
+        """(Re)builds the armature from the subscription's skeleton and rest pose."""
+        sk = self.sub.skeleton
+        n = len(sk)
+        parents = [int(p) for p in sk.parents]
+        rest = [None] * n
+        for j in range(n):  # rest positions: the rest translations composed (rest rotations are engine-local)
+            q = Quaternion((sk.rest_rotations[j][3], *sk.rest_rotations[j][:3]))
+            t = Vector(sk.rest_translations[j])
+            if parents[j] < 0:
+                rest[j] = (q.to_matrix(), t)
+            else:
+                o, p = rest[parents[j]]
+                rest[j] = (o @ q.to_matrix(), p + o @ t)
+        heads = [r[1] for r in rest]
+        size = max([(h - heads[0]).length for h in heads] + [1e-3])
+        child = _own_frame_children(parents)
+
+        # A new skeleton starts a new Action (the old one stays in the file:
+        # its keys belong to the old bones' hierarchy).
+        old = self.object
+        if old is not None:
+            data = old.data
+            bpy.data.objects.remove(old, do_unlink=True)
+            bpy.data.armatures.remove(data)
+        arm = bpy.data.armatures.new(f"gmr {name}")
+        obj = bpy.data.objects.new(f"gmr {name}", arm)
+        bpy.context.scene.collection.objects.link(obj)
+        bpy.context.view_layer.objects.active = obj
+        bpy.ops.object.mode_set(mode="EDIT")
+        bones = []
+        for j in range(n):
+            b = arm.edit_bones.new(sk.names[j][:63])
+            b.head = heads[j]
+            tail = heads[child[j]] if child[j] >= 0 else None
+            if tail is None or (tail - heads[j]).length < 1e-4 * size:
+                # A leaf, or a zero-length bone: a short bone along the incoming
+                # direction (or up), so Blender keeps it.
+                p = parents[j]
+                d = heads[j] - heads[p] if p >= 0 else Vector((0.0, 0.0, 1.0))
+                d = d.normalized() if d.length > 1e-9 * size else Vector((0.0, 0.0, 1.0))
+                tail = heads[j] + 0.05 * size * d
+            b.tail = tail
+            b.use_connect = False
+            if parents[j] >= 0:
+                b.parent = bones[parents[j]]
+            bones.append(b)
+        names = [b.name for b in bones]  # by joint index (arm.bones has its own order)
+        bpy.ops.object.mode_set(mode="OBJECT")
+        self.bone_names = names
+        self._rest = [arm.bones[name].matrix_local.copy() for name in self.bone_names]
+        for pb in obj.pose.bones:
+            pb.rotation_mode = "QUATERNION"
+        self.object = obj
+        self.version = self.sub.skeleton_version
+        self.parents = parents
+        return obj
+
+    # ------------------------------------------------------------ frames
+
+    def tick(self):
+        """Applies the newest frame that arrived (never waits). Returns the
+        gmr frame applied, or None. The add-on's timer calls it."""
+        if self.sub is None:
+            return None
+        frame = self.sub.latest()
+        if frame is None:
+            return None
+        if frame.skeleton_version != self.version:
+            if frame.skeleton_version != self.sub.skeleton_version:
+                return None  # a frame of a skeleton not announced yet (UDP can overtake): skip it
+            self.build_armature(self.view.motion if self.view else "motion")
+        self.apply(frame)
+        return frame
+
+    def apply(self, frame):
+        n = len(self.parents)
+        joints = [int(j) for j in self.sub.joints]
+        if len(joints) != n or frame.local_rotations is None:
+            raise RuntimeError("the live link needs every joint's local transforms")
+        own = [None] * n
+        pos = [None] * n
+        by_joint = {j: i for i, j in enumerate(joints)}  # values follow `joints`; parents come first by index
+        for j in range(n):
+            i = by_joint[j]
+            r = frame.local_rotations[i]
+            q = Quaternion((r[3], r[0], r[1], r[2])).to_matrix()
+            t = Vector(frame.local_translations[i])
+            p = self.parents[j]
+            if p < 0:
+                own[j], pos[j] = q, t
+            else:
+                own[j], pos[j] = own[p] @ q, pos[p] + own[p] @ t
+        pose = []
+        for j in range(n):
+            rest = self._rest[j]
+            m = (own[j] @ rest.to_3x3()).to_4x4()
+            m.translation = pos[j]
+            pose.append(m)
+        bones = self.object.pose.bones
+        for j in range(n):
+            p = self.parents[j]
+            rest_j_inv = self._rest[j].inverted()
+            if p < 0:
+                basis = rest_j_inv @ pose[j]
+            else:
+                basis = rest_j_inv @ self._rest[p] @ pose[p].inverted() @ pose[j]
+            pb = bones[self.bone_names[j]]
+            loc, rot, _ = basis.decompose()
+            pb.location = loc
+            pb.rotation_quaternion = rot
+            if self.record:
+                key = frame.frame_index + 1
+                pb.keyframe_insert("location", frame=key, group=pb.name)
+                pb.keyframe_insert("rotation_quaternion", frame=key, group=pb.name)
+        if self.record:
+            self.recorded += 1
+        self.frames_applied += 1
+        self.last_frame = frame
+        self.last_apply_time = time.monotonic()

@@ -1,0 +1,149 @@
+"""The Blender live link, proven in Blender: for the built-in demo, a CMU BVH
+and a CMU ASF/AMC take, a gmr-server started here streams to the add-on
+(client/blender/gmr_live_link) running in headless Blender, which builds the
+armature from the subscription's skeleton and rest pose and poses it from
+each frame's local transforms in Blender's conventions. Every applied frame's
+pose-bone heads (world space) must equal `gmr positions` of that frame with
+the same roots and viewpoint, converted to Blender's axes and metres, to
+1e-4 of the skeleton's size: before and after a root change requested from
+Blender (the armature is rebuilt with the new hierarchy), and when the
+Action the add-on recorded is played back.
+
+    live_link_test.py --repo . --bin-dir build/bin --python-dir build/python
+
+Exits 77 (skipped) outside CI when Blender, numpy, python3-protobuf or the
+corpus is missing; under CI=true that is a failure.
+"""
+
+import argparse
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import tempfile
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "python"))
+import gmr_test_env as env  # noqa: E402
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repo", required=True)
+    ap.add_argument("--bin-dir", required=True)
+    ap.add_argument("--python-dir", required=True)
+    ap.add_argument("--keep", help="keep the Blender outputs in this folder")
+    args = ap.parse_args()
+    repo = pathlib.Path(args.repo).resolve()
+    blender = shutil.which("blender")
+    if blender is None:
+        env.skip_or_fail("blender is not installed (scripts/install-deps.sh installs it)")
+    try:
+        import numpy as np
+    except ImportError:
+        env.skip_or_fail("numpy is missing (scripts/install-deps.sh installs python3-numpy)")
+    if not env.have_data():
+        env.skip_or_fail(f"the corpus is missing at {env.data_dir()}")
+
+    work = pathlib.Path(args.keep) if args.keep else pathlib.Path(tempfile.mkdtemp(prefix="gmr_blender_"))
+    work.mkdir(parents=True, exist_ok=True)
+    bin_dir = pathlib.Path(args.bin_dir).resolve()
+    subprocess.run([str(bin_dir / "gmr"), "demo", str(work / "demo"), "--format", "gmr"], check=True,
+                   capture_output=True)
+    lib = work / "library"
+    (lib / "07").mkdir(parents=True, exist_ok=True)
+    d = env.data_dir()
+    for src, dst in ((d / "bvh/cmu/02_01.bvh", lib / "02_01.bvh"), (d / "asfamc/07/07-walk.asf", lib / "07/07-walk.asf"),
+                     (d / "asfamc/07/07_05-walk.amc", lib / "07/07_05-walk.amc")):
+        if not dst.exists():
+            os.symlink(src, dst)
+
+    # (server library or None for the built-in demo, motion, file for gmr
+    # positions, its unit flag, roots, viewpoint, roots asked from Blender)
+    cases = [
+        (None, "walk", work / "demo/walk.gmr", ["--metres-per-unit", "0.01"], "head", "", "l_toe,r_hand"),
+        (None, "wave", work / "demo/wave.gmr", ["--metres-per-unit", "0.01"], "", "pelvis", "l_hand"),
+        (lib, "02_01", lib / "02_01.bvh", ["--metres-per-unit", "0.0254"], "", "", "Head"),
+        (lib, "07/07_05-walk", lib / "07/07_05-walk.amc", [], "lfoot", "", "head,rhand"),
+    ]
+    failures = []
+    checked = 0
+    for library, motion, path, unit, roots, viewpoint, new_roots in cases:
+        label = f"{motion} (roots '{roots}', viewpoint '{viewpoint}', then roots '{new_roots}')"
+        server_args = [] if library is None else ["--metres-per-unit", "0.0254"]
+        with env.Server(bin_dir, *server_args, library=library) as server:
+            out = work / (motion.replace("/", "_") + ".json")
+            run = subprocess.run([blender, "-b", "--factory-startup", "--python",
+                                  str(repo / "tests/blender/live_link_in_blender.py"), "--",
+                                  "--addon-dir", str(repo / "client/blender"), "--python-dir",
+                                  str(pathlib.Path(args.python_dir).resolve()), "--port", str(server.port),
+                                  "--motion", motion, "--roots", roots, "--viewpoint", viewpoint,
+                                  "--new-roots", new_roots, "--out", str(out)],
+                                 capture_output=True, text=True, timeout=300)
+            if run.returncode != 0 or not out.exists():
+                failures.append(f"{label}: Blender failed ({run.returncode}):\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}")
+                continue
+        result = json.loads(out.read_text())
+
+        def expected(roots_list):
+            flags = ["--conventions", "blender", *unit]
+            if roots_list:
+                flags += ["--roots", roots_list]
+            if viewpoint:
+                flags += ["--relative-to", viewpoint]
+            return env.gmr_positions(bin_dir, path, *flags)
+
+        for phase, roots_list in (("before", roots), ("after", new_roots)):
+            want, names = expected(roots_list)
+            size = max(float(np.linalg.norm(want[0] - want[0][k])) for k in range(len(names)))
+            samples = result[phase]
+            if len(samples) < 20:
+                failures.append(f"{label}: only {len(samples)} frames applied {phase} the root change")
+            for s in samples:
+                heads = s["heads"]
+                if sorted(heads) != sorted(names):
+                    failures.append(f"{label} {phase}: bones {sorted(heads)[:5]}... are not the joints {sorted(names)[:5]}...")
+                    break
+                got = np.array([heads[n] for n in names])
+                err = float(np.abs(got - want[s["frame"]]).max())
+                checked += 1
+                if err > 1e-4 * size:
+                    worst = names[int(np.abs(got - want[s["frame"]]).max(axis=1).argmax())]
+                    failures.append(f"{label} {phase}: frame {s['frame']}: a head is {err:.3g} m off "
+                                    f"(bone {worst}; allowed {1e-4 * size:.3g})")
+                    break
+        want_roots = sorted(r.strip() for r in new_roots.split(","))
+        if sorted(result["roots_after"]) != want_roots:
+            failures.append(f"{label}: the armature's roots after the change are {result['roots_after']}, not {want_roots}")
+        if result["versions"][0] == result["versions"][1]:
+            failures.append(f"{label}: the skeleton version did not change")
+        # The recorded Action plays back the same heads.
+        want, names = expected(new_roots)
+        size = max(float(np.linalg.norm(want[0] - want[0][k])) for k in range(len(names)))
+        if result["action_fcurves"] != 7 * result["bones"] or not result["played"]:
+            failures.append(f"{label}: the Action has {result['action_fcurves']} F-curves for {result['bones']} bones "
+                            f"and played {len(result['played'])} frames")
+        for s in result["played"]:
+            got = np.array([s["heads"][n] for n in names])
+            err = float(np.abs(got - want[s["frame"]]).max())
+            checked += 1
+            if err > 1e-4 * size:
+                failures.append(f"{label}: the recorded Action at frame {s['frame']} is {err:.3g} m off")
+                break
+        print(f"{label}: {len(result['before'])} + {len(result['after'])} frames applied, "
+              f"{len(result['played'])} played from the Action")
+
+    if failures:
+        print("\n".join(failures), file=sys.stderr)
+        sys.exit(1)
+    if checked < 4 * 40:
+        print(f"only {checked} frames checked", file=sys.stderr)
+        sys.exit(1)
+    print(f"live link in Blender: {len(cases)} motions, {checked} frames checked")
+    if not args.keep:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
