@@ -88,6 +88,9 @@ int main(int argc, char** argv) {
   app.add_option("--max-view-bytes-per-connection", cfg.max_view_bytes_per_connection,
                  "Motion bytes one connection's edited views may own")
       ->capture_default_str();
+  app.add_option("--socket-unsent-bytes", cfg.socket_unsent_bytes,
+                 "TCP_NOTSENT_LOWAT per connection: bytes the kernel may hold unsent before frames wait in the "
+                 "server's queue, where stale ones are dropped (0: the system's setting)");
   app.add_option("--socket-send-buffer", cfg.socket_send_buffer,
                  "SO_SNDBUF per connection in bytes (0: the kernel's autotuning)")
       ->capture_default_str();

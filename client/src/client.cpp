@@ -1,11 +1,13 @@
 #include "gmr/client/client.h"
 
+#include <algorithm>
 #include <atomic>
 #include <boost/asio.hpp>
 #include <condition_variable>
 #include <cstring>
 #include <deque>
 #include <future>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -61,7 +63,8 @@ ServerHello hello_of(const pb::HelloReply& h) {
 }
 
 SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
-  return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason(), e.frames_skipped()};
+  return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason(), e.frames_skipped(),
+                         e.frames_stale()};
 }
 
 }  // namespace
@@ -92,6 +95,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     FrameCallback on_frame;
     EndCallback on_end;
     SkeletonCallback on_skeleton;
+    std::int64_t max_age_ns = 0;  // 0: no staleness bound
   };
   std::map<std::uint32_t, std::shared_ptr<Sub>> subs;
   // A UDP frame can overtake the TCP reply to its Subscribe: frames for an
@@ -223,6 +227,13 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
       }
       if (!sub || !sub->on_frame) return;
       const std::int64_t received = now_ns();
+      // Older than its bound (it waited in the kernel's buffers while this
+      // client was not reading): dropped, counted.
+      if (sub->max_age_ns > 0 && received + hello.clock_offset_ns - f.server_send_time_ns() > sub->max_age_ns) {
+        std::lock_guard lock(mutex);
+        ++counters.frames_stale;
+        return;
+      }
       auto decoded = wire::decode_frame(f);
       if (!decoded.ok()) {
         std::lock_guard lock(mutex);
@@ -480,7 +491,9 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
   hello.mutable_hello()->set_client_name(options.client_name);
   hello.mutable_hello()->set_auth_token(options.auth_token);
+  const std::int64_t hello_sent = now_ns();
   auto r = d.expect(hello, pb::ServerMessage::kHello);
+  const std::int64_t hello_answered = now_ns();
   if (!r.ok()) {
     c->close();
     // A TLS server closes a plain client's connection without a word.
@@ -490,6 +503,10 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   }
   d.hello = hello_of(r->hello());
   d.hello.tls = d.socket.tls();
+  // The server read its clock about halfway through the round trip.
+  if (r->hello().server_time_ns() != 0) {
+    d.hello.clock_offset_ns = r->hello().server_time_ns() - (hello_sent + (hello_answered - hello_sent) / 2);
+  }
   d.server_udp = udp::endpoint(remote.address(), d.hello.udp_port);
   d.udp_socket.open(remote.address().is_v4() ? udp::v4() : udp::v6(), ec);
   if (!ec) d.udp_socket.bind(udp::endpoint(remote.address().is_loopback() ? remote.address() : net::ip::address(), 0), ec);
@@ -700,7 +717,13 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   s->set_shared(o.shared);
   to_proto(o.conventions, *s->mutable_conventions());
   s->set_max_frames(o.max_frames);
-  auto sub = std::make_shared<Impl::Sub>(Impl::Sub{std::move(on_frame), std::move(on_end), std::move(on_skeleton)});
+  // Zero: no bound, which the wire says with the largest (0 there is the server's default).
+  const auto staleness_ms = o.max_staleness.count() <= 0 ? std::numeric_limits<std::uint32_t>::max()
+                                                          : static_cast<std::uint32_t>(std::min<std::int64_t>(
+                                                                o.max_staleness.count(), std::numeric_limits<std::uint32_t>::max()));
+  s->set_max_staleness_ms(staleness_ms);
+  auto sub = std::make_shared<Impl::Sub>(Impl::Sub{std::move(on_frame), std::move(on_end), std::move(on_skeleton),
+                                                   o.max_staleness.count() > 0 ? std::int64_t{o.max_staleness.count()} * 1000000 : 0});
   // Registered on the I/O thread as the reply is read, before any frame.
   {
     std::lock_guard lock(impl_->mutex);

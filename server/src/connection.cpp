@@ -2,8 +2,14 @@
 
 #include <spdlog/spdlog.h>
 
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/socket.h>
+
 #include <algorithm>
 #include <array>
+#include <cerrno>
+#include <cstring>
 
 #include "gmr/wire/framing.h"
 
@@ -52,6 +58,16 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
   socket_.tcp().set_option(tcp::no_delay(true), ec);
   if (limits_.socket_send_buffer > 0) {
     socket_.tcp().set_option(net::socket_base::send_buffer_size(limits_.socket_send_buffer), ec);
+  }
+  if (limits_.socket_unsent_bytes > 0) {
+    // Bytes the kernel may hold that it has not sent: past them a write
+    // waits, so frames wait here, where latest-wins and the staleness bound
+    // apply, rather than in the kernel, where they would reach a client that
+    // stalled seconds late (docs/protocol.md, "Staleness").
+    const int lowat = limits_.socket_unsent_bytes;
+    if (::setsockopt(socket_.tcp().native_handle(), IPPROTO_TCP, TCP_NOTSENT_LOWAT, &lowat, sizeof lowat) != 0) {
+      spdlog::debug("conn {}: TCP_NOTSENT_LOWAT: {}", id_, std::strerror(errno));
+    }
   }
   last_read_ = last_write_ = Clock::now();
   spdlog::info("conn {}: connected from {}{}", id_, peer_, socket_.tls() ? " (TLS)" : "");
@@ -121,7 +137,8 @@ void Connection::pop_frame(std::deque<PendingFrame>& queue) {
   ++counters_.frames_dropped;
 }
 
-bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) {
+bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+                            Clock::duration max_age) {
   if (closing()) return true;
   const std::uint64_t size = head.size() + body->size();
   // With no write in flight the frame goes out at once; otherwise it waits,
@@ -149,7 +166,8 @@ bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr
       return false;
     }
   }
-  queue.push_back(PendingFrame{std::move(head), std::move(body)});
+  const Clock::time_point stale_at = max_age > Clock::duration::zero() ? Clock::now() + max_age : Clock::time_point::max();
+  queue.push_back(PendingFrame{std::move(head), std::move(body), stale_at});
   frame_bytes_ += size;
   note_queue();
   account();
@@ -165,7 +183,13 @@ bool Connection::congested(std::uint32_t key) const {
   return Clock::now() - write_started_ > limits_.congested_after;
 }
 
+std::uint64_t Connection::stale_dropped(std::uint32_t key) const {
+  auto it = stale_.find(key);
+  return it == stale_.end() ? 0 : it->second;
+}
+
 void Connection::discard_frames(std::uint32_t key) {
+  stale_.erase(key);
   auto it = frames_.find(key);
   if (it == frames_.end()) return;
   for (const auto& f : it->second) frame_bytes_ -= f.head.size() + f.body->size();
@@ -217,8 +241,14 @@ void Connection::flush() {
   std::size_t frames = 0;
   for (const auto& [key, queue] : frames_) frames += queue.size();
   hold_heads_.reserve(frames);
+  const Clock::time_point now = Clock::now();
   for (auto& [key, queue] : frames_) {
     for (auto& f : queue) {
+      if (f.stale_at < now) {  // waited past its subscriber's staleness bound
+        ++counters_.frames_dropped;
+        ++stale_[key];
+        continue;
+      }
       hold_heads_.push_back(std::move(f.head));
       in_flight_bytes_ += hold_heads_.back().size() + f.body->size();
       hold_.push_back(std::move(f.body));

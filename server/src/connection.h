@@ -60,6 +60,7 @@ struct ConnectionLimits {
   std::chrono::milliseconds heartbeat_interval{0};
   std::chrono::milliseconds write_timeout{0};
   int socket_send_buffer = 0;             // SO_SNDBUF; 0: the system's default
+  int socket_unsent_bytes = 0;            // TCP_NOTSENT_LOWAT; 0: the system's default
 };
 
 class Connection final : public Outbox, public std::enable_shared_from_this<Connection> {
@@ -95,7 +96,9 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   bool stopped() const override { return stopped_; }
   bool closing() const override { return stopped_ || close_after_flush_; }
   void send(std::string framed) override;
-  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) override;
+  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+                  Clock::duration max_age = {}) override;
+  std::uint64_t stale_dropped(std::uint32_t key) const override;
   bool congested(std::uint32_t key) const override;
   void discard_frames(std::uint32_t key) override;
   void send_frames_now(std::uint32_t key) override;
@@ -111,6 +114,7 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   struct PendingFrame {
     std::string head;
     std::shared_ptr<const std::string> body;
+    Clock::time_point stale_at = Clock::time_point::max();  // not written after this
   };
 
   // The read chain: prefix, then body, then the handler, then the next
@@ -153,6 +157,7 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   std::uint64_t reply_bytes_ = 0;
   std::map<std::uint32_t, std::deque<PendingFrame>> frames_;  // per key, oldest first
   std::uint64_t frame_bytes_ = 0;                             // heads and bodies in frames_
+  std::map<std::uint32_t, std::uint64_t> stale_;              // per key: frames dropped for their age
   bool writing_ = false;
   std::uint64_t in_flight_bytes_ = 0;
   std::vector<std::shared_ptr<const std::string>> hold_;  // what the write in flight points into

@@ -4,6 +4,7 @@
 // without sockets.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -31,13 +32,18 @@ class Outbox {
   virtual void send(std::string framed) = 0;
   // Queues a frame: `head` (this client's length prefix and ids) before the
   // shared `body`. False when the key already had its share of frames
-  // waiting and the oldest was dropped to make room (counted).
-  virtual bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body) = 0;
+  // waiting and the oldest was dropped to make room (counted). A frame still
+  // waiting `max_age` after this call is dropped instead of written (counted,
+  // and in stale_dropped(key)); zero: no limit.
+  virtual bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+                          std::chrono::steady_clock::duration max_age = {}) = 0;
+  // Frames of `key` dropped for waiting past their max_age.
+  virtual std::uint64_t stale_dropped(std::uint32_t key) const { return (void)key, 0; }
   // True while frames for `key` cannot go out soon: its share of frames is
   // waiting behind a write that has been in flight for a while (the client
   // is not reading). Streams then skip computing frames for it.
   virtual bool congested(std::uint32_t key) const { return (void)key, false; }
-  // Forgets the frames waiting for `key`.
+  // Forgets the frames waiting for `key` (and its stale_dropped count).
   virtual void discard_frames(std::uint32_t key) = 0;
   // Moves the frames waiting for `key` ahead of the next reply.
   virtual void send_frames_now(std::uint32_t key) = 0;

@@ -216,6 +216,8 @@ Reply RequestHandler::hello(const pb::Hello& h) {
   r->set_heartbeat_interval_ms(static_cast<std::uint32_t>(cfg.heartbeat_interval.count()));
   r->set_idle_timeout_ms(static_cast<std::uint32_t>(cfg.idle_timeout.count()));
   r->set_role(role_ == Role::kControl ? pb::ROLE_CONTROL : pb::ROLE_READ);
+  r->set_server_time_ns(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
   return out;
 }
 

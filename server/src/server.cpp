@@ -26,6 +26,7 @@ ConnectionLimits Server::Impl::connection_limits() const {
   l.heartbeat_interval = cfg.heartbeat_interval;
   l.write_timeout = cfg.write_timeout;
   l.socket_send_buffer = cfg.socket_send_buffer;
+  l.socket_unsent_bytes = cfg.socket_unsent_bytes;
   return l;
 }
 

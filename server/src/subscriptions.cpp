@@ -111,6 +111,8 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   } else {
     target = std::make_shared<TcpTarget>(weak_from_this(), connection_, id, v->id());
   }
+  target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
+                                                : std::chrono::milliseconds(r.max_staleness_ms()));
   stream->add(target, r.max_frames());
   subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version, settings.basis};
   server_.committed_mhz += rate_mhz;
@@ -228,11 +230,17 @@ void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, co
   pb::ServerMessage m;
   m.mutable_subscription_ended()->set_subscription_id(id);
   m.mutable_subscription_ended()->set_frames_sent(sent);
-  m.mutable_subscription_ended()->set_frames_dropped(s.target->dropped());
+  auto c = connection_.lock();
+  const std::uint64_t stale = c ? c->stale_dropped(id) : 0;
+  m.mutable_subscription_ended()->set_frames_dropped(s.target->dropped() + stale);
+  m.mutable_subscription_ended()->set_frames_stale(stale);
   m.mutable_subscription_ended()->set_frames_skipped(s.target->late_skipped());
   m.mutable_subscription_ended()->set_reason(reason);
   // The frames still waiting go out before the end notice.
-  if (auto c = connection_.lock()) c->send_frames_now(id);
+  if (c) {
+    c->send_frames_now(id);
+    c->discard_frames(id);  // nothing waits any more; forgets its stale count
+  }
   s.stream->remove(s.target.get());
   server_.committed_mhz -= s.rate_mhz;
   subs_.erase(it);

@@ -34,7 +34,8 @@ void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std
   auto c = connection_.lock();
   if (!c || c->closing()) return;
   // The per-subscriber head (length prefix, ServerMessage tag, ids); the body is shared.
-  if (!c->push_frame(subscription_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), true), body)) {
+  if (!c->push_frame(subscription_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), true), body,
+                     max_age_)) {
     ++dropped_;
   }
 }

@@ -26,6 +26,8 @@ class SubscriptionTarget : public Target {
   void late(std::uint64_t n) override;
 
   std::uint32_t subscription() const { return subscription_; }
+  // Frames that would wait longer than this in the outbox are dropped (TCP).
+  void set_max_age(std::chrono::steady_clock::duration d) { max_age_ = d; }
   std::uint64_t dropped() const { return dropped_; }
   std::uint64_t late_skipped() const { return late_; }
 
@@ -36,6 +38,7 @@ class SubscriptionTarget : public Target {
   std::uint32_t view_;
   std::uint64_t dropped_ = 0;
   std::uint64_t late_ = 0;
+  std::chrono::steady_clock::duration max_age_{};
 };
 
 // Frames go into the connection's outbox (latest wins per subscription).

@@ -4,7 +4,9 @@
 // mid-stream, heartbeats and graceful stop.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <mutex>
+#include <thread>
 
 #include "net_test_util.h"
 
@@ -720,6 +722,67 @@ TEST(Streaming, LocalTransformsAndRestPoseInTheSubscribersConventions) {
     EXPECT_LE((ch->rest.translations[static_cast<std::size_t>(j)] - bb.position(joint.offset)).norm(), 1e-12) << joint.name;
   }
   EXPECT_TRUE(c->unsubscribe(live->id).ok());
+}
+
+// Bounded staleness: a client that stalls 5 s (its frame callback blocks the
+// I/O thread, so nothing is read) then reads again gets no frame older than
+// its bound: the server dropped those that waited in its queue past it (they
+// are counted), the client those that waited in the kernel's buffers
+// (counted too), and fresh frames follow at once.
+TEST(Streaming, AStalledClientGetsNoFrameOlderThanItsBound) {
+  TestServer s;
+  std::mutex mutex;
+  std::vector<ReceivedFrame> after;
+  std::atomic<bool> stalled{false};
+  client::ClientOptions co;
+  co.receive_buffer = 8 * 1024;  // the kernel holds little for this client, so the server's queue fills
+  auto c = s.connect(co);
+  ASSERT_NE(c, nullptr);
+  EXPECT_LT(std::abs(c->hello().clock_offset_ns), 50'000'000) << "one host: the clocks agree";
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.rate_hz = 240;
+  o.orientations = true;
+  o.max_staleness = std::chrono::milliseconds(100);
+  auto sub = c->subscribe(v->id, o, [&](const ReceivedFrame& f) {
+    if (!stalled.exchange(true)) {
+      std::this_thread::sleep_for(std::chrono::seconds(5));
+      return;
+    }
+    std::lock_guard lock(mutex);
+    after.push_back(f);
+  });
+  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  for (;;) {
+    {
+      std::lock_guard lock(mutex);
+      if (after.size() >= 60) break;
+    }
+    ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "frames stopped after the stall";
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  std::vector<ReceivedFrame> frames;
+  {
+    std::lock_guard lock(mutex);
+    frames = after;
+  }
+  // On one host both clocks are the same clock: age = receive - send.
+  std::int64_t oldest = 0;
+  for (const auto& f : frames) oldest = std::max(oldest, f.receive_time_ns - f.server_send_time_ns);
+  EXPECT_LE(oldest, 100'000'000 + 2'000'000) << "a frame older than the 100 ms bound was delivered";
+  const auto counters = c->counters();
+  auto stats = c->stats();
+  ASSERT_TRUE(stats.ok());
+  EXPECT_GT(counters.frames_stale, 0u) << "frames that waited in the kernel during the stall";
+  EXPECT_GT(stats->frames_dropped, 0u) << "frames the server did not send";
+  std::printf("after a 5 s stall: %llu frames dropped by the client as stale, %llu dropped by the server, "
+              "%zu fresh frames, oldest %.1f ms\n",
+              static_cast<unsigned long long>(counters.frames_stale),
+              static_cast<unsigned long long>(stats->frames_dropped), frames.size(), oldest / 1e6);
+  EXPECT_TRUE(c->unsubscribe(sub->id).ok());
 }
 
 TEST(Streaming, HeartbeatsKeepAQuietClientConnected) {

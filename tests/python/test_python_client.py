@@ -212,6 +212,23 @@ class DemoLibrary(unittest.TestCase):
         self.assertEqual(e.exception.code, "CONNECTION")
         c.close()
 
+    def test_a_client_that_stalls_gets_no_stale_frame(self):
+        # Not reading for 2 s lets the kernel's buffers fill with old frames;
+        # after it, none older than the bound is handed out, and they are counted.
+        c = gmr_client.Client(port=self.server.port)
+        v = c.create_view("walk")
+        sub = c.subscribe(v.id, loop=True, rate_hz=240, orientations=True, max_staleness_ms=100)
+        time.sleep(2.0)
+        fresh = []
+        for f in sub:
+            fresh.append(f)
+            if len(fresh) == 50:
+                break
+        ages = [(f.receive_time_ns + c.clock_offset_ns - f.server_send_time_ns) / 1e6 for f in fresh]
+        self.assertLessEqual(max(ages), 100.0)
+        self.assertGreater(sub.frames_stale, 0)
+        c.close()
+
     def test_connection_errors_are_clear(self):
         with self.assertRaises(gmr_client.GmrError) as e:
             gmr_client.Client(port=1, timeout=2)

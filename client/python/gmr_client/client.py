@@ -240,6 +240,8 @@ class Subscription:
         self.ended = None  # dict(reason, frames_sent, frames_dropped, frames_skipped) once ended
         self.skeleton_changes = 0
         self.frames_overflowed = 0  # frames this client queued but nobody read in time
+        self.frames_stale = 0       # frames that arrived older than max_staleness (dropped)
+        self.max_age_ns = 0         # 0: no staleness bound
         self._frames = collections.deque()
 
     def _push(self, frame: Frame) -> None:
@@ -306,7 +308,12 @@ class Client:
         m.hello.protocol_version = PROTOCOL_VERSION
         m.hello.client_name = name
         m.hello.auth_token = token
+        sent = time.time_ns()
         self.hello = self._request(m, "hello")
+        answered = time.time_ns()
+        # The server's clock minus ours, from the round trip (0 if it does not
+        # say): frames' ages are measured with it.
+        self.clock_offset_ns = self.hello.server_time_ns - (sent + answered) // 2 if self.hello.server_time_ns else 0
         if self.hello.max_message_bytes:
             self._max_message = self.hello.max_message_bytes
 
@@ -422,8 +429,12 @@ class Client:
                   speed: float = 1.0, rate_hz: float = 0.0, skip_repeats: bool = False, orientations: bool = False,
                   local_transforms: bool = False, joints: Sequence[str] = (), udp: bool = False,
                   float64: bool = False, shared: bool = False, max_frames: int = 0,
-                  conventions: ConventionsLike = None) -> Subscription:
-        """Starts streaming frames of a view (docs/protocol.md, "Streams")."""
+                  conventions: ConventionsLike = None, max_staleness_ms: int = 100) -> Subscription:
+        """Starts streaming frames of a view (docs/protocol.md, "Streams").
+
+        Frames older than max_staleness_ms are never handed out: the server
+        drops those that waited in its queue, this client those that arrive
+        older (after a stall, the kernel's buffers hold them); 0: no bound."""
         if udp:
             self.register_udp()
         m = pb.ClientMessage()
@@ -442,6 +453,7 @@ class Client:
         s.precision = pb.PRECISION_FLOAT64 if float64 else pb.PRECISION_FLOAT32
         s.shared = shared
         s.max_frames = max_frames
+        s.max_staleness_ms = max_staleness_ms if max_staleness_ms > 0 else 0xFFFFFFFF  # 0 on the wire: 100 ms
         _set_conventions(conventions, s.conventions)
         # Frames can come before the reply is handled (in the same read, or by
         # UDP): they wait in _early until the subscription exists.
@@ -451,6 +463,7 @@ class Client:
         finally:
             self._subscribing = False
         sub = Subscription(self, reply)
+        sub.max_age_ns = max_staleness_ms * 1_000_000 if max_staleness_ms > 0 else 0
         self._subs[sub.id] = sub
         for frame in self._early.pop(sub.id, []):
             sub._push(frame)
@@ -463,7 +476,8 @@ class Client:
         self._request(m, "ack")
         sub = self._subs.pop(subscription, None)
         if sub is not None and sub.ended is None:
-            sub.ended = {"reason": "unsubscribed", "frames_sent": 0, "frames_dropped": 0, "frames_skipped": 0}
+            sub.ended = {"reason": "unsubscribed", "frames_sent": 0, "frames_dropped": 0, "frames_skipped": 0,
+                         "frames_stale": 0}
 
     def pause(self, subscription: int) -> None:
         m = pb.ClientMessage()
@@ -645,6 +659,9 @@ class Client:
                 return
             sub = self._subs.get(frame.subscription_id)
             if sub is not None:
+                if sub.max_age_ns and frame.receive_time_ns + self.clock_offset_ns - frame.server_send_time_ns > sub.max_age_ns:
+                    sub.frames_stale += 1  # waited in the kernel's buffers while we were not reading
+                    return
                 sub._push(frame)
             elif self._subscribing and len(self._early[frame.subscription_id]) < _MAX_QUEUED_FRAMES:
                 self._early[frame.subscription_id].append(frame)
@@ -653,7 +670,7 @@ class Client:
             sub = self._subs.pop(e.subscription_id, None)
             if sub is not None:
                 sub.ended = {"reason": e.reason, "frames_sent": e.frames_sent, "frames_dropped": e.frames_dropped,
-                             "frames_skipped": e.frames_skipped}
+                             "frames_skipped": e.frames_skipped, "frames_stale": e.frames_stale}
         elif which == "skeleton_changed":
             sub = self._subs.get(msg.skeleton_changed.subscription_id)
             if sub is not None:

@@ -70,6 +70,10 @@ struct ServerHello {
   std::uint32_t heartbeat_interval_ms = 0;
   std::uint32_t idle_timeout_ms = 0;
   Role role = Role::kUnknown;
+  // The server's clock minus this client's (system clocks, nanoseconds),
+  // estimated from the Hello round trip (0 for a server that does not say):
+  // what frames' ages are measured with.
+  std::int64_t clock_offset_ns = 0;
   bool tls = false;  // the connection speaks TLS
 };
 
@@ -128,6 +132,11 @@ struct SubscribeOptions {
   bool float64 = false;
   bool shared = false;           // join a running stream with the same content and schedule
   std::uint64_t max_frames = 0;  // 0: no limit
+  // Frames older than this are never delivered: the server drops those that
+  // waited longer in its queue, this client those that arrive older (after a
+  // stall, the kernel's buffers still hold them); both are counted. Zero: no
+  // bound. docs/protocol.md, "Staleness".
+  std::chrono::milliseconds max_staleness{100};
   Conventions conventions;       // an engine's axes and unit (gmr/view/conventions.h); default: the motion's own
 };
 
@@ -160,6 +169,7 @@ struct SubscriptionEnd {
   std::uint64_t frames_dropped = 0;  // this client was slow (frames it did not read in time)
   std::string reason;
   std::uint64_t frames_skipped = 0;  // the server was late (ticks skipped to catch up)
+  std::uint64_t frames_stale = 0;    // of frames_dropped, those the server held past max_staleness
 };
 
 // The server's counters (GetStats); the frames_sent .. max_queued_bytes are
@@ -205,6 +215,7 @@ struct ClientCounters {
   std::uint64_t udp_incomplete_dropped = 0;  // messages with a lost fragment
   std::uint64_t udp_malformed = 0;
   std::uint64_t frames_malformed = 0;        // frames whose values did not decode (dropped)
+  std::uint64_t frames_stale = 0;            // frames that arrived older than their max_staleness (dropped)
 };
 
 class Client {

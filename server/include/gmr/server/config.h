@@ -73,6 +73,13 @@ struct ServerConfig {
   // grow to net.ipv4.tcp_wmem's maximum, 4 MiB). 0 keeps the system's
   // autotuning. Tests shrink it so a client that never reads fills it quickly.
   int socket_send_buffer = 256 * 1024;
+  // TCP_NOTSENT_LOWAT for accepted sockets: at most this many bytes the
+  // kernel has not sent yet; a write past them waits, and frames wait in the
+  // connection's queue (latest wins, staleness bound) instead of the kernel's.
+  // 0 keeps the system's setting (no limit).
+  int socket_unsent_bytes = 16 * 1024;
+  // A subscription's staleness bound when it asks for none (Subscribe.max_staleness_ms 0).
+  std::chrono::milliseconds default_max_staleness{100};
   // Admission against what the server can send (docs/protocol.md,
   // "Admission"): the frames per second all subscriptions together may ask
   // for (each subscriber's rate counts, shared stream or not). A
