@@ -1,0 +1,180 @@
+"""The C ABI (libgmr_client_c.so, gmr_client_c.h) tested from a plain C
+program and from Python ctypes, against a gmr-server started here: the
+frames they poll equal `gmr positions` of the same frames and view; the
+library exports only gmr_* and has its SONAME.
+
+    c_abi_test.py --bin-dir build/bin --lib build/lib/libgmr_client_c.so --c-test build/tests/gmr_c_abi_test
+"""
+
+import argparse
+import ctypes
+import pathlib
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "python"))
+import gmr_test_env as env  # noqa: E402
+
+
+class MotionInfo(ctypes.Structure):
+    _fields_ = [("name", ctypes.c_char * 256), ("joint_count", ctypes.c_uint32), ("frame_count", ctypes.c_uint64),
+                ("frame_time", ctypes.c_double), ("metres_per_unit", ctypes.c_double)]
+
+
+class JointInfo(ctypes.Structure):
+    _fields_ = [("name", ctypes.c_char * 128), ("parent", ctypes.c_int32), ("rest_translation", ctypes.c_double * 3),
+                ("rest_rotation", ctypes.c_double * 4)]
+
+
+class SubscribeOptions(ctypes.Structure):
+    _fields_ = [("struct_size", ctypes.c_uint32), ("rate_hz", ctypes.c_double), ("speed", ctypes.c_double),
+                ("loop", ctypes.c_int32), ("udp", ctypes.c_int32), ("float64", ctypes.c_int32),
+                ("local_transforms", ctypes.c_int32), ("orientations", ctypes.c_int32),
+                ("max_frames", ctypes.c_uint64), ("start_frame", ctypes.c_uint32), ("end_frame", ctypes.c_uint32),
+                ("preset", ctypes.c_int), ("source_metres_per_unit", ctypes.c_double),
+                ("max_staleness_ms", ctypes.c_uint32)]
+
+
+class Frame(ctypes.Structure):
+    _fields_ = [("frame_index", ctypes.c_uint64), ("motion_time", ctypes.c_double), ("sequence", ctypes.c_uint64),
+                ("server_send_time_ns", ctypes.c_int64), ("skeleton_version", ctypes.c_uint32),
+                ("joint_count", ctypes.c_uint32), ("skeleton_changed", ctypes.c_int32),
+                ("has_local_transforms", ctypes.c_int32), ("has_orientations", ctypes.c_int32)]
+
+
+GMR_OK, GMR_NO_FRAME, GMR_ENDED, GMR_ERROR_NOT_FOUND = 0, 1, 2, 13
+PRESET_BLENDER = 3
+
+
+def load(path):
+    lib = ctypes.CDLL(str(path))
+    P = ctypes.c_void_p
+    lib.gmr_last_error.restype = ctypes.c_char_p
+    lib.gmr_connect.argtypes = [ctypes.c_char_p, ctypes.c_uint16, ctypes.c_char_p, ctypes.POINTER(P)]
+    lib.gmr_disconnect.argtypes = [P]
+    lib.gmr_list_motions.argtypes = [P, ctypes.POINTER(MotionInfo), ctypes.c_size_t, ctypes.POINTER(ctypes.c_size_t)]
+    lib.gmr_create_view.argtypes = [P, ctypes.c_char_p, ctypes.POINTER(ctypes.c_uint32)]
+    lib.gmr_set_roots.argtypes = [P, ctypes.c_uint32, ctypes.POINTER(ctypes.c_char_p), ctypes.c_size_t]
+    lib.gmr_set_viewpoint.argtypes = [P, ctypes.c_uint32, ctypes.c_char_p]
+    lib.gmr_subscribe_options_init.argtypes = [ctypes.POINTER(SubscribeOptions)]
+    lib.gmr_subscribe.argtypes = [P, ctypes.c_uint32, ctypes.POINTER(SubscribeOptions), ctypes.POINTER(P)]
+    lib.gmr_unsubscribe.argtypes = [P]
+    lib.gmr_subscription_joint_count.argtypes = [P, ctypes.POINTER(ctypes.c_size_t)]
+    lib.gmr_subscription_joint.argtypes = [P, ctypes.c_size_t, ctypes.POINTER(JointInfo)]
+    D = ctypes.POINTER(ctypes.c_double)
+    lib.gmr_poll_frame.argtypes = [P, ctypes.POINTER(Frame), D, D, D, D, ctypes.c_size_t]
+    return lib
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--bin-dir", required=True)
+    ap.add_argument("--lib", required=True)
+    ap.add_argument("--c-test", required=True)
+    args = ap.parse_args()
+    bin_dir = pathlib.Path(args.bin_dir)
+    failures = []
+
+    # Only gmr_* leaves the library, and it has its SONAME.
+    symbols = subprocess.run(["nm", "-D", "--defined-only", args.lib], check=True, capture_output=True,
+                             text=True).stdout.split()
+    exported = [s for s in symbols[2::3]]
+    if not exported or any(not s.startswith("gmr_") for s in exported):
+        failures.append(f"exported symbols other than gmr_*: {[s for s in exported if not s.startswith('gmr_')][:10]}")
+    dynamic = subprocess.run(["readelf", "-d", args.lib], check=True, capture_output=True, text=True).stdout
+    if "Library soname: [libgmr_client_c.so.0]" not in dynamic:
+        failures.append("no SONAME libgmr_client_c.so.0")
+
+    with tempfile.TemporaryDirectory(prefix="gmr_cabi_") as tmp:
+        subprocess.run([str(bin_dir / "gmr"), "demo", tmp, "--format", "gmr"], check=True, capture_output=True)
+        walk = pathlib.Path(tmp) / "walk.gmr"
+        with env.Server(bin_dir) as server:
+            # The C program.
+            run = subprocess.run([args.c_test, str(server.port)], capture_output=True, text=True, timeout=120)
+            if run.returncode != 0:
+                failures.append(f"the C program failed ({run.returncode}): {run.stderr}")
+            else:
+                print(run.stderr.strip())
+                want, names = env.gmr_positions(bin_dir, walk, "--roots", "head", "--conventions", "unity",
+                                                "--metres-per-unit", "0.01")
+                index = {n: i for i, n in enumerate(names)}
+                worst, rows = 0.0, 0
+                for line in run.stdout.splitlines():
+                    _, frame, name, x, y, z = line.split()
+                    w = want[int(frame)][index[name]]
+                    worst = max(worst, abs(float(x) - w[0]), abs(float(y) - w[1]), abs(float(z) - w[2]))
+                    rows += 1
+                if rows < 5 * 22 or worst > 1e-9:
+                    failures.append(f"C: {rows} positions, {worst:.3g} from gmr positions")
+                print(f"C program: {rows} joint positions equal gmr positions (largest difference {worst:.3g} m)")
+
+            # Python ctypes.
+            lib = load(args.lib)
+            client = ctypes.c_void_p()
+            if lib.gmr_connect(b"127.0.0.1", server.port, None, ctypes.byref(client)) != GMR_OK:
+                failures.append(f"ctypes connect: {lib.gmr_last_error()}")
+            else:
+                motions = (MotionInfo * 8)()
+                count = ctypes.c_size_t()
+                lib.gmr_list_motions(client, motions, 8, ctypes.byref(count))
+                listed = sorted(motions[i].name.decode() for i in range(count.value))
+                if listed != ["jump", "turn", "walk", "wave"]:
+                    failures.append(f"ctypes list: {listed}")
+                view = ctypes.c_uint32()
+                assert lib.gmr_create_view(client, b"walk", ctypes.byref(view)) == GMR_OK
+                roots = (ctypes.c_char_p * 2)(b"l_hand", b"r_toe")
+                assert lib.gmr_set_roots(client, view, roots, 2) == GMR_OK, lib.gmr_last_error()
+                assert lib.gmr_set_viewpoint(client, view, b"pelvis") == GMR_OK, lib.gmr_last_error()
+                o = SubscribeOptions()
+                lib.gmr_subscribe_options_init(ctypes.byref(o))
+                o.preset = PRESET_BLENDER
+                o.float64 = 1
+                o.end_frame = 40
+                o.speed = 4
+                sub = ctypes.c_void_p()
+                assert lib.gmr_subscribe(client, view, ctypes.byref(o), ctypes.byref(sub)) == GMR_OK, lib.gmr_last_error()
+                n = ctypes.c_size_t()
+                lib.gmr_subscription_joint_count(sub, ctypes.byref(n))
+                joint_names = []
+                for j in range(n.value):
+                    info = JointInfo()
+                    lib.gmr_subscription_joint(sub, j, ctypes.byref(info))
+                    joint_names.append(info.name.decode())
+                want, names = env.gmr_positions(bin_dir, walk, "--roots", "l_hand,r_toe", "--relative-to", "pelvis",
+                                                "--conventions", "blender", "--metres-per-unit", "0.01")
+                positions = (ctypes.c_double * (3 * 64))()
+                frame = Frame()
+                polled, worst = 0, 0.0
+                deadline = time.monotonic() + 30
+                while time.monotonic() < deadline:
+                    s = lib.gmr_poll_frame(sub, ctypes.byref(frame), positions, None, None, None, 64)
+                    if s == GMR_ENDED:
+                        break
+                    if s == GMR_NO_FRAME:
+                        time.sleep(0.002)
+                        continue
+                    assert s == GMR_OK, lib.gmr_last_error()
+                    for j, name in enumerate(joint_names):
+                        w = want[frame.frame_index][names.index(name)]
+                        worst = max(worst, *(abs(positions[3 * j + k] - w[k]) for k in range(3)))
+                    polled += 1
+                if polled < 5 or worst > 1e-9:
+                    failures.append(f"ctypes: {polled} frames polled, {worst:.3g} from gmr positions")
+                print(f"ctypes: {polled} frames polled equal gmr positions (largest difference {worst:.3g} m)")
+                lib.gmr_unsubscribe(sub)
+                none = ctypes.c_uint32()
+                s = lib.gmr_create_view(client, b"nope", ctypes.byref(none))
+                if s != GMR_ERROR_NOT_FOUND or b"nope" not in lib.gmr_last_error():
+                    failures.append(f"ctypes error path: {s} {lib.gmr_last_error()}")
+                lib.gmr_disconnect(client)
+
+    if failures:
+        print("\n".join(failures), file=sys.stderr)
+        sys.exit(1)
+    print(f"C ABI: {len(exported)} exported functions, all gmr_*")
+
+
+if __name__ == "__main__":
+    main()
