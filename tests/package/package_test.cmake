@@ -6,7 +6,9 @@
 # -D variables: GMR_BINARY_DIR, CONSUMER_DIR, WORK_DIR, GENERATOR,
 # MAKE_PROGRAM, CXX_COMPILER, BUILD_TYPE, INSTALL_LIBDIR, GMR_VERSION, and
 # optionally CXX_FLAGS / LINKER_FLAGS (sanitizer builds: the consumer links an
-# instrumented archive).
+# instrumented archive). With CLIENT=ON (and C_COMPILER): everything is
+# installed, and the consumer also uses the installed C++ client and C ABI
+# against the installed gmr-server, started here on loopback.
 foreach(var GMR_BINARY_DIR CONSUMER_DIR WORK_DIR GENERATOR CXX_COMPILER INSTALL_LIBDIR GMR_VERSION)
   if(NOT DEFINED ${var} OR "${${var}}" STREQUAL "")
     message(FATAL_ERROR "package_test.cmake: -D${var}=... is required")
@@ -23,21 +25,43 @@ function(run what)
 endfunction()
 
 set(prefix ${WORK_DIR}/prefix)
+if(NOT CLIENT)
+  set(CLIENT OFF)
+endif()
+set(c_compiler "")
+if(C_COMPILER)
+  set(c_compiler -DCMAKE_C_COMPILER=${C_COMPILER})
+endif()
 set(build ${WORK_DIR}/consumer-build)
 file(REMOVE_RECURSE ${WORK_DIR})
 file(MAKE_DIRECTORY ${WORK_DIR})
 
-run("install" ${CMAKE_COMMAND} --install ${GMR_BINARY_DIR} --prefix ${prefix} --component gmr)
-foreach(file ${INSTALL_LIBDIR}/cmake/gmr/gmrConfig.cmake ${INSTALL_LIBDIR}/cmake/gmr/gmrConfigVersion.cmake
+set(expected ${INSTALL_LIBDIR}/cmake/gmr/gmrConfig.cmake ${INSTALL_LIBDIR}/cmake/gmr/gmrConfigVersion.cmake
              ${INSTALL_LIBDIR}/cmake/gmr/gmrTargets.cmake ${INSTALL_LIBDIR}/libgmr.a
              include/gmr/core/error.h include/gmr/fast/fast_fk.h)
+if(CLIENT)
+  run("install" ${CMAKE_COMMAND} --install ${GMR_BINARY_DIR} --prefix ${prefix})
+  list(APPEND expected ${INSTALL_LIBDIR}/libgmr_client.a ${INSTALL_LIBDIR}/libgmr_wire.a ${INSTALL_LIBDIR}/libgmr_proto.a
+       ${INSTALL_LIBDIR}/libgmr_client_c.so.0 ${INSTALL_LIBDIR}/pkgconfig/gmr_client_c.pc
+       ${INSTALL_LIBDIR}/cmake/gmr/gmrClientTargets.cmake ${INSTALL_LIBDIR}/cmake/gmr/gmrClientCTargets.cmake
+       include/gmr/client/client.h include/gmr/wire/frame_values.h include/gmr_client_c.h
+       bin/gmr bin/gmr-server bin/gmr-load)
+else()
+  run("install" ${CMAKE_COMMAND} --install ${GMR_BINARY_DIR} --prefix ${prefix} --component gmr)
+endif()
+foreach(file ${expected})
   if(NOT EXISTS ${prefix}/${file})
     message(FATAL_ERROR "install: ${prefix}/${file} is missing")
   endif()
 endforeach()
-# Nothing private (lib/src) or from other targets gets installed.
+# Nothing private (lib/src) or from other targets gets installed; of the
+# client side only its headers without protobuf types.
 file(GLOB_RECURSE installed_headers RELATIVE ${prefix}/include ${prefix}/include/*)
 foreach(header ${installed_headers})
+  if(header STREQUAL "gmr/client/client.h" OR header STREQUAL "gmr/wire/frame_values.h"
+     OR header STREQUAL "gmr_client_c.h")
+    continue()
+  endif()
   if(NOT header MATCHES "^gmr/[a-z0-9_]+/[a-z0-9_]+\\.h$" OR header MATCHES "^gmr/(wire|server|client|stream)/")
     message(FATAL_ERROR "install: unexpected file include/${header}")
   endif()
@@ -47,7 +71,8 @@ endforeach()
 run("consumer configure" ${CMAKE_COMMAND} -S ${CONSUMER_DIR} -B ${build} -G ${GENERATOR}
     -DCMAKE_MAKE_PROGRAM=${MAKE_PROGRAM} -DCMAKE_CXX_COMPILER=${CXX_COMPILER} -DCMAKE_BUILD_TYPE=${BUILD_TYPE}
     -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF
-    "-DCMAKE_CXX_FLAGS=${CXX_FLAGS}" "-DCMAKE_EXE_LINKER_FLAGS=${LINKER_FLAGS}")
+    -DGMR_CONSUMER_CLIENT=${CLIENT} ${c_compiler}
+    "-DCMAKE_CXX_FLAGS=${CXX_FLAGS}" "-DCMAKE_C_FLAGS=${CXX_FLAGS}" "-DCMAKE_EXE_LINKER_FLAGS=${LINKER_FLAGS}")
 string(REGEX MATCH "consumer: gmr ([0-9.]+) from ([^\n]*)" found "${run_output}")
 if(NOT CMAKE_MATCH_1 STREQUAL GMR_VERSION OR NOT CMAKE_MATCH_2 STREQUAL "${prefix}/${INSTALL_LIBDIR}/cmake/gmr")
   message(FATAL_ERROR "consumer configure: expected gmr ${GMR_VERSION} from ${prefix}/${INSTALL_LIBDIR}/cmake/gmr, "
@@ -64,5 +89,34 @@ message("${run_output}")
 if(NOT run_output MATCHES "^gmr consumer: [a-z]+, [0-9]+ joints, [0-9]+ frames, frame [0-9]+, SIMD [A-Za-z0-9_]+\n"
    OR NOT run_output MATCHES "\nfast FK matches the reference")
   message(FATAL_ERROR "consumer run: unexpected output")
+endif()
+
+if(CLIENT)
+  # The installed server on a free loopback port, the installed gmr command
+  # and the three client consumers against it.
+  # No semicolons: CMake would split the script at them. The server writes to
+  # a file, so it never holds execute_process's pipe.
+  set(script "
+    '${prefix}/bin/gmr-server' --port 0 --port-file '${WORK_DIR}/port' --log-level warn >'${WORK_DIR}/server.log' 2>&1 &
+    pid=$!
+    for i in $(seq 200)
+    do
+      [ -s '${WORK_DIR}/port' ] && break
+      sleep 0.05
+    done
+    port=$(cat '${WORK_DIR}/port')
+    '${prefix}/bin/gmr' ls --port $port >/dev/null && '${build}/gmr_client_consumer' $port &&
+      '${build}/gmr_c_consumer' $port && '${build}/gmr_c_pkgconfig_consumer' $port
+    rc=$?
+    kill -TERM $pid
+    wait $pid || rc=1
+    exit $rc")
+  run("installed server and clients" sh -c "${script}")
+  message("${run_output}")
+  foreach(line "client consumer: [0-9]+ motions, 10 frames" "c consumer: frame [0-9]+ of")
+    if(NOT run_output MATCHES "${line}")
+      message(FATAL_ERROR "clients against the installed server: no '${line}' in\n${run_output}")
+    endif()
+  endforeach()
 endif()
 file(REMOVE_RECURSE ${WORK_DIR})
