@@ -1,7 +1,9 @@
 // gmr-load: N clients subscribe to a gmr-server and measure what arrives.
 //
 //   gmr-load [--host H] [--port P] [--token T] [--tls-ca CA] [--clients N] [--motion M] [--seconds S]
-//            [--rate HZ] [--udp] [--shared] [--orientations] [--float64]
+//            [--rate HZ] [--udp] [--shared] [--orientations] [--float64] [--threads T]
+//
+// The clients share T I/O threads (gmr::client::EventLoop), not one each.
 //
 // Prints latency (server send time -> client receive time, both system_clock
 // on the same machine, so only meaningful on one host or with synced clocks)
@@ -62,6 +64,9 @@ int main(int argc, char** argv) {
   app.add_flag("--shared", shared, "All clients join one shared stream (one FK and encoding per tick)");
   app.add_flag("--orientations", orientations, "Send orientations too");
   app.add_flag("--float64", float64, "Send float64 numbers");
+  unsigned threads = 2;
+  app.add_option("--threads", threads, "I/O threads all the clients share (0: one per client, as before)")
+      ->capture_default_str();
   int max_staleness_ms = 0;
   app.add_option("--max-staleness-ms", max_staleness_ms,
                  "Each subscription's staleness bound: older frames are dropped by the server and the clients, and "
@@ -80,6 +85,8 @@ int main(int argc, char** argv) {
   so.float64 = float64;
   so.max_staleness = std::chrono::milliseconds(max_staleness_ms);
   double rate_in_effect = 0.0;
+  if (threads > 0) connect_options.loop = std::make_shared<gmr::client::EventLoop>(threads);
+  const auto setup_started = std::chrono::steady_clock::now();
   for (int i = 0; i < clients; ++i) {
     auto run = std::make_unique<ClientRun>();
     gmr::client::ClientOptions co = connect_options;
@@ -123,6 +130,7 @@ int main(int argc, char** argv) {
     run->subscription = sub->id;
     runs.push_back(std::move(run));
   }
+  const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_started).count();
   std::this_thread::sleep_for(std::chrono::duration<double>(warmup));
   for (auto& r : runs) {
     std::lock_guard lock(r->mutex);
@@ -169,6 +177,8 @@ int main(int argc, char** argv) {
   std::printf("gmr-load: %d clients, motion %s, %s, %.1f Hz each, %s stream%s, %.1f s measured\n", clients,
               motion.c_str(), udp ? "UDP" : "TCP", rate_in_effect, shared ? "one shared" : "one",
               shared ? "" : " per client", elapsed);
+  std::printf("set-up           %.2f s for %d clients on %s\n", setup_seconds, clients,
+              threads > 0 ? (std::to_string(threads) + " shared I/O threads").c_str() : "a thread each");
   std::printf("frames received  %llu (%.1f/s in all, %.1f/s per client; expected %.1f/s per client)\n",
               static_cast<unsigned long long>(frames), static_cast<double>(frames) / elapsed,
               static_cast<double>(frames) / elapsed / clients, rate_in_effect);

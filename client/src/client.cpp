@@ -69,17 +69,62 @@ SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
 
 }  // namespace
 
-struct Client::Impl : std::enable_shared_from_this<Impl> {
-  ClientOptions options;
+// The io_context a client's handlers run on: its own (one thread, started
+// by connect()) or an EventLoop's, shared with other clients.
+struct Loop {
   net::io_context io;
+  std::vector<std::thread::id> threads;  // the threads running io (set before any client uses it)
+  bool runs_here() const {
+    return std::find(threads.begin(), threads.end(), std::this_thread::get_id()) != threads.end();
+  }
+};
+
+struct EventLoop::Impl {
+  std::shared_ptr<Loop> loop = std::make_shared<Loop>();
+  std::optional<net::executor_work_guard<net::io_context::executor_type>> guard{loop->io.get_executor()};
+  std::vector<std::thread> threads;
+};
+
+EventLoop::EventLoop(unsigned threads) : impl_(std::make_unique<Impl>()) {
+  const unsigned n = std::max(1u, threads);
+  for (unsigned i = 0; i < n; ++i) impl_->threads.emplace_back([loop = impl_->loop] { loop->io.run(); });
+  for (const auto& t : impl_->threads) impl_->loop->threads.push_back(t.get_id());
+}
+
+EventLoop::~EventLoop() {
+  impl_->guard.reset();
+  impl_->loop->io.stop();
+  for (auto& t : impl_->threads) {
+    if (t.get_id() == std::this_thread::get_id()) {
+      t.detach();
+    } else {
+      t.join();
+    }
+  }
+}
+
+unsigned EventLoop::threads() const { return static_cast<unsigned>(impl_->threads.size()); }
+
+struct Client::Impl : std::enable_shared_from_this<Impl> {
+  explicit Impl(std::shared_ptr<Loop> l) : loop(std::move(l)), io(loop->io), strand(net::make_strand(io)) {}
+
+  ClientOptions options;
+  std::shared_ptr<Loop> loop;
+  net::io_context& io;
+  // Every handler of this client runs on its strand, so a loop with several
+  // threads never runs two of them at once.
+  net::strand<net::io_context::executor_type> strand;
+  bool own_loop = true;
+  std::atomic<bool> closed{false};
   std::optional<net::ssl::context> tls_context;  // options.tls.enabled; outlives the socket
-  wire::TlsSocket socket{io};
-  udp::socket udp_socket{io};
+  wire::TlsSocket socket{net::any_io_executor(strand)};
+  udp::socket udp_socket{strand};
   udp::endpoint server_udp;
-  net::steady_timer heartbeat{io};
-  std::thread thread;
-  // Keeps run() going until close(); then the loop ends once every handler has
-  // completed (never io.stop(): a handler left queued would keep Impl alive).
+  net::steady_timer heartbeat{strand};
+  std::thread thread;  // own loop only
+  // Own loop: keeps run() going until close(); then the loop ends once every
+  // handler has completed (never io.stop(): a handler left queued would keep
+  // Impl alive).
   std::optional<net::executor_work_guard<net::io_context::executor_type>> guard;
   ServerHello hello;
 
@@ -127,7 +172,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
       write_queue_bytes -= n;
       return false;
     }
-    net::post(io, [self = shared_from_this(), framed = std::move(framed)]() mutable {
+    net::post(strand, [self = shared_from_this(), framed = std::move(framed)]() mutable {
       if (!self->open) {
         self->write_queue_bytes -= framed.size();
         return;
@@ -383,12 +428,12 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     if (ec) SSL_set_tlsext_host_name(socket.tls_stream().native_handle(), name.c_str());
     auto done = std::make_shared<std::promise<boost::system::error_code>>();
     auto result = done->get_future();
-    net::post(io, [self = shared_from_this(), done] {
+    net::post(strand, [self = shared_from_this(), done] {
       self->socket.tls_stream().async_handshake(net::ssl::stream_base::client,
                                                 [done](const boost::system::error_code& e) { done->set_value(e); });
     });
     if (result.wait_for(options.timeout) != std::future_status::ready) {
-      net::post(io, [self = shared_from_this()] { boost::system::error_code e; self->socket.tcp().close(e); });
+      net::post(strand, [self = shared_from_this()] { boost::system::error_code e; self->socket.tcp().close(e); });
       result.wait();
       return make_error("TLS handshake with " + where + ": timed out");
     }
@@ -447,9 +492,10 @@ Status to_status(Result<pb::ServerMessage> r) {
 
 Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   std::unique_ptr<Client> c(new Client());
-  c->impl_ = std::make_shared<Impl>();
+  c->impl_ = std::make_shared<Impl>(options.loop ? options.loop->impl_->loop : std::make_shared<Loop>());
   auto& d = *c->impl_;
   d.options = options;
+  d.own_loop = options.loop == nullptr;
   boost::system::error_code ec;
   tcp::resolver resolver(d.io);
   auto endpoints = resolver.resolve(options.host, std::to_string(options.port), ec);
@@ -463,11 +509,14 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   }
   net::async_connect(d.socket.tcp(), endpoints,
                      [&connected](const boost::system::error_code& e, const tcp::endpoint&) { connected.set_value(e); });
-  d.guard.emplace(d.io.get_executor());
-  d.thread = std::thread([impl = c->impl_] { impl->io.run(); });
+  if (d.own_loop) {
+    d.guard.emplace(d.io.get_executor());
+    d.thread = std::thread([impl = c->impl_] { impl->io.run(); });
+    d.loop->threads.push_back(d.thread.get_id());
+  }
   const std::string where = options.host + ":" + std::to_string(options.port);
   if (connected_future.wait_for(options.timeout) != std::future_status::ready) {
-    net::post(d.io, [impl = c->impl_] { boost::system::error_code e; impl->socket.tcp().close(e); });
+    net::post(d.strand, [impl = c->impl_] { boost::system::error_code e; impl->socket.tcp().close(e); });
     connected_future.wait();
     c->close();
     return make_error("cannot connect to " + where + ": timed out");
@@ -485,7 +534,7 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   }
   d.open = true;
   const auto remote = d.socket.tcp().remote_endpoint(ec);
-  net::post(d.io, [impl = c->impl_] { impl->read_prefix(); });
+  net::post(d.strand, [impl = c->impl_] { impl->read_prefix(); });
 
   pb::ClientMessage hello;
   hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
@@ -513,7 +562,7 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   // A deep receive buffer rides out scheduling stalls of the I/O thread (the
   // kernel caps it at net.core.rmem_max).
   if (!ec) d.udp_socket.set_option(net::socket_base::receive_buffer_size(4 << 20), ec);
-  net::post(d.io, [impl = c->impl_] {
+  net::post(d.strand, [impl = c->impl_] {
     if (impl->udp_socket.is_open()) impl->read_udp();
     impl->arm_heartbeat();
   });
@@ -523,11 +572,25 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
 Client::~Client() { close(); }
 
 void Client::close() {
-  // Once the I/O thread is gone (joined, or detached and ending) nothing
-  // would run a posted handler, and one left queued in io would keep Impl,
-  // which owns io, alive for ever: a second close() does nothing.
-  if (!impl_ || !impl_->thread.joinable()) return;
-  net::post(impl_->io, [impl = impl_] {
+  // A second close() does nothing: with its own loop, once the I/O thread is
+  // gone (joined, or detached and ending) nothing would run a posted handler,
+  // and one left queued in io would keep Impl, which owns io, alive for ever.
+  if (!impl_ || impl_->closed.exchange(true)) return;
+  if (!impl_->own_loop) {
+    // A shared loop: the connection is failed on its strand; unless called
+    // from one of the loop's threads (a callback), wait for that, so no
+    // callback runs after close() returns.
+    auto done = std::make_shared<std::promise<void>>();
+    auto finished = done->get_future();
+    net::post(impl_->strand, [impl = impl_, done] {
+      impl->fail("closed by the client");
+      done->set_value();
+    });
+    if (!impl_->loop->runs_here()) finished.wait();
+    return;
+  }
+  if (!impl_->thread.joinable()) return;
+  net::post(impl_->strand, [impl = impl_] {
     impl->fail("closed by the client");
     impl->guard.reset();
   });
@@ -683,7 +746,7 @@ Status Client::register_udp() {
   // server confirms over TCP.
   while (!d.udp_registered && d.open) {
     lock.unlock();
-    net::post(d.io, [impl = impl_, datagram] {
+    net::post(d.strand, [impl = impl_, datagram] {
       boost::system::error_code ec;
       impl->udp_socket.send_to(net::buffer(datagram), impl->server_udp, 0, ec);
     });

@@ -1,7 +1,7 @@
 // The C++ client against a server that says Hello and then stops reading:
 // its requests pile up in the kernel, then in the client's write queue, and
 // the queue's bound turns the next request into an immediate error instead
-// of unbounded memory.
+// of unbounded memory. And many clients on one shared EventLoop.
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
@@ -9,6 +9,8 @@
 #include <unistd.h>
 
 #include <array>
+#include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <mutex>
 #include <thread>
@@ -110,6 +112,86 @@ TEST(ClientWriteQueue, IsBoundedWhenTheServerStopsReading) {
   EXPECT_NE(last.error().message.find("write queue full"), std::string::npos) << last.error().message;
   EXPECT_TRUE((*c)->connected());  // refused, not disconnected
   server.release();
+}
+
+// 200 clients on one EventLoop of two threads (not a thread each): every one
+// connects, subscribes and gets all its frames, with its callbacks never
+// running two at a time; a client can close itself from its own callback;
+// the rest close, then the loop goes.
+TEST(EventLoop, ManyClientsShareTwoThreads) {
+  server::ServerConfig cfg;
+  cfg.max_connections = 512;
+  cfg.max_connections_per_address = 0;
+  TestServer s(cfg);
+  auto loop = std::make_shared<client::EventLoop>(2);
+  EXPECT_EQ(loop->threads(), 2u);
+  constexpr int kClients = 200;
+  constexpr int kFrames = 20;
+  struct Counts {
+    std::atomic<int> frames{0};
+    std::atomic<int> inside{0};  // callbacks of this client running now
+    std::atomic<bool> overlapped{false};
+    std::atomic<bool> ended{false};
+  };
+  std::vector<Counts> counts(kClients);
+  std::vector<std::unique_ptr<client::Client>> clients;
+  client::ClientOptions o;
+  o.port = s.port();
+  o.loop = loop;
+  for (int i = 0; i < kClients; ++i) {
+    auto c = client::Client::connect(o);
+    ASSERT_TRUE(c.ok()) << i << ": " << c.error().to_string();
+    clients.push_back(std::move(c).value());
+  }
+  const auto started = std::chrono::steady_clock::now();
+  for (int i = 0; i < kClients; ++i) {
+    auto v = clients[static_cast<std::size_t>(i)]->create_view("walk");
+    ASSERT_TRUE(v.ok());
+    client::SubscribeOptions so;
+    so.end_frame = kFrames;
+    so.speed = 2;  // the motion's frames once each, at twice its rate
+    Counts& k = counts[static_cast<std::size_t>(i)];
+    auto sub = clients[static_cast<std::size_t>(i)]->subscribe(
+        v->id, so,
+        [&k](const client::ReceivedFrame&) {
+          if (k.inside.fetch_add(1) != 0) k.overlapped = true;
+          std::this_thread::sleep_for(std::chrono::microseconds(50));
+          ++k.frames;
+          k.inside.fetch_sub(1);
+        },
+        [&k](const client::SubscriptionEnd&) { k.ended = true; });
+    ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  }
+  for (auto& k : counts) {
+    while (!k.ended && std::chrono::steady_clock::now() - started < std::chrono::seconds(30)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  }
+  int complete = 0;
+  for (auto& k : counts) {
+    complete += k.ended && k.frames == kFrames;
+    EXPECT_FALSE(k.overlapped) << "a client's callbacks ran at the same time on two threads";
+  }
+  EXPECT_EQ(complete, kClients);
+
+  // A client that closes itself from its callback, on a loop thread.
+  auto v = clients[0]->create_view("wave");
+  ASSERT_TRUE(v.ok());
+  std::atomic<bool> closed_inside{false};
+  client::Client* first = clients[0].get();
+  client::SubscribeOptions looping;
+  looping.loop = true;
+  ASSERT_TRUE(first
+                  ->subscribe(v->id, looping,
+                              [&](const client::ReceivedFrame&) {
+                                if (!closed_inside.exchange(true)) first->close();
+                              })
+                  .ok());
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!closed_inside && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_TRUE(closed_inside);
+  clients.clear();  // closes every client, then the loop can go
+  loop.reset();
 }
 
 }  // namespace

@@ -29,6 +29,26 @@
 // protobuf header (gmr::wire, linked by gmr::client, speaks the protocol).
 namespace gmr::client {
 
+// I/O threads that many clients share (by default each Client runs its own
+// thread): a load tester or an engine with hundreds of connections creates
+// one EventLoop with a few threads and passes it in ClientOptions::loop.
+// Each client's handlers still run one at a time (a strand per client), and
+// its callbacks run on one of the loop's threads. Close the clients before
+// the EventLoop goes.
+class EventLoop {
+ public:
+  explicit EventLoop(unsigned threads = 1);
+  ~EventLoop();
+  EventLoop(const EventLoop&) = delete;
+  EventLoop& operator=(const EventLoop&) = delete;
+  unsigned threads() const;
+
+ private:
+  friend class Client;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 struct ClientOptions {
   std::string host = "127.0.0.1";
   std::uint16_t port = 7400;
@@ -51,6 +71,8 @@ struct ClientOptions {
     std::string ca_file;
     std::string server_name;
   } tls;
+  // Shared I/O threads (EventLoop); null: this client runs its own thread.
+  std::shared_ptr<EventLoop> loop;
 };
 
 // What the connection may do (the server's auth file, docs/security.md).

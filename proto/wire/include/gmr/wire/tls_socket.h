@@ -18,6 +18,8 @@ class TlsSocket {
   using Tls = boost::asio::ssl::stream<Tcp>;
 
   explicit TlsSocket(boost::asio::io_context& io) : s_(std::in_place_type<Tcp>, io) {}
+  // On an executor (a strand: handlers of one connection never run at once).
+  explicit TlsSocket(const boost::asio::any_io_executor& executor) : s_(std::in_place_type<Tcp>, executor) {}
   explicit TlsSocket(Tcp socket) : s_(std::in_place_type<Tcp>, std::move(socket)) {}
 
   // From here on the connection speaks TLS (call before any byte is read or
