@@ -8,6 +8,7 @@
 #include <mutex>
 #include <thread>
 
+#include "gmr/kinematics/forward_kinematics.h"
 #include "net_test_util.h"
 
 namespace gmr::test {
@@ -783,6 +784,75 @@ TEST(Streaming, AStalledClientGetsNoFrameOlderThanItsBound) {
               static_cast<unsigned long long>(counters.frames_stale),
               static_cast<unsigned long long>(stats->frames_dropped), frames.size(), oldest / 1e6);
   EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+}
+
+// Evolution: a client that sends none of the fields added for engines
+// (conventions, local transforms, staleness, GetSkeleton conventions) gets
+// what it got before: the motion's own axes and units (even though the
+// library knows the demo is in centimetres), no local transforms in queries
+// or frames, and the replies it knows, which carry new fields it ignores.
+TEST(Compatibility, AClientThatSendsNoneOfTheNewFieldsGetsWhatItGotBefore) {
+  TestServer s;
+  const auto library = test_library();
+  const auto walk = std::find_if(library.begin(), library.end(), [](const auto& e) { return e.name == "walk"; });
+  ASSERT_NE(walk, library.end());
+  const Motion& motion = *walk->motion;
+  RawConnection raw(s.port());
+  const pb::HelloReply hello = raw.handshake();
+  EXPECT_NE(hello.server_time_ns(), 0) << "a new field, which an old client ignores";
+  auto view = raw.create_view(2, "walk");
+  ASSERT_TRUE(view.has_value());
+
+  pb::ClientMessage q = request(3);
+  q.mutable_query_frames()->set_view_id(*view);
+  q.mutable_query_frames()->set_begin(0);
+  q.mutable_query_frames()->set_end(10);
+  q.mutable_query_frames()->set_orientations(true);
+  ASSERT_FALSE(q.query_frames().has_conventions());
+  raw.send(q);
+  auto r = raw.reply();
+  ASSERT_TRUE(r.has_value() && r->has_frames()) << (r ? r->DebugString() : "no reply");
+  const auto& b = r->frames();
+  const std::size_t n = motion.skeleton.size();
+  ASSERT_EQ(b.positions_size(), static_cast<int>(10 * n * 3));
+  EXPECT_EQ(b.local_rotations_size(), 0);
+  EXPECT_EQ(b.local_translations_size(), 0);
+  std::vector<Eigen::Vector3d> p(n);
+  double worst = 0;
+  for (std::size_t f = 0; f < 10; ++f) {
+    compute_frame(motion, f, p);
+    for (std::size_t j = 0; j < n; ++j) {
+      for (int k = 0; k < 3; ++k) {
+        worst = std::max(worst, std::abs(b.positions(static_cast<int>((f * n + j) * 3 + k)) - p[j][k]));
+      }
+    }
+  }
+  EXPECT_LE(worst, 1e-9 * skeleton_size(motion)) << "the motion's own axes and centimetres";
+
+  pb::ClientMessage sub = request(4);
+  sub.mutable_subscribe()->set_view_id(*view);
+  sub.mutable_subscribe()->set_end_frame(10);
+  sub.mutable_subscribe()->set_speed(4);
+  raw.send(sub);
+  auto subscribed = raw.reply();
+  ASSERT_TRUE(subscribed.has_value() && subscribed->has_subscribed());
+  EXPECT_EQ(subscribed->subscribed().joints_size(), static_cast<int>(n));
+  int frames = 0;
+  bool ended = false;
+  for (int i = 0; i < 200 && !ended; ++i) {
+    auto m = raw.receive();
+    ASSERT_TRUE(m.has_value());
+    if (m->has_frame()) {
+      ++frames;
+      EXPECT_EQ(m->frame().positions_size(), static_cast<int>(n * 3));
+      EXPECT_EQ(m->frame().local_rotations_size() + m->frame().local_translations_size(), 0);
+      compute_frame(motion, m->frame().frame_index(), p);
+      EXPECT_NEAR(m->frame().positions(1), p[0].y(), 1e-4 * skeleton_size(motion));
+    }
+    ended = m->has_subscription_ended();
+  }
+  EXPECT_TRUE(ended);
+  EXPECT_EQ(frames, 10);
 }
 
 TEST(Streaming, HeartbeatsKeepAQuietClientConnected) {
