@@ -1,8 +1,10 @@
 # What `cmake --install` puts beside gmr::gmr (which lib/ installs): the C++
 # client (gmr::client, with the gmr::wire and gmr::proto archives it needs;
 # its headers have no protobuf types), the C ABI (libgmr_client_c.so, its
-# header, a pkg-config file and gmr::client_c) and the programs. Components:
-# gmr, client, client_c, programs. find_package(gmr COMPONENTS client
+# header, a pkg-config file and gmr::client_c), the programs, the Python
+# client (lib/python3/dist-packages/gmr_client, its protocol module
+# generated) and the Blender add-on (share/gmr/blender/gmr_live_link).
+# Components: gmr, client, client_c, programs, python. find_package(gmr COMPONENTS client
 # client_c) loads the client targets (cmake/gmrConfig.cmake.in).
 include(GNUInstallDirs)
 set(GMR_CONFIG_INSTALL_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/gmr)
@@ -35,6 +37,13 @@ if(TARGET gmr_client_c)
   configure_file(${PROJECT_SOURCE_DIR}/client/c/gmr_client_c.pc.in ${PROJECT_BINARY_DIR}/gmr_client_c.pc @ONLY)
   install(FILES ${PROJECT_BINARY_DIR}/gmr_client_c.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig
           COMPONENT client_c)
+endif()
+
+if(TARGET gmr_python_client)
+  install(DIRECTORY ${GMR_PYTHON_DIR}/gmr_client DESTINATION ${CMAKE_INSTALL_LIBDIR}/python3/dist-packages
+          COMPONENT python FILES_MATCHING PATTERN "*.py")
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/client/blender/gmr_live_link DESTINATION ${CMAKE_INSTALL_DATADIR}/gmr/blender
+          COMPONENT python FILES_MATCHING PATTERN "*.py")
 endif()
 
 foreach(program gmr_cli gmr_server_bin gmr_load)

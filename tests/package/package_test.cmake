@@ -45,7 +45,10 @@ if(CLIENT)
        ${INSTALL_LIBDIR}/libgmr_client_c.so.0 ${INSTALL_LIBDIR}/pkgconfig/gmr_client_c.pc
        ${INSTALL_LIBDIR}/cmake/gmr/gmrClientTargets.cmake ${INSTALL_LIBDIR}/cmake/gmr/gmrClientCTargets.cmake
        include/gmr/client/client.h include/gmr/wire/frame_values.h include/gmr_client_c.h
-       bin/gmr bin/gmr-server bin/gmr-load)
+       bin/gmr bin/gmr-server bin/gmr-load
+       ${INSTALL_LIBDIR}/python3/dist-packages/gmr_client/stream_pb2.py
+       ${INSTALL_LIBDIR}/python3/dist-packages/gmr_client/client.py
+       share/gmr/blender/gmr_live_link/__init__.py share/gmr/blender/gmr_live_link/link.py)
 else()
   run("install" ${CMAKE_COMMAND} --install ${GMR_BINARY_DIR} --prefix ${prefix} --component gmr)
 endif()
@@ -112,6 +115,25 @@ if(CLIENT)
     wait $pid || rc=1
     exit $rc")
   run("installed server and clients" sh -c "${script}")
+  if(PYTHON)  # the installed Python client, from the prefix alone
+    execute_process(COMMAND ${PYTHON} -c "import google.protobuf, numpy" RESULT_VARIABLE have_modules
+                    OUTPUT_QUIET ERROR_QUIET)
+    if(NOT have_modules EQUAL 0)
+      if("$ENV{CI}" STREQUAL "true")
+        message(FATAL_ERROR "${PYTHON} cannot import google.protobuf and numpy (CI=true)")
+      endif()
+      message("skipped: the installed Python client (no python3-protobuf or numpy for ${PYTHON})")
+      set(PYTHON "")
+    endif()
+  endif()
+  if(PYTHON)
+    execute_process(COMMAND ${CMAKE_COMMAND} -E env PYTHONPATH=${prefix}/${INSTALL_LIBDIR}/python3/dist-packages
+                            ${PYTHON} -c "import gmr_client, gmr_client.stream_pb2; print('python client', gmr_client.PROTOCOL_VERSION)"
+                    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+    if(NOT rc EQUAL 0 OR NOT out MATCHES "python client 1")
+      message(FATAL_ERROR "the installed Python client does not import (${rc}): ${out}${err}")
+    endif()
+  endif()
   message("${run_output}")
   foreach(line "client consumer: [0-9]+ motions, 10 frames" "c consumer: frame [0-9]+ of")
     if(NOT run_output MATCHES "${line}")
