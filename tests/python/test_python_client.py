@@ -229,6 +229,26 @@ class DemoLibrary(unittest.TestCase):
         self.assertGreater(sub.frames_stale, 0)
         c.close()
 
+    def test_pause_seek_resume_and_stats(self):
+        c = self.client
+        v = c.create_view("jump")
+        sub = c.subscribe(v.id, loop=True, float64=True)
+        next(iter(sub))
+        c.pause(sub.id)
+        c.seek(sub.id, 100)
+        sub.frames()  # what came before the pause
+        c.resume(sub.id)
+        resumed = next(iter(sub))
+        self.assertGreaterEqual(resumed.frame_index, 100)
+        self.assertLess(resumed.frame_index, 130)
+        stats = c.stats()
+        self.assertGreater(stats.frames_sent, 0)
+        with self.assertRaises(gmr_client.GmrError) as e:
+            c.seek(12345, 0)
+        self.assertEqual(e.exception.code, "NOT_FOUND")
+        c.unsubscribe(sub.id)
+        c.close_view(v.id)
+
     def test_connection_errors_are_clear(self):
         with self.assertRaises(gmr_client.GmrError) as e:
             gmr_client.Client(port=1, timeout=2)

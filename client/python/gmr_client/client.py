@@ -335,9 +335,7 @@ class Client:
     # ------------------------------------------------------------ requests
 
     def list_motions(self) -> List[MotionInfo]:
-        m = pb.ClientMessage()
-        m.list_motions.SetInParent()
-        r = self._request(m, "motions")
+        r = self._ask("list_motions", "motions")
         return [MotionInfo(x.name, x.joint_count, x.frame_count, x.frame_time, x.source, x.metres_per_unit)
                 for x in r.motions]
 
@@ -349,50 +347,32 @@ class Client:
         return Skeleton.from_proto(self._request(m, "skeleton").skeleton)
 
     def create_view(self, motion: str) -> View:
-        m = pb.ClientMessage()
-        m.create_view.motion = motion
-        return self._view(m)
+        return self._view(self._ask("create_view", "view", motion=motion))
 
     def close_view(self, view: int) -> None:
-        m = pb.ClientMessage()
-        m.close_view.view_id = view
-        self._request(m, "ack")
+        self._ask("close_view", "ack", view_id=view)
 
     def shift_root(self, view: int, joint: str) -> View:
-        m = pb.ClientMessage()
-        m.shift_root.view_id = view
-        m.shift_root.joint = joint
-        return self._view(m)
+        return self._view(self._ask("shift_root", "view", view_id=view, joint=joint))
 
     def split(self, view: int, joint: str) -> View:
-        m = pb.ClientMessage()
-        m.split.view_id = view
-        m.split.joint = joint
-        return self._view(m)
+        return self._view(self._ask("split", "view", view_id=view, joint=joint))
 
     def join(self, view: int, root: str) -> View:
-        m = pb.ClientMessage()
-        m.join.view_id = view
-        m.join.root = root
-        return self._view(m)
+        return self._view(self._ask("join", "view", view_id=view, root=root))
 
     def set_roots(self, view: int, roots: Sequence[str]) -> View:
         m = pb.ClientMessage()
         m.set_roots.view_id = view
         m.set_roots.roots.extend(roots)
-        return self._view(m)
+        return self._view(self._request(m, "view"))
 
     def strip_dummies(self, view: int) -> View:
-        m = pb.ClientMessage()
-        m.strip_dummies.view_id = view
-        return self._view(m)
+        return self._view(self._ask("strip_dummies", "view", view_id=view))
 
     def set_coordinates(self, view: int, relative_to: str = "") -> View:
         """World coordinates (""), or the motion seen from joint `relative_to`."""
-        m = pb.ClientMessage()
-        m.set_coordinates.view_id = view
-        m.set_coordinates.relative_to = relative_to
-        return self._view(m)
+        return self._view(self._ask("set_coordinates", "view", view_id=view, relative_to=relative_to))
 
     def query(self, view: int, begin: int, end: int = 0, *, orientations: bool = False,
               local_transforms: bool = False, joints: Sequence[str] = (),
@@ -471,34 +451,23 @@ class Client:
         return sub
 
     def unsubscribe(self, subscription: int) -> None:
-        m = pb.ClientMessage()
-        m.unsubscribe.subscription_id = subscription
-        self._request(m, "ack")
+        self._ask("unsubscribe", "ack", subscription_id=subscription)
         sub = self._subs.pop(subscription, None)
         if sub is not None and sub.ended is None:
             sub.ended = {"reason": "unsubscribed", "frames_sent": 0, "frames_dropped": 0, "frames_skipped": 0,
                          "frames_stale": 0}
 
     def pause(self, subscription: int) -> None:
-        m = pb.ClientMessage()
-        m.pause.subscription_id = subscription
-        self._request(m, "ack")
+        self._ask("pause", "ack", subscription_id=subscription)
 
     def resume(self, subscription: int) -> None:
-        m = pb.ClientMessage()
-        m.resume.subscription_id = subscription
-        self._request(m, "ack")
+        self._ask("resume", "ack", subscription_id=subscription)
 
     def seek(self, subscription: int, frame: int) -> None:
-        m = pb.ClientMessage()
-        m.seek.subscription_id = subscription
-        m.seek.frame = frame
-        self._request(m, "ack")
+        self._ask("seek", "ack", subscription_id=subscription, frame=frame)
 
     def stats(self):
-        m = pb.ClientMessage()
-        m.get_stats.SetInParent()
-        return self._request(m, "stats")
+        return self._ask("get_stats", "stats")
 
     def register_udp(self) -> None:
         """Registers this connection's UDP endpoint (register, challenge, confirm; docs/protocol.md, "UDP")."""
@@ -563,8 +532,17 @@ class Client:
             raise GmrError("PROTOCOL", f"expected a '{expect}' reply, got '{which}'")
         return getattr(r, which)
 
-    def _view(self, m) -> View:
-        v = self._request(m, "view")
+    def _ask(self, body: str, expect: str, **fields):
+        """Sends a request whose body has only scalar fields and returns the reply's `expect` part."""
+        m = pb.ClientMessage()
+        part = getattr(m, body)
+        part.SetInParent()
+        for name, value in fields.items():
+            setattr(part, name, value)
+        return self._request(m, expect)
+
+    @staticmethod
+    def _view(v) -> View:
         return View(v.view_id, v.motion, v.skeleton_version, Skeleton.from_proto(v.skeleton), v.relative_to,
                     v.frame_count, v.frame_time, list(v.removed), v.join_offset_spread)
 
