@@ -146,6 +146,24 @@ int main(int argc, char** argv) {
   gmr_client* nobody = NULL;
   s = gmr_connect("127.0.0.1", 1, NULL, &nobody);
   CHECK(s == GMR_ERROR_CONNECTION && nobody == NULL, "connect to port 1: %d", s);
+  /* Split, join back, strip dummies; a query in Unity's conventions equals
+   * the frames polled above (positions do not change with the roots). */
+  CHECK(gmr_split(c, view, "l_knee") == GMR_OK, "split: %s", gmr_last_error());
+  CHECK(gmr_join(c, view, "l_knee") == GMR_OK, "join: %s", gmr_last_error());
+  s = gmr_join(c, view, "head");
+  CHECK(s == GMR_ERROR_FAILED_PRECONDITION, "join a root without a soft link: %d %s", s, gmr_last_error());
+  CHECK(gmr_strip_dummies(c, view) == GMR_OK, "strip_dummies: %s", gmr_last_error());
+  static double queried[3 * kMaxJoints * 2];
+  size_t per_frame = 0;
+  s = gmr_query_positions(c, view, 0, 2, GMR_PRESET_UNITY, queried, 3 * kMaxJoints * 2, &per_frame);
+  CHECK(s == GMR_OK && per_frame == joints, "query: %d %s (%zu joints)", s, gmr_last_error(), per_frame);
+  s = gmr_query_positions(c, view, 0, 2, GMR_PRESET_UNITY, queried, 3, &per_frame);
+  CHECK(s == GMR_ERROR_INVALID_ARGUMENT && strstr(gmr_last_error(), "values for an array of 3"), "small array: %s",
+        gmr_last_error());
+  for (size_t j = 0; j < joints; ++j) {
+    printf("query %d %s %.17g %.17g %.17g\n", 1, info[j].name, queried[3 * (joints + j)], queried[3 * (joints + j) + 1],
+           queried[3 * (joints + j) + 2]);
+  }
   CHECK(gmr_close_view(c, view) == GMR_OK, "close_view: %s", gmr_last_error());
   gmr_disconnect(c);
   fprintf(stderr, "c abi: %d frames polled of %llu received, locals compose to the positions\n", frames,

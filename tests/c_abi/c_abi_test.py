@@ -102,7 +102,7 @@ def main():
                 index = {n: i for i, n in enumerate(names)}
                 worst, rows = 0.0, 0
                 for line in run.stdout.splitlines():
-                    _, frame, name, x, y, z = line.split()
+                    _, frame, name, x, y, z = line.split()  # "frame ..." (polled) and "query ..." lines
                     w = want[int(frame)][index[name]]
                     worst = max(worst, abs(float(x) - w[0]), abs(float(y) - w[1]), abs(float(z) - w[2]))
                     rows += 1

@@ -121,8 +121,17 @@ GMR_C_API gmr_status gmr_create_view(gmr_client* client, const char* motion, uin
 GMR_C_API gmr_status gmr_close_view(gmr_client* client, uint32_t view_id);
 GMR_C_API gmr_status gmr_shift_root(gmr_client* client, uint32_t view_id, const char* joint);
 GMR_C_API gmr_status gmr_set_roots(gmr_client* client, uint32_t view_id, const char* const* roots, size_t count);
+GMR_C_API gmr_status gmr_split(gmr_client* client, uint32_t view_id, const char* joint);
+GMR_C_API gmr_status gmr_join(gmr_client* client, uint32_t view_id, const char* root);
+GMR_C_API gmr_status gmr_strip_dummies(gmr_client* client, uint32_t view_id);
 /* The motion seen from `joint`; NULL or "": world coordinates. */
 GMR_C_API gmr_status gmr_set_viewpoint(gmr_client* client, uint32_t view_id, const char* joint);
+
+/* Positions of frames [begin, end) of a view in `preset`'s conventions:
+ * frame-major, 3 doubles per joint in the view's joint order. `capacity` is
+ * how many doubles `positions` holds; *joint_count gets the joints per frame. */
+GMR_C_API gmr_status gmr_query_positions(gmr_client* client, uint32_t view_id, uint32_t begin, uint32_t end,
+                                         gmr_preset preset, double* positions, size_t capacity, size_t* joint_count);
 
 GMR_C_API void gmr_subscribe_options_init(gmr_subscribe_options* options);
 GMR_C_API gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscribe_options* options,

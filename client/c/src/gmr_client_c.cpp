@@ -184,6 +184,55 @@ gmr_status gmr_set_roots(gmr_client* client, uint32_t view_id, const char* const
   });
 }
 
+gmr_status gmr_split(gmr_client* client, uint32_t view_id, const char* joint) {
+  return guarded([&] {
+    if (client == nullptr || joint == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_split: a NULL argument");
+    auto v = client->client->split(view_id, joint);
+    return v.ok() ? GMR_OK : status_of(v.error());
+  });
+}
+
+gmr_status gmr_join(gmr_client* client, uint32_t view_id, const char* root) {
+  return guarded([&] {
+    if (client == nullptr || root == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_join: a NULL argument");
+    auto v = client->client->join(view_id, root);
+    return v.ok() ? GMR_OK : status_of(v.error());
+  });
+}
+
+gmr_status gmr_strip_dummies(gmr_client* client, uint32_t view_id) {
+  return guarded([&] {
+    if (client == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_strip_dummies: client is NULL");
+    auto v = client->client->strip_dummies(view_id);
+    return v.ok() ? GMR_OK : status_of(v.error());
+  });
+}
+
+gmr_status gmr_query_positions(gmr_client* client, uint32_t view_id, uint32_t begin, uint32_t end, gmr_preset preset,
+                               double* positions, size_t capacity, size_t* joint_count) {
+  return guarded([&] {
+    if (client == nullptr || positions == nullptr || joint_count == nullptr) {
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_query_positions: a NULL argument");
+    }
+    if (preset < GMR_PRESET_NATIVE || preset > GMR_PRESET_GODOT) {
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_query_positions: unknown preset " + std::to_string(preset));
+    }
+    gmr::client::QueryOptions o;
+    o.conventions.preset = static_cast<gmr::ConventionPreset>(preset);
+    auto q = client->client->query(view_id, begin, end, o);
+    if (!q.ok()) return status_of(q.error());
+    *joint_count = q->joints.size();
+    if (3 * q->positions.size() > capacity) {
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_query_positions: " + std::to_string(3 * q->positions.size()) +
+                                                  " values for an array of " + std::to_string(capacity));
+    }
+    for (std::size_t i = 0; i < q->positions.size(); ++i) {
+      for (int k = 0; k < 3; ++k) positions[3 * i + static_cast<std::size_t>(k)] = q->positions[i][k];
+    }
+    return GMR_OK;
+  });
+}
+
 gmr_status gmr_set_viewpoint(gmr_client* client, uint32_t view_id, const char* joint) {
   return guarded([&] {
     if (client == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_set_viewpoint: client is NULL");
