@@ -72,26 +72,31 @@ SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
 // The io_context a client's handlers run on: its own (one thread, started
 // by connect()) or an EventLoop's, shared with other clients.
 struct Loop {
-  net::io_context io;
-  std::vector<std::thread::id> threads;  // the threads running io (set before any client uses it)
-  bool runs_here() const {
-    return std::find(threads.begin(), threads.end(), std::this_thread::get_id()) != threads.end();
-  }
+  Loop() : owned(std::make_unique<net::io_context>()), io(*owned) {}
+  explicit Loop(net::io_context& caller) : io(caller) {}
+  std::unique_ptr<net::io_context> owned;  // null: the caller's
+  net::io_context& io;
+  // True on a thread inside io.run() (a callback): close() must not wait there.
+  bool runs_here() const { return io.get_executor().running_in_this_thread(); }
 };
 
 struct EventLoop::Impl {
-  std::shared_ptr<Loop> loop = std::make_shared<Loop>();
-  std::optional<net::executor_work_guard<net::io_context::executor_type>> guard{loop->io.get_executor()};
+  explicit Impl(std::shared_ptr<Loop> l) : loop(std::move(l)) {}
+  std::shared_ptr<Loop> loop;
+  std::optional<net::executor_work_guard<net::io_context::executor_type>> guard;
   std::vector<std::thread> threads;
 };
 
-EventLoop::EventLoop(unsigned threads) : impl_(std::make_unique<Impl>()) {
+EventLoop::EventLoop(unsigned threads) : impl_(std::make_unique<Impl>(std::make_shared<Loop>())) {
+  impl_->guard.emplace(impl_->loop->io.get_executor());
   const unsigned n = std::max(1u, threads);
   for (unsigned i = 0; i < n; ++i) impl_->threads.emplace_back([loop = impl_->loop] { loop->io.run(); });
-  for (const auto& t : impl_->threads) impl_->loop->threads.push_back(t.get_id());
 }
 
+EventLoop::EventLoop(net::io_context& io) : impl_(std::make_unique<Impl>(std::make_shared<Loop>(io))) {}
+
 EventLoop::~EventLoop() {
+  if (impl_->threads.empty()) return;  // the caller's io_context: the caller runs and stops it
   impl_->guard.reset();
   impl_->loop->io.stop();
   for (auto& t : impl_->threads) {
@@ -103,7 +108,7 @@ EventLoop::~EventLoop() {
   }
 }
 
-unsigned EventLoop::threads() const { return static_cast<unsigned>(impl_->threads.size()); }
+unsigned EventLoop::threads() const { return static_cast<unsigned>(impl_->threads.size()); }  // 0: the caller's
 
 struct Client::Impl : std::enable_shared_from_this<Impl> {
   explicit Impl(std::shared_ptr<Loop> l) : loop(std::move(l)), io(loop->io), strand(net::make_strand(io)) {}
@@ -512,7 +517,6 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   if (d.own_loop) {
     d.guard.emplace(d.io.get_executor());
     d.thread = std::thread([impl = c->impl_] { impl->io.run(); });
-    d.loop->threads.push_back(d.thread.get_id());
   }
   const std::string where = options.host + ":" + std::to_string(options.port);
   if (connected_future.wait_for(options.timeout) != std::future_status::ready) {

@@ -4,6 +4,8 @@
 // of unbounded memory. And many clients on one shared EventLoop.
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
+
+#include <boost/asio.hpp>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -192,6 +194,43 @@ TEST(EventLoop, ManyClientsShareTwoThreads) {
   EXPECT_TRUE(closed_inside);
   clients.clear();  // closes every client, then the loop can go
   loop.reset();
+}
+
+// The caller's own io_context, run by the caller on one thread: 20 clients
+// on it stream; closing them from the main thread does not wait for ever.
+TEST(EventLoop, RunsOnTheCallersIoContext) {
+  TestServer s;
+  boost::asio::io_context io;
+  auto work = boost::asio::make_work_guard(io);
+  std::thread runner([&io] { io.run(); });
+  auto loop = std::make_shared<client::EventLoop>(io);
+  EXPECT_EQ(loop->threads(), 0u);
+  client::ClientOptions o;
+  o.port = s.port();
+  o.loop = loop;
+  std::vector<std::unique_ptr<client::Client>> clients;
+  std::atomic<int> ended{0}, frames{0};
+  for (int i = 0; i < 20; ++i) {
+    auto c = client::Client::connect(o);
+    ASSERT_TRUE(c.ok()) << c.error().to_string();
+    auto v = (*c)->create_view("jump");
+    ASSERT_TRUE(v.ok());
+    client::SubscribeOptions so;
+    so.end_frame = 10;
+    so.speed = 4;
+    ASSERT_TRUE((*c)->subscribe(v->id, so, [&](const client::ReceivedFrame&) { ++frames; },
+                                [&](const client::SubscriptionEnd&) { ++ended; })
+                    .ok());
+    clients.push_back(std::move(c).value());
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (ended < 20 && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(ended.load(), 20);
+  EXPECT_EQ(frames.load(), 200);
+  clients.clear();
+  loop.reset();
+  work.reset();
+  runner.join();
 }
 
 }  // namespace

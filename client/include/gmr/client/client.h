@@ -27,6 +27,10 @@
 
 // The public types are plain structs: a program using the client needs no
 // protobuf header (gmr::wire, linked by gmr::client, speaks the protocol).
+namespace boost::asio {
+class io_context;
+}
+
 namespace gmr::client {
 
 // I/O threads that many clients share (by default each Client runs its own
@@ -38,10 +42,13 @@ namespace gmr::client {
 class EventLoop {
  public:
   explicit EventLoop(unsigned threads = 1);
+  // The caller's own Asio io_context, which the caller runs (on as many
+  // threads as it likes) and keeps alive while clients use it.
+  explicit EventLoop(boost::asio::io_context& io);
   ~EventLoop();
   EventLoop(const EventLoop&) = delete;
   EventLoop& operator=(const EventLoop&) = delete;
-  unsigned threads() const;
+  unsigned threads() const;  // its own threads; 0 on the caller's io_context
 
  private:
   friend class Client;
