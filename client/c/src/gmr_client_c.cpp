@@ -70,6 +70,21 @@ struct gmr_client {
   std::unique_ptr<gmr::client::Client> client;
 };
 
+namespace {
+
+// A view operation on a joint name: checks the arguments, runs `op` on the
+// client, maps its result. `what` names the C function for the message.
+template <class Op>
+gmr_status view_op(const char* what, gmr_client* client, const char* name, Op op) noexcept {
+  return guarded([&] {
+    if (client == nullptr || name == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, std::string(what) + ": a NULL argument");
+    auto r = op(*client->client, std::string(name));
+    return r.ok() ? GMR_OK : status_of(r.error());
+  });
+}
+
+}  // namespace
+
 // What the client's I/O thread writes and the poller reads. Shared with the
 // callbacks, so a callback still running when the handle is freed finds it.
 struct SubscriptionState {
@@ -154,19 +169,11 @@ gmr_status gmr_create_view(gmr_client* client, const char* motion, uint32_t* vie
 }
 
 gmr_status gmr_close_view(gmr_client* client, uint32_t view_id) {
-  return guarded([&] {
-    if (client == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_close_view: client is NULL");
-    auto s = client->client->close_view(view_id);
-    return s.ok() ? GMR_OK : status_of(s.error());
-  });
+  return view_op("gmr_close_view", client, "", [&](auto& c, const std::string&) { return c.close_view(view_id); });
 }
 
 gmr_status gmr_shift_root(gmr_client* client, uint32_t view_id, const char* joint) {
-  return guarded([&] {
-    if (client == nullptr || joint == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_shift_root: a NULL argument");
-    auto v = client->client->shift_root(view_id, joint);
-    return v.ok() ? GMR_OK : status_of(v.error());
-  });
+  return view_op("gmr_shift_root", client, joint, [&](auto& c, const std::string& j) { return c.shift_root(view_id, j); });
 }
 
 gmr_status gmr_set_roots(gmr_client* client, uint32_t view_id, const char* const* roots, size_t count) {
@@ -185,27 +192,15 @@ gmr_status gmr_set_roots(gmr_client* client, uint32_t view_id, const char* const
 }
 
 gmr_status gmr_split(gmr_client* client, uint32_t view_id, const char* joint) {
-  return guarded([&] {
-    if (client == nullptr || joint == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_split: a NULL argument");
-    auto v = client->client->split(view_id, joint);
-    return v.ok() ? GMR_OK : status_of(v.error());
-  });
+  return view_op("gmr_split", client, joint, [&](auto& c, const std::string& j) { return c.split(view_id, j); });
 }
 
 gmr_status gmr_join(gmr_client* client, uint32_t view_id, const char* root) {
-  return guarded([&] {
-    if (client == nullptr || root == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_join: a NULL argument");
-    auto v = client->client->join(view_id, root);
-    return v.ok() ? GMR_OK : status_of(v.error());
-  });
+  return view_op("gmr_join", client, root, [&](auto& c, const std::string& r) { return c.join(view_id, r); });
 }
 
 gmr_status gmr_strip_dummies(gmr_client* client, uint32_t view_id) {
-  return guarded([&] {
-    if (client == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_strip_dummies: client is NULL");
-    auto v = client->client->strip_dummies(view_id);
-    return v.ok() ? GMR_OK : status_of(v.error());
-  });
+  return view_op("gmr_strip_dummies", client, "", [&](auto& c, const std::string&) { return c.strip_dummies(view_id); });
 }
 
 gmr_status gmr_query_positions(gmr_client* client, uint32_t view_id, uint32_t begin, uint32_t end, gmr_preset preset,
@@ -234,11 +229,8 @@ gmr_status gmr_query_positions(gmr_client* client, uint32_t view_id, uint32_t be
 }
 
 gmr_status gmr_set_viewpoint(gmr_client* client, uint32_t view_id, const char* joint) {
-  return guarded([&] {
-    if (client == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_set_viewpoint: client is NULL");
-    auto v = client->client->set_coordinates(view_id, joint == nullptr ? "" : joint);
-    return v.ok() ? GMR_OK : status_of(v.error());
-  });
+  return view_op("gmr_set_viewpoint", client, joint == nullptr ? "" : joint,
+                 [&](auto& c, const std::string& j) { return c.set_coordinates(view_id, j); });
 }
 
 void gmr_subscribe_options_init(gmr_subscribe_options* o) {
