@@ -496,7 +496,8 @@ class Client:
     def poll(self, timeout: float = 0.0) -> None:
         """Reads whatever has arrived (frames go to their subscriptions), waiting
         at most `timeout` seconds for the first message. Sends a heartbeat when
-        the connection has been quiet for the server's heartbeat interval."""
+        this client has sent nothing for the server's heartbeat interval or a
+        third of its idle timeout, whichever is shorter."""
         self._pump(timeout)
         while self._pump(0.0):
             pass
