@@ -10,6 +10,7 @@
 
 #include "gmr/kinematics/forward_kinematics.h"
 #include "net_test_util.h"
+#include "test_data.h"
 
 namespace gmr::test {
 namespace {
@@ -579,27 +580,6 @@ TEST(Streaming, ConventionsPerQueryAndPerSubscription) {
   r = c->query(v->id, 0, 1, false, {}, bad);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("unknown conventions preset 9"), std::string::npos) << r.error().message;
-}
-
-// Composes engine-bone locals from the roots down (O_j = O_p Q_j,
-// P_j = P_p + O_p T_j) into world positions; values for every joint.
-std::vector<Eigen::Vector3d> compose_locals(const Skeleton& skeleton, std::span<const Eigen::Quaterniond> q,
-                                            std::span<const Eigen::Vector3d> t) {
-  std::vector<Eigen::Vector3d> p(skeleton.size());
-  std::vector<Eigen::Matrix3d> o(skeleton.size());
-  for (int j = 0; j < static_cast<int>(skeleton.size()); ++j) {
-    const auto u = static_cast<std::size_t>(j);
-    const int parent = skeleton.joint(j).parent;
-    if (parent == kNoParent) {
-      o[u] = q[u].toRotationMatrix();
-      p[u] = t[u];
-    } else {
-      const auto pu = static_cast<std::size_t>(parent);
-      o[u] = o[pu] * q[u].toRotationMatrix();
-      p[u] = p[pu] + o[pu] * t[u];
-    }
-  }
-  return p;
 }
 
 // Local transforms (engine bones) per query and per subscription, and the

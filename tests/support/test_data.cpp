@@ -109,4 +109,23 @@ PositionDiff compare_positions(std::span<const Eigen::Vector3d> a, std::span<con
   return d;
 }
 
+std::vector<Eigen::Vector3d> compose_locals(const Skeleton& skeleton, std::span<const Eigen::Quaterniond> q,
+                                            std::span<const Eigen::Vector3d> t) {
+  std::vector<Eigen::Vector3d> p(skeleton.size());
+  std::vector<Eigen::Matrix3d> o(skeleton.size());
+  for (int j = 0; j < static_cast<int>(skeleton.size()); ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    const int parent = skeleton.joint(j).parent;
+    if (parent == kNoParent) {
+      o[u] = q[u].toRotationMatrix();
+      p[u] = t[u];
+    } else {
+      const auto pu = static_cast<std::size_t>(parent);
+      o[u] = o[pu] * q[u].toRotationMatrix();
+      p[u] = p[pu] + o[pu] * t[u];
+    }
+  }
+  return p;
+}
+
 }  // namespace gmr::test

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <filesystem>
 #include <span>
 #include <string>
@@ -51,6 +52,12 @@ struct PositionDiff {
   int joint = -1;
 };
 // a and b are frame-major arrays of `joints` positions per frame.
+// Engine-bone locals (gmr/view/engine_pose.h) composed from the roots down,
+// O_j = O_p Q_j and P_j = P_p + O_p T_j: the world positions they give, one
+// per joint of `skeleton` (q and t hold one entry per joint, in its order).
+std::vector<Eigen::Vector3d> compose_locals(const Skeleton& skeleton, std::span<const Eigen::Quaterniond> q,
+                                            std::span<const Eigen::Vector3d> t);
+
 PositionDiff compare_positions(std::span<const Eigen::Vector3d> a, std::span<const Eigen::Vector3d> b,
                                std::size_t joints);
 
