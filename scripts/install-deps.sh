@@ -12,12 +12,16 @@ packages=(
   libcli11-dev              # argument parsing for the gmr and gmr-server commands
   nlohmann-json3-dev        # JSON output of the research harness (gmr-bench fk --json)
   libspdlog-dev libfmt-dev  # logging outside lib/
-  libboost-dev libboost-system-dev # Boost.Asio for the server and client
+  libboost-dev libboost-system-dev # Boost.Asio for the server and client; Boost.Beast for HTTP and WebSocket
+  prometheus-cpp-dev        # /metrics in the Prometheus text format
+  libjs-three               # three.js for the browser viewer, served by gmr-server (no CDN)
   libssl-dev                # OpenSSL: TLS (Asio's SSL), token digests, the tests' certificates
   libprotobuf-dev protobuf-compiler # the wire protocol
   gnuplot-nox               # the Figure 4 plot (gmr-bench figure4)
   python3                   # the layout check (tests/layout/check_layout.py)
   python3-protobuf python3-numpy # the Python client (client/python) and the Blender add-on
+  python3-prometheus-client # the metrics test parses /metrics with Prometheus's own parser
+  chromium                  # the viewer test: the page in a real headless browser
   clang libclang-rt-14-dev  # the sanitizer build uses clang (gmr builds with GCC and clang)
   blender                   # the interop test: Blender's own BVH importer reads what gmr writes
   nodejs npm                # the interop test: three.js's BVHLoader (npm, tests/interop/package.json)

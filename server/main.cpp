@@ -1,4 +1,5 @@
-// gmr-server: serves a motion library over TCP and UDP (docs/protocol.md).
+// gmr-server: serves a motion library over TCP, UDP and WebSocket (docs/protocol.md),
+// with the browser viewer and /metrics on its HTTP port (docs/viewer.md).
 //
 //   gmr-server [--library DIR] [--port P] [--udp-port U] [--bind ADDR] [limits...]
 //
@@ -12,11 +13,28 @@
 #include <chrono>
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 #include <functional>
 
 #include "gmr/core/file_util.h"
 #include "gmr/server/library.h"
 #include "gmr/server/server.h"
+
+namespace {
+
+// The viewer's files: installed beside the program (PREFIX/share/gmr/web),
+// or, in a build tree, the source tree's.
+std::string default_web_root() {
+  std::error_code ec;
+  const auto exe = std::filesystem::canonical("/proc/self/exe", ec);
+  if (!ec) {
+    const auto installed = exe.parent_path().parent_path() / "share" / "gmr" / "web";
+    if (std::filesystem::is_regular_file(installed / "index.html", ec)) return installed.string();
+  }
+  return GMR_SOURCE_WEB_ROOT;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace gmr::server;
@@ -110,12 +128,29 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   app.add_option("--tls-key", cfg.tls_key_file, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
   app.add_option("--port-file", port_file, "Write the TCP port here once listening (for scripts using --port 0)");
+  int http_port = -1;
+  std::string http_port_file;
+  auto* http_port_option = app.add_option(
+      "--http-port", http_port,
+      "HTTP port for the browser viewer, its WebSocket, /metrics, /healthz and /readyz (default 7480, or any free "
+      "port with --port 0; -1: no HTTP)");
+  app.add_option("--http-port-file", http_port_file, "Write the HTTP port here once listening");
+  app.add_option("--web-root", cfg.web_root,
+                 "The viewer's files (default: the installed share/gmr/web, or the source tree's server/web)");
+  app.add_option("--three-dir", cfg.three_dir, "Where three.js is (Debian's libjs-three)")->capture_default_str();
+  app.add_option("--allow-origin", cfg.http_allowed_origins,
+                 "An origin (http://host:port, or *) besides the server's own whose pages may open the WebSocket; "
+                 "repeatable");
+  app.add_option("--max-http-sessions", cfg.max_http_sessions, "HTTP connections open at once (WebSockets count "
+                 "under --max-connections)")
+      ->capture_default_str();
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  const bool http_port_given = http_port_option->count() > 0;
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e %^%l%$ %v");
   if (idle_ms <= 0 || heartbeat_ms <= 0 || write_ms <= 0 || handshake_ms <= 0) {
@@ -152,7 +187,35 @@ int main(int argc, char** argv) {
   }
   if (!anonymous.empty()) cfg.anonymous = parse_role(anonymous).value();
 
+  if (http_port < -1 || http_port > 65535) {
+    std::fprintf(stderr, "gmr-server: --http-port must be -1 (no HTTP) or a port number\n");
+    return 1;
+  }
+  // HTTP on its own port: 7480 beside the default TCP port, any free port
+  // beside --port 0 (as UDP), unless told.
+  cfg.http_port = http_port_given ? http_port : cfg.port == 0 ? 0 : 7480;
+  if (cfg.web_root.empty()) cfg.web_root = default_web_root();
+
   try {
+    // Listening first, then loading: /healthz answers and /readyz says
+    // "loading" meanwhile; TCP clients wait in the backlog until it is done.
+    Server server(cfg);
+    server.start();
+    if (!port_file.empty()) {
+      if (auto s = gmr::write_file_atomic(port_file, std::to_string(server.tcp_port()) + "\n"); !s.ok()) {
+        throw std::runtime_error(s.error().to_string());
+      }
+    }
+    if (!http_port_file.empty()) {
+      if (auto s = gmr::write_file_atomic(http_port_file, std::to_string(server.http_port()) + "\n"); !s.ok()) {
+        throw std::runtime_error(s.error().to_string());
+      }
+    }
+    if (server.http_port() != 0) {
+      spdlog::info("viewer: http://{}:{}/ (files from {})   metrics: /metrics   health: /healthz /readyz",
+                   cfg.bind_address == "0.0.0.0" ? std::string("127.0.0.1") : cfg.bind_address, server.http_port(),
+                   cfg.web_root);
+    }
     std::vector<LibraryEntry> library;
     if (library_dir.empty()) {
       library = builtin_library();
@@ -168,6 +231,7 @@ int main(int argc, char** argv) {
           },
           motion_limits, library_files);
       if (!loaded.ok()) {
+        server.stop();
         std::fprintf(stderr, "gmr-server: %s\n", loaded.error().to_string().c_str());
         return 1;
       }
@@ -181,13 +245,7 @@ int main(int argc, char** argv) {
         if (e.metres_per_unit == 0.0) e.metres_per_unit = library_unit;
       }
     }
-    Server server(cfg, std::move(library));
-    server.start();
-    if (!port_file.empty()) {
-      if (auto s = gmr::write_file_atomic(port_file, std::to_string(server.tcp_port()) + "\n"); !s.ok()) {
-        throw std::runtime_error(s.error().to_string());
-      }
-    }
+    server.set_library(std::move(library));
     // The main thread waits for a signal; the server runs on its own thread.
     // SIGHUP reads the auth file again (a file that does not parse leaves
     // the tokens in use as they are).

@@ -12,6 +12,7 @@
 #include <cstring>
 
 #include "gmr/wire/framing.h"
+#include "prometheus/histogram.h"
 
 namespace gmr::server {
 
@@ -23,9 +24,32 @@ constexpr std::size_t kFirstChunk = 4096;
 constexpr std::size_t kBodyChunk = 256 * 1024;
 }  // namespace
 
+void tune_socket(tcp::socket& socket, const ConnectionLimits& limits, std::uint64_t id) {
+  boost::system::error_code ec;
+  socket.set_option(tcp::no_delay(true), ec);
+  if (limits.socket_send_buffer > 0) {
+    socket.set_option(net::socket_base::send_buffer_size(limits.socket_send_buffer), ec);
+  }
+  if (limits.socket_unsent_bytes > 0) {
+    // Bytes the kernel may hold that it has not sent: past them a write
+    // waits, so frames wait in the connection's queue, where latest-wins and
+    // the staleness bound apply, rather than in the kernel, where they would
+    // reach a client that stalled seconds late (docs/protocol.md, "Staleness").
+    const int lowat = limits.socket_unsent_bytes;
+    if (::setsockopt(socket.native_handle(), IPPROTO_TCP, TCP_NOTSENT_LOWAT, &lowat, sizeof lowat) != 0) {
+      spdlog::debug("conn {}: TCP_NOTSENT_LOWAT: {}", id, std::strerror(errno));
+    }
+  }
+}
+
 Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
                        BufferBudget* budget, net::ssl::context* tls)
-    : socket_(std::move(socket)), id_(id), limits_(limits), budget_(budget), watchdog_(io) {
+    : socket_(std::move(socket)),
+      id_(id),
+      limits_(limits),
+      budget_(budget),
+      frames_(limits.frames_per_key, limits.max_frame_bytes),
+      watchdog_(io) {
   if (tls != nullptr) socket_.use_tls(*tls);
   secured_ = tls == nullptr;
   boost::system::error_code ec;
@@ -54,21 +78,7 @@ bool Connection::may_read() const {
 void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std::uint64_t)> on_closed) {
   handler_ = std::move(handler);
   on_closed_ = std::move(on_closed);
-  boost::system::error_code ec;
-  socket_.tcp().set_option(tcp::no_delay(true), ec);
-  if (limits_.socket_send_buffer > 0) {
-    socket_.tcp().set_option(net::socket_base::send_buffer_size(limits_.socket_send_buffer), ec);
-  }
-  if (limits_.socket_unsent_bytes > 0) {
-    // Bytes the kernel may hold that it has not sent: past them a write
-    // waits, so frames wait here, where latest-wins and the staleness bound
-    // apply, rather than in the kernel, where they would reach a client that
-    // stalled seconds late (docs/protocol.md, "Staleness").
-    const int lowat = limits_.socket_unsent_bytes;
-    if (::setsockopt(socket_.tcp().native_handle(), IPPROTO_TCP, TCP_NOTSENT_LOWAT, &lowat, sizeof lowat) != 0) {
-      spdlog::debug("conn {}: TCP_NOTSENT_LOWAT: {}", id_, std::strerror(errno));
-    }
-  }
+  tune_socket(socket_.tcp(), limits_, id_);
   last_read_ = last_write_ = Clock::now();
   spdlog::info("conn {}: connected from {}{}", id_, peer_, socket_.tls() ? " (TLS)" : "");
   arm_watchdog();
@@ -97,7 +107,6 @@ void Connection::stop(const std::string& reason) {
                counters_.frames_dropped);
   if (handler_) handler_->on_stop();
   frames_.clear();
-  frame_bytes_ = 0;
   replies_.clear();
   reply_bytes_ = 0;
   std::string().swap(body_);
@@ -118,7 +127,6 @@ void Connection::finish() {
 void Connection::close_after_reply() {
   close_after_flush_ = true;
   frames_.clear();
-  frame_bytes_ = 0;
   account();
 }
 
@@ -131,44 +139,15 @@ void Connection::send(std::string framed) {
   flush();
 }
 
-void Connection::pop_frame(std::deque<PendingFrame>& queue) {
-  frame_bytes_ -= queue.front().head.size() + queue.front().body->size();
-  queue.pop_front();
-  ++counters_.frames_dropped;
-}
-
 bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
                             Clock::duration max_age) {
   if (closing()) return true;
-  const std::uint64_t size = head.size() + body->size();
   // With no write in flight the frame goes out at once; otherwise it waits,
   // within this connection's bounds and the server's budget.
-  if (writing_ && budget_ != nullptr && budget_->over()) {
-    ++counters_.frames_dropped;
-    return false;
-  }
-  bool kept_all = true;
-  auto& queue = frames_[key];
-  if (queue.size() >= std::max<std::size_t>(1, limits_.frames_per_key)) {
-    pop_frame(queue);
-    kept_all = false;
-  }
-  if (writing_ && limits_.max_frame_bytes != 0) {
-    // The oldest of this key give way; a frame that would still not fit
-    // beside the other keys' frames is dropped.
-    while (!queue.empty() && frame_bytes_ + size > limits_.max_frame_bytes) {
-      pop_frame(queue);
-      kept_all = false;
-    }
-    if (frame_bytes_ != 0 && frame_bytes_ + size > limits_.max_frame_bytes) {
-      if (queue.empty()) frames_.erase(key);
-      ++counters_.frames_dropped;
-      return false;
-    }
-  }
-  const Clock::time_point stale_at = max_age > Clock::duration::zero() ? Clock::now() + max_age : Clock::time_point::max();
-  queue.push_back(PendingFrame{std::move(head), std::move(body), stale_at});
-  frame_bytes_ += size;
+  const Clock::time_point now = Clock::now();
+  const Clock::time_point stale_at = max_age > Clock::duration::zero() ? now + max_age : Clock::time_point::max();
+  const bool kept_all = frames_.push(key, PendingFrame{std::move(head), std::move(body), stale_at, now}, writing_,
+                                     budget_ != nullptr && budget_->over(), counters_);
   note_queue();
   account();
   flush();
@@ -178,36 +157,24 @@ bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr
 bool Connection::congested(std::uint32_t key) const {
   if (!writing_ || stopped_) return false;
   if (budget_ != nullptr && budget_->over()) return true;
-  auto it = frames_.find(key);
-  if (it == frames_.end() || it->second.empty()) return false;
+  if (!frames_.waiting(key)) return false;
   return Clock::now() - write_started_ > limits_.congested_after;
 }
 
-std::uint64_t Connection::stale_dropped(std::uint32_t key) const {
-  auto it = stale_.find(key);
-  return it == stale_.end() ? 0 : it->second;
-}
+std::uint64_t Connection::stale_dropped(std::uint32_t key) const { return frames_.stale_dropped(key); }
 
 void Connection::discard_frames(std::uint32_t key) {
-  stale_.erase(key);
-  auto it = frames_.find(key);
-  if (it == frames_.end()) return;
-  for (const auto& f : it->second) frame_bytes_ -= f.head.size() + f.body->size();
-  frames_.erase(it);
+  frames_.discard(key);
   account();
 }
 
 void Connection::send_frames_now(std::uint32_t key) {
-  auto it = frames_.find(key);
-  if (it == frames_.end()) return;
-  for (const auto& frame : it->second) {
+  for (const auto& frame : frames_.take(key)) {
     auto bytes = std::make_shared<const std::string>(frame.head + *frame.body);
-    frame_bytes_ -= frame.head.size() + frame.body->size();
     reply_bytes_ += bytes->size();
     replies_.push_back(std::move(bytes));
     ++counters_.frames_sent;
   }
-  frames_.erase(it);
   account();
 }
 
@@ -238,32 +205,23 @@ void Connection::flush() {
   }
   replies_.clear();
   reply_bytes_ = 0;
-  std::size_t frames = 0;
-  for (const auto& [key, queue] : frames_) frames += queue.size();
-  hold_heads_.reserve(frames);
-  const Clock::time_point now = Clock::now();
-  for (auto& [key, queue] : frames_) {
-    for (auto& f : queue) {
-      if (f.stale_at < now) {  // waited past its subscriber's staleness bound
-        ++counters_.frames_dropped;
-        ++stale_[key];
-        continue;
-      }
-      hold_heads_.push_back(std::move(f.head));
-      in_flight_bytes_ += hold_heads_.back().size() + f.body->size();
-      hold_.push_back(std::move(f.body));
-      ++counters_.frames_sent;
-    }
-  }
-  // Buffers point into hold_heads_ (reserved, so stable) and the held bodies.
-  std::size_t head_index = 0;
-  for (std::size_t i = buffers.size(); i < hold_.size(); ++i, ++head_index) {
-    buffers.push_back(net::buffer(hold_heads_[head_index]));
+  // Frames still within their subscriber's staleness bound, each its own
+  // head then the shared body (hold_heads_ is reserved: buffers point into it).
+  const std::size_t first_frame = hold_.size();
+  hold_heads_.reserve(frames_.count());
+  frames_.drain(Clock::now(), counters_, [&](std::uint32_t, PendingFrame& f) {
+    oldest_frame_in_flight_ = std::min(oldest_frame_in_flight_, f.pushed_at);
+    hold_heads_.push_back(std::move(f.head));
+    in_flight_bytes_ += hold_heads_.back().size() + f.body->size();
+    hold_.push_back(std::move(f.body));
+    ++counters_.frames_sent;
+  });
+  for (std::size_t i = first_frame, head = 0; i < hold_.size(); ++i, ++head) {
+    buffers.push_back(net::buffer(hold_heads_[head]));
     buffers.push_back(net::buffer(*hold_[i]));
   }
-  frames_.clear();
-  frame_bytes_ = 0;
   writing_frames_ = !hold_heads_.empty();
+  if (!writing_frames_) oldest_frame_in_flight_ = Clock::time_point::max();
   writing_ = true;
   write_started_ = Clock::now();
   if (socket_.tls()) {
@@ -277,8 +235,9 @@ void Connection::flush() {
     hold_heads_.clear();
   }
   account();
-  socket_.async_write(buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+  socket_.async_write(buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
     self->writing_ = false;
+    self->counters_.bytes_sent += n;
     self->hold_.clear();
     self->hold_heads_.clear();
     if (self->tls_out_.capacity() > kBodyChunk) std::string().swap(self->tls_out_);
@@ -289,7 +248,13 @@ void Connection::flush() {
       return;
     }
     self->last_write_ = Clock::now();
-    if (self->writing_frames_) self->last_frames_written_ = self->last_write_;
+    if (self->writing_frames_) {
+      self->last_frames_written_ = self->last_write_;
+      if (self->frame_wait_ != nullptr) {
+        self->frame_wait_->Observe(std::chrono::duration<double>(self->last_write_ - self->oldest_frame_in_flight_).count());
+      }
+      self->oldest_frame_in_flight_ = Clock::time_point::max();
+    }
     if (self->read_paused_ && self->may_read()) {
       self->read_paused_ = false;
       self->read_prefix();
@@ -298,34 +263,42 @@ void Connection::flush() {
   });
 }
 
-void Connection::arm_watchdog() {
+std::chrono::milliseconds watchdog_period(const ConnectionLimits& l, bool established) {
   using std::chrono::milliseconds;
-  const auto& l = limits_;
   auto shortest = std::min({l.heartbeat_interval, l.idle_timeout, l.write_timeout});
-  if (!established_ && l.handshake_timeout.count() > 0) shortest = std::min(shortest, l.handshake_timeout);
-  const auto period = std::max(milliseconds(10), shortest / 4);
-  watchdog_.expires_after(period);
+  if (!established && l.handshake_timeout.count() > 0) shortest = std::min(shortest, l.handshake_timeout);
+  return std::max(milliseconds(10), shortest / 4);
+}
+
+std::string watchdog_verdict(const LinkTimes& t, const ConnectionLimits& lim, Clock::time_point now, std::uint64_t id) {
+  if (!t.established && lim.handshake_timeout.count() > 0 && now - t.started > lim.handshake_timeout) {
+    spdlog::warn("conn {}: no Hello within {} ms", id, lim.handshake_timeout.count());
+    return "no Hello in time";
+  }
+  // A client that only listens to a subscription is not idle while its
+  // frames are written: a dead one stops taking them, and the write timeout
+  // below closes it. Heartbeats the server writes do not count.
+  if (now - t.last_read > lim.idle_timeout && now - t.last_frames_written > lim.idle_timeout) {
+    spdlog::warn("conn {}: idle for more than {} ms", id, lim.idle_timeout.count());
+    return "idle timeout";
+  }
+  if (t.writing && now - t.write_started > lim.write_timeout) {
+    spdlog::warn("conn {}: a write made no progress for {} ms: the client is not reading", id,
+                 lim.write_timeout.count());
+    return "write timeout";
+  }
+  return {};
+}
+
+void Connection::arm_watchdog() {
+  watchdog_.expires_after(watchdog_period(limits_, established_));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     if (ec || self->stopped_) return;
     const auto now = Clock::now();
-    const auto& lim = self->limits_;
-    if (!self->established_ && lim.handshake_timeout.count() > 0 && now - self->started_ > lim.handshake_timeout) {
-      spdlog::warn("conn {}: no Hello within {} ms", self->id_, lim.handshake_timeout.count());
-      self->stop("no Hello in time");
-      return;
-    }
-    // A client that only listens to a TCP subscription is not idle while its
-    // frames are written: a dead one stops taking them, and the write
-    // timeout below closes it. Heartbeats the server writes do not count.
-    if (now - self->last_read_ > lim.idle_timeout && now - self->last_frames_written_ > lim.idle_timeout) {
-      spdlog::warn("conn {}: idle for more than {} ms", self->id_, lim.idle_timeout.count());
-      self->stop("idle timeout");
-      return;
-    }
-    if (self->writing_ && now - self->write_started_ > lim.write_timeout) {
-      spdlog::warn("conn {}: a write made no progress for {} ms: the client is not reading", self->id_,
-                   lim.write_timeout.count());
-      self->stop("write timeout");
+    const LinkTimes times{self->established_, self->writing_,       self->started_,
+                          self->last_read_,   self->write_started_, self->last_frames_written_};
+    if (std::string why = watchdog_verdict(times, self->limits_, now, self->id_); !why.empty()) {
+      self->stop(why);
       return;
     }
     // Reads paused for the server-wide budget resume once it allows.
@@ -334,14 +307,18 @@ void Connection::arm_watchdog() {
       self->read_prefix();
     }
     // (Nothing is written into a TLS stream before its handshake.)
-    if (self->secured_ && !self->writing_ && now - self->last_write_ > lim.heartbeat_interval) {
-      pb::ServerMessage hb;
-      hb.mutable_heartbeat()->set_client_time_ns(0);
-      self->send(wire::frame_message(hb).value());
+    if (self->secured_ && !self->writing_ && now - self->last_write_ > self->limits_.heartbeat_interval) {
+      self->send(heartbeat_message());
       self->last_write_ = now;
     }
     self->arm_watchdog();
   });
+}
+
+std::string heartbeat_message() {
+  pb::ServerMessage hb;
+  hb.mutable_heartbeat()->set_client_time_ns(0);
+  return wire::frame_message(hb).value();
 }
 
 void Connection::read_prefix() {
@@ -369,6 +346,7 @@ void Connection::on_prefix(const boost::system::error_code& ec) {
     return;
   }
   last_read_ = Clock::now();
+  counters_.bytes_received += prefix_.size();
   const std::uint32_t length = wire::read_length_prefix(prefix_);
   if (auto s = wire::check_length(length, limits_.max_message_bytes); !s.ok()) {
     spdlog::warn("conn {}: bad length prefix: {}; closing", id_, s.error().message);
@@ -396,6 +374,7 @@ void Connection::read_body() {
 void Connection::on_body(const boost::system::error_code& ec, std::size_t got) {
   if (stopped_) return;
   body_received_ += got;
+  counters_.bytes_received += got;
   if (ec) {
     spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_,
                  body_expected_);

@@ -30,7 +30,12 @@
 
 #include "gmr/wire/tls_socket.h"
 #include "net.h"
+#include "frame_queue.h"
 #include "outbox.h"
+
+namespace prometheus {
+class Histogram;
+}
 
 namespace gmr::server {
 
@@ -63,7 +68,24 @@ struct ConnectionLimits {
   int socket_unsent_bytes = 0;            // TCP_NOTSENT_LOWAT; 0: the system's default
 };
 
-class Connection final : public Outbox, public std::enable_shared_from_this<Connection> {
+// Socket options every accepted client socket gets: no Nagle delay, the
+// configured send buffer and unsent-bytes bound.
+void tune_socket(tcp::socket& socket, const ConnectionLimits& limits, std::uint64_t id);
+
+// The watchdog both transports run: its period, and why it stops a link
+// (empty: it lives on).
+struct LinkTimes {
+  bool established = false;  // said Hello
+  bool writing = false;      // a write is in flight
+  Clock::time_point started, last_read, write_started, last_frames_written;
+};
+std::chrono::milliseconds watchdog_period(const ConnectionLimits& limits, bool established);
+std::string watchdog_verdict(const LinkTimes& times, const ConnectionLimits& limits, Clock::time_point now,
+                             std::uint64_t id);
+// A framed Heartbeat, what the server writes when it wrote nothing for a while.
+std::string heartbeat_message();
+
+class Connection final : public CountingOutbox, public std::enable_shared_from_this<Connection> {
  public:
   // What the connection hands its messages to.
   class Handler {
@@ -85,9 +107,9 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   void start(std::shared_ptr<Handler> handler, std::function<void(std::uint64_t id)> on_closed);
   // Ends the connection now: the handler's on_stop, then the socket closes.
   // Idempotent.
-  void stop(const std::string& reason);
+  void stop(const std::string& reason) override;
   // Graceful: drop waiting frames, write the waiting replies, then stop.
-  void finish();
+  void finish() override;
 
   // Outbox (outbox.h). A key holds at most frames_per_key frames; the frames
   // of send_frames_now go into the reply queue, so an end notice follows its
@@ -105,18 +127,12 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   void close_after_reply() override;
   void established() override { established_ = true; }
   const std::string& peer_address() const { return peer_address_; }
-  void count_frame_sent() override { ++counters_.frames_sent; }
-  void count_frame_dropped(std::uint64_t n = 1) override { counters_.frames_dropped += n; }
-  void count_frame_skipped(std::uint64_t n) override { counters_.frames_skipped += n; }
+  // Observes, per write that carried frames, how long its oldest frame
+  // waited from push_frame to the write's completion (seconds).
+  void set_frame_wait_histogram(prometheus::Histogram* h) { frame_wait_ = h; }
   ConnectionCounters counters() const override;
 
  private:
-  struct PendingFrame {
-    std::string head;
-    std::shared_ptr<const std::string> body;
-    Clock::time_point stale_at = Clock::time_point::max();  // not written after this
-  };
-
   // The read chain: prefix, then body, then the handler, then the next
   // prefix; it pauses while replies wait above max_reply_queue_bytes and
   // flush() resumes it.
@@ -126,13 +142,12 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   void on_body(const boost::system::error_code& ec, std::size_t got);
   void flush();
   void arm_watchdog();
-  std::uint64_t queued_bytes() const { return reply_bytes_ + frame_bytes_ + in_flight_bytes_; }
+  std::uint64_t queued_bytes() const { return reply_bytes_ + frames_.bytes() + in_flight_bytes_; }
   // Bytes held now (queued plus the request body being read) into the budget.
   void account();
   void note_queue();
   // Reading may go on: replies and the budget allow it.
   bool may_read() const;
-  void pop_frame(std::deque<PendingFrame>& queue);
 
   wire::TlsSocket socket_;
   std::uint64_t id_;
@@ -155,9 +170,7 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
 
   std::deque<std::shared_ptr<const std::string>> replies_;
   std::uint64_t reply_bytes_ = 0;
-  std::map<std::uint32_t, std::deque<PendingFrame>> frames_;  // per key, oldest first
-  std::uint64_t frame_bytes_ = 0;                             // heads and bodies in frames_
-  std::map<std::uint32_t, std::uint64_t> stale_;              // per key: frames dropped for their age
+  FrameQueue frames_;
   bool writing_ = false;
   std::uint64_t in_flight_bytes_ = 0;
   std::vector<std::shared_ptr<const std::string>> hold_;  // what the write in flight points into
@@ -165,10 +178,11 @@ class Connection final : public Outbox, public std::enable_shared_from_this<Conn
   std::string tls_out_;  // with TLS: the write in flight in one piece (one record per 16 KiB, not per buffer)
   bool secured_ = false;   // the TLS handshake is done (or there is no TLS): writing may start
   bool writing_frames_ = false;  // the write in flight holds frames
+  Clock::time_point oldest_frame_in_flight_ = Clock::time_point::max();
+  prometheus::Histogram* frame_wait_ = nullptr;
   Clock::time_point write_started_{}, last_read_{}, last_write_{};
   Clock::time_point last_frames_written_{};  // the last write that held frames completed
   net::steady_timer watchdog_;
-  ConnectionCounters counters_;
 };
 
 }  // namespace gmr::server

@@ -1,7 +1,6 @@
 // Outbox: what a client's requests and subscriptions need from its transport.
-// Connection (TCP) is the one the server runs; a WebSocket session would be
-// another, and tests use one that only records, to run a RequestHandler
-// without sockets.
+// Connection (TCP) and WsConnection (WebSocket) are the ones the server runs;
+// tests use one that only records, to run a RequestHandler without sockets.
 #pragma once
 
 #include <chrono>
@@ -15,6 +14,11 @@ struct ConnectionCounters {
   std::uint64_t frames_sent = 0;
   std::uint64_t frames_dropped = 0;    // a newer frame replaced it, or (UDP) over the datagram bound
   std::uint64_t frames_skipped = 0;    // the server was late and skipped the tick
+  std::uint64_t frames_stale = 0;      // of frames_dropped: waited past their staleness bound
+  std::uint64_t udp_frames_sent = 0;   // of frames_sent: over UDP
+  std::uint64_t udp_frames_dropped = 0;  // of frames_dropped: over UDP
+  std::uint64_t bytes_sent = 0;        // written to the connection's socket
+  std::uint64_t bytes_received = 0;    // read from it
   std::uint64_t queued_bytes = 0;      // replies and frames waiting or being written
   std::uint64_t max_queued_bytes = 0;  // high-water mark
 };
@@ -24,6 +28,8 @@ class Outbox {
   virtual ~Outbox() = default;
 
   virtual std::uint64_t id() const = 0;
+  // "tcp" or "websocket": what metrics label its counts with.
+  virtual const char* transport() const { return "tcp"; }
   // Stopped: nothing more goes out.
   virtual bool stopped() const = 0;
   // Stopped, or finishing: no more frames are taken.
@@ -51,11 +57,35 @@ class Outbox {
   virtual void established() {}
   // Closes once the next reply (queued after this call) is out.
   virtual void close_after_reply() = 0;
-  // Frames sent or dropped elsewhere (UDP) count with this client.
-  virtual void count_frame_sent() = 0;
-  virtual void count_frame_dropped(std::uint64_t n = 1) = 0;
+  // Ends the connection now (idempotent), or gracefully: waiting frames are
+  // dropped, waiting replies written, then it stops.
+  virtual void stop(const std::string& reason) = 0;
+  virtual void finish() = 0;
+  // Frames sent or dropped elsewhere (UDP), and frames a stream dropped or
+  // skipped for this client, count with it.
+  virtual void count_udp_frame_sent() = 0;
+  virtual void count_udp_frame_dropped() = 0;
+  virtual void count_frame_dropped(std::uint64_t n) = 0;
   virtual void count_frame_skipped(std::uint64_t n) = 0;
   virtual ConnectionCounters counters() const = 0;
+};
+
+// The counting a real transport does, shared by Connection and WsConnection.
+class CountingOutbox : public Outbox {
+ public:
+  void count_udp_frame_sent() override {
+    ++counters_.frames_sent;
+    ++counters_.udp_frames_sent;
+  }
+  void count_udp_frame_dropped() override {
+    ++counters_.frames_dropped;
+    ++counters_.udp_frames_dropped;
+  }
+  void count_frame_dropped(std::uint64_t n) override { counters_.frames_dropped += n; }
+  void count_frame_skipped(std::uint64_t n) override { counters_.frames_skipped += n; }
+
+ protected:
+  ConnectionCounters counters_;
 };
 
 }  // namespace gmr::server

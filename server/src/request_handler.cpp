@@ -71,6 +71,14 @@ void RequestHandler::send(const pb::ServerMessage& m) {
   c->send(std::move(bytes).value());
 }
 
+namespace {
+// The request's kind for metrics: its ClientMessage field's name.
+std::string_view request_kind(const pb::ClientMessage& m) {
+  const auto* field = pb::ClientMessage::descriptor()->FindFieldByNumber(static_cast<int>(m.body_case()));
+  return field != nullptr ? std::string_view(field->name()) : std::string_view("unknown");
+}
+}  // namespace
+
 void RequestHandler::on_message(const std::string& body) {
   pb::ClientMessage req;
   if (!req.ParseFromString(body)) {
@@ -78,10 +86,12 @@ void RequestHandler::on_message(const std::string& body) {
       spdlog::warn("conn {}: a {}-byte message is not a ClientMessage{}", connection_id_, body.size(),
                    suppressed ? " (" + std::to_string(suppressed) + " more such lines suppressed)" : std::string());
     }
+    server_.metrics.unparsable_request();
     send(error_message(0, pb::ERROR_CODE_BAD_REQUEST, "cannot parse the message as a gmr.stream.v1.ClientMessage"));
     return;
   }
   if (req.body_case() == pb::ClientMessage::kHeartbeat) return;  // the connection counted it as a read
+  const Clock::time_point began = Clock::now();
   Reply reply;
   try {
     reply = dispatch(req);
@@ -96,12 +106,20 @@ void RequestHandler::on_message(const std::string& body) {
                     printable(refused->message, 200),
                     suppressed ? " (" + std::to_string(suppressed) + " more lines suppressed)" : std::string());
     }
+    server_.metrics.request(request_kind(req), Clock::now() - began, refused->code);
     send(error_message(req.request_id(), refused->code, std::move(refused->message)));
     return;
   }
   auto& m = std::get<pb::ServerMessage>(reply);
   m.set_request_id(req.request_id());
   send(m);
+  server_.metrics.request(request_kind(req), Clock::now() - began, pb::ERROR_CODE_UNSPECIFIED);
+}
+
+std::pair<std::size_t, std::size_t> RequestHandler::subscription_count() const {
+  std::size_t udp = 0;
+  for (const auto& [id, s] : subs_) udp += dynamic_cast<const UdpTarget*>(s.target.get()) != nullptr ? 1 : 0;
+  return {subs_.size() - udp, udp};
 }
 
 Reply RequestHandler::dispatch(const pb::ClientMessage& req) {

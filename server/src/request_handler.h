@@ -45,6 +45,9 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   void udp_registered(const udp::endpoint& endpoint);
 
   const std::shared_ptr<UdpPublisher::Registration>& udp() const { return udp_; }
+  std::size_t view_count() const { return views_.size(); }
+  // Subscriptions whose frames go through the connection, and over UDP.
+  std::pair<std::size_t, std::size_t> subscription_count() const;
   bool stopped() const { return stopped_; }
 
  private:

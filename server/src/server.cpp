@@ -10,9 +10,30 @@
 
 namespace gmr::server {
 
-Server::Impl::Impl(ServerConfig config, std::vector<LibraryEntry> entries)
-    : cfg(std::move(config)), library(std::move(entries)) {
+Server::Impl::Impl(ServerConfig config, std::vector<LibraryEntry> entries, bool is_ready)
+    : cfg(std::move(config)), library(std::move(entries)), ready(is_ready) {
   for (std::size_t i = 0; i < library.size(); ++i) by_name.emplace(library[i].name, i);
+}
+
+void Server::Impl::install_library(std::vector<LibraryEntry> entries) {
+  if (ready || stopping) return;
+  library = std::move(entries);
+  by_name.clear();
+  for (std::size_t i = 0; i < library.size(); ++i) by_name.emplace(library[i].name, i);
+  ready = true;
+  spdlog::info("ready: {} motions", library.size());
+  accept_loop();
+}
+
+std::shared_ptr<RequestHandler> Server::Impl::add_connection(const std::shared_ptr<Outbox>& outbox,
+                                                             const std::string& address) {
+  auto handler = std::make_shared<RequestHandler>(*this, outbox);
+  handler->start();
+  connections[outbox->id()] = ConnectionEntry{outbox, handler, address};
+  pending_hello[outbox->id()] = outbox;
+  ++per_address[address];
+  ++accepted[outbox->transport()];
+  return handler;
 }
 
 ConnectionLimits Server::Impl::connection_limits() const {
@@ -43,6 +64,17 @@ std::shared_ptr<const CompiledForm> Server::Impl::compiled_form(std::size_t entr
 void Server::Impl::connection_closed(std::uint64_t id) {
   auto it = connections.find(id);
   if (it == connections.end()) return;
+  if (auto c = it->second.connection.lock()) {
+    const ConnectionCounters k = c->counters();
+    auto& t = closed_counters[c->transport()];
+    t.frames_sent += k.frames_sent;
+    t.frames_dropped += k.frames_dropped;
+    t.frames_stale += k.frames_stale;
+    t.udp_frames_sent += k.udp_frames_sent;
+    t.udp_frames_dropped += k.udp_frames_dropped;
+    t.bytes_sent += k.bytes_sent;
+    t.bytes_received += k.bytes_received;
+  }
   if (auto n = per_address.find(it->second.address); n != per_address.end() && --n->second == 0) per_address.erase(n);
   connections.erase(it);
   pending_hello.erase(id);
@@ -66,12 +98,8 @@ void Server::Impl::accept_loop() {
       } else {
         const std::uint64_t id = next_connection_id++;
         auto c = std::make_shared<Connection>(io, std::move(socket), id, connection_limits(), &buffers, tls.get());
-        auto handler = std::make_shared<RequestHandler>(*this, c);
-        handler->start();
-        connections[id] = ConnectionEntry{c, handler, address};
-        pending_hello[id] = c;
-        ++per_address[address];
-        c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
+        c->set_frame_wait_histogram(&metrics.frame_wait(c->transport()));
+        c->start(add_connection(c, address), [this](std::uint64_t closed) { connection_closed(closed); });
       }
     }
     accept_loop();
@@ -89,7 +117,7 @@ std::string Server::Impl::admit(const std::string& address) {
   // Connections still waiting for their Hello: past the cap, the oldest of
   // them gives way (it had its chance; a real client says Hello at once).
   while (!pending_hello.empty() && pending_hello.size() >= cfg.max_pending_handshakes) {
-    const std::weak_ptr<Connection> oldest = pending_hello.begin()->second;
+    const std::weak_ptr<Outbox> oldest = pending_hello.begin()->second;
     pending_hello.erase(pending_hello.begin());  // before stop(), whose connection_closed erases by id
     if (auto c = oldest.lock(); c && !c->stopped()) c->stop("made room for a new connection: no Hello yet");
   }
@@ -121,6 +149,7 @@ void Server::Impl::begin_stop() {
   spdlog::info("stopping: {} connections, {} streams", connections.size(), streams.live());
   boost::system::error_code ec;
   acceptor.close(ec);
+  http.close();
   udp.close();
   streams.stop_all();
   auto open = connections;
@@ -176,7 +205,25 @@ ServerStats Server::Impl::snapshot() {
 // ---------------------------------------------------------------------------
 
 Server::Server(ServerConfig config, std::vector<LibraryEntry> library)
-    : impl_(std::make_shared<Impl>(std::move(config), std::move(library))) {}
+    : impl_(std::make_shared<Impl>(std::move(config), std::move(library), true)) {}
+
+Server::Server(ServerConfig config) : impl_(std::make_shared<Impl>(std::move(config), std::vector<LibraryEntry>{}, false)) {}
+
+void Server::set_library(std::vector<LibraryEntry> library) {
+  auto& d = *impl_;
+  if (!d.started) {
+    d.library = std::move(library);
+    d.by_name.clear();
+    for (std::size_t i = 0; i < d.library.size(); ++i) d.by_name.emplace(d.library[i].name, i);
+    d.ready = true;
+    return;
+  }
+  net::post(d.io, [impl = impl_.get(), entries = std::move(library)]() mutable {
+    impl->install_library(std::move(entries));
+  });
+}
+
+std::uint16_t Server::http_port() const { return impl_->http.port(); }
 
 Server::~Server() { stop(); }
 
@@ -228,6 +275,7 @@ void Server::start() {
                                  : d.cfg.port == 0   ? std::uint16_t{0}
                                                      : d.tcp_port;
   d.udp.open(address, udp_port);
+  if (d.cfg.http_port >= 0) d.http.open(address, static_cast<std::uint16_t>(d.cfg.http_port));
   if (!address.is_loopback()) {
     if (!d.cfg.credentials || d.cfg.anonymous == Role::kControl) {
       spdlog::warn("listening on {} without tokens: any host that can reach it may edit views and read "
@@ -241,10 +289,13 @@ void Server::start() {
     }
   }
   d.started = true;
-  d.accept_loop();
+  if (d.ready) d.accept_loop();
   d.udp.start();
-  spdlog::info("serving {} motions on tcp{} {}:{} and udp {}:{}{}", d.library.size(), d.tls ? " (TLS)" : "",
-               d.cfg.bind_address, d.tcp_port, d.cfg.bind_address, d.udp.port(),
+  d.http.start();
+  spdlog::info("serving {} on tcp{} {}:{} and udp {}:{}{}{}",
+               d.ready ? std::to_string(d.library.size()) + " motions" : std::string("(library loading)"),
+               d.tls ? " (TLS)" : "", d.cfg.bind_address, d.tcp_port, d.cfg.bind_address, d.udp.port(),
+               d.http.port() != 0 ? ", http " + d.cfg.bind_address + ":" + std::to_string(d.http.port()) : std::string(),
                d.cfg.credentials ? ", " + std::to_string(d.cfg.credentials->size()) + " tokens, anonymous clients " +
                                        role_name(d.cfg.anonymous)
                                  : std::string());

@@ -17,6 +17,8 @@
 #include <vector>
 
 #include "connection.h"
+#include "http_server.h"
+#include "metrics.h"
 #include "gmr/server/server.h"
 #include "gmr/server/view.h"
 #include "net.h"
@@ -33,10 +35,14 @@ constexpr double kMinSpeed = 1e-3, kMaxSpeed = 1000.0;
 constexpr double kMinRateHz = 1e-2, kMaxRateHz = 10000.0;
 
 struct Server::Impl {
-  Impl(ServerConfig config, std::vector<LibraryEntry> entries);
+  Impl(ServerConfig config, std::vector<LibraryEntry> entries, bool ready);
 
   ServerConfig cfg;
   std::vector<LibraryEntry> library;
+  // The library is there (a server made without one waits for set_library):
+  // /readyz says so, and TCP connections are accepted.
+  bool ready = false;
+  Metrics metrics;
   std::map<std::string, std::size_t, std::less<>> by_name;
 
   // Declared before io: connections that io's handlers still hold at
@@ -52,7 +58,7 @@ struct Server::Impl {
   net::io_context io;
   tcp::acceptor acceptor{io};
   UdpPublisher udp{io, cfg.max_udp_datagrams_in_flight};
-  StreamCounters counters;
+  StreamCounters counters{.tick_lateness = &metrics.tick_lateness()};
   StreamRegistry streams{io, counters};
   std::thread thread;
   std::uint16_t tcp_port = 0;
@@ -61,9 +67,10 @@ struct Server::Impl {
   std::promise<void> stopped;
   std::shared_future<void> stopped_future = stopped.get_future().share();
 
+  HttpListener http{*this};
   std::uint64_t next_connection_id = 1;
   struct ConnectionEntry {
-    std::weak_ptr<Connection> connection;
+    std::weak_ptr<Outbox> connection;
     std::weak_ptr<RequestHandler> handler;
     std::string address;  // the client's IP address
   };
@@ -71,7 +78,11 @@ struct Server::Impl {
   std::map<std::string, std::size_t> per_address;  // open connections by IP address
   // Connections waiting for their Hello, by id: ids grow, so the first is
   // the oldest (admit() pushes it out past max_pending_handshakes).
-  std::map<std::uint64_t, std::weak_ptr<Connection>> pending_hello;
+  std::map<std::uint64_t, std::weak_ptr<Outbox>> pending_hello;
+  // Connections accepted, by transport, and the counters of those closed
+  // (metrics add the open ones'), for lifetime totals.
+  std::map<std::string, std::uint64_t, std::less<>> accepted;
+  std::map<std::string, ConnectionCounters, std::less<>> closed_counters;
   std::uint64_t connections_refused = 0;
   LogLimiter refusal_log{5, std::chrono::seconds(10)};
   // Hello refused for its token (or for having none).
@@ -92,6 +103,12 @@ struct Server::Impl {
   // close the oldest connection still waiting for its Hello to make room.
   std::string admit(const std::string& address);
   void refuse(tcp::socket socket, const std::string& why);
+  // Registers an accepted client connection (TCP or WebSocket) with its
+  // request handler; returns the handler, which the caller starts the
+  // connection with.
+  std::shared_ptr<RequestHandler> add_connection(const std::shared_ptr<Outbox>& outbox, const std::string& address);
+  // Installs the library (set_library), on the I/O thread.
+  void install_library(std::vector<LibraryEntry> entries);
   void begin_stop();
   void connection_closed(std::uint64_t id);
   // The shared float form of library entry `entry` (made when no view holds one).

@@ -9,6 +9,7 @@
 #include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
 #include "gmr/wire/frames.h"
+#include "prometheus/histogram.h"
 
 namespace gmr::server {
 
@@ -263,6 +264,9 @@ std::uint64_t Stream::congested_ticks() const {
 
 void Stream::on_tick() {
   if (paused_ || targets_.empty()) return;
+  if (counters_.tick_lateness != nullptr) {
+    counters_.tick_lateness->Observe(std::chrono::duration<double>(Clock::now() - due(tick_)).count());
+  }
   const Schedule& sched = settings_.schedule;
   const double pos = position(tick_);
   const double length = static_cast<double>(sched.end - sched.start);

@@ -23,6 +23,10 @@
 #include "gmr/view/conventions.h"
 #include "net.h"
 
+namespace prometheus {
+class Histogram;
+}
+
 namespace gmr::server {
 
 // Where a stream's frames go: a subscription over TCP or over UDP.
@@ -51,6 +55,8 @@ struct StreamCounters {
   std::uint64_t frames_computed_float = 0;  // of those, by the float path
   std::uint64_t frames_encoded = 0;         // encodings (one per tick that sends)
   std::uint64_t frames_skipped = 0;         // ticks skipped because the server was late (per target)
+  // Observes how late each tick ran after its due time (seconds); may be null.
+  prometheus::Histogram* tick_lateness = nullptr;
 };
 
 class Stream : public std::enable_shared_from_this<Stream> {

@@ -45,10 +45,10 @@ void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std
   if (!c || c->closing()) return;
   if (!publisher_.send(endpoint_, wire::frame_message_for(view_, subscription_, stream_id, *body))) {
     ++dropped_;
-    c->count_frame_dropped();
+    c->count_udp_frame_dropped();
     return;
   }
-  c->count_frame_sent();
+  c->count_udp_frame_sent();
 }
 
 }  // namespace gmr::server

@@ -31,7 +31,10 @@ class RecordingOutbox final : public server::Outbox {
   void discard_frames(std::uint32_t) override {}
   void send_frames_now(std::uint32_t) override {}
   void close_after_reply() override { closing_ = true; }
-  void count_frame_sent() override {}
+  void stop(const std::string&) override { closing_ = true; }
+  void finish() override { closing_ = true; }
+  void count_udp_frame_sent() override {}
+  void count_udp_frame_dropped() override {}
   void count_frame_dropped(std::uint64_t) override {}
   void count_frame_skipped(std::uint64_t) override {}
   server::ConnectionCounters counters() const override { return {}; }
@@ -52,7 +55,7 @@ class RecordingOutbox final : public server::Outbox {
 
 class RequestHandlerTest : public ::testing::Test {
  protected:
-  RequestHandlerTest() : server_(server::ServerConfig{}, test_library()) {
+  RequestHandlerTest() : server_(server::ServerConfig{}, test_library(), true) {
     spdlog::set_level(spdlog::level::warn);  // the handler logs every hello
     handler_ = std::make_shared<server::RequestHandler>(server_, outbox_);
     handler_->start();

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "gmr/server/auth.h"
 #include "gmr/wire/framing.h"
@@ -16,6 +17,24 @@ struct ServerConfig {
   std::uint16_t port = 0;                  // TCP; 0 picks a free port (read it back with Server::tcp_port)
   int udp_port = -1;                       // -1: the TCP port number (any free port when port is 0); 0: any free port
   std::string server_name = "gmr-server";
+  // HTTP (docs/viewer.md, docs/operations.md): the browser viewer, its
+  // WebSocket, /metrics, /healthz and /readyz on a port of their own, on
+  // bind_address. -1: no HTTP; 0: any free port (read it back with
+  // Server::http_port).
+  int http_port = -1;
+  // The viewer's files (index.html, viewer.js, viewer.css) and Debian's
+  // three.js (libjs-three), served at / and /three/.
+  std::string web_root;
+  std::string three_dir = "/usr/share/javascript/three";
+  // HTTP connections open at once (a WebSocket counts as a client
+  // connection instead, under max_connections), and how long one may sit
+  // idle or take to send its request.
+  std::size_t max_http_sessions = 64;
+  std::chrono::milliseconds http_timeout{30000};
+  // Origins (scheme://host:port, or "*") besides the server's own whose
+  // pages may open the WebSocket. A browser sends its page's origin; any
+  // site open in a browser on this host could otherwise drive the server.
+  std::vector<std::string> http_allowed_origins;
 
   // Who may do what (docs/security.md). A client's Hello token gives its role
   // from `credentials` (an unknown token is refused); a client without a

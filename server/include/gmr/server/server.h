@@ -53,6 +53,10 @@ struct ServerStats {
 class Server {
  public:
   Server(ServerConfig config, std::vector<LibraryEntry> library);
+  // A server whose library comes later (set_library): once started, HTTP
+  // answers /healthz while /readyz says it is loading, and the TCP port
+  // takes connections but reads them only once the library is there.
+  explicit Server(ServerConfig config);
   ~Server();  // stop() and join
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
@@ -62,6 +66,12 @@ class Server {
   void start();
   std::uint16_t tcp_port() const;
   std::uint16_t udp_port() const;
+  // 0 when config.http_port is -1 (no HTTP).
+  std::uint16_t http_port() const;
+
+  // The library of a server made without one; the server is then ready
+  // (/readyz). Call once, from any thread but the I/O thread.
+  void set_library(std::vector<LibraryEntry> library);
 
   // Graceful stop: stops accepting, ends every stream, lets replies drain for
   // up to config.shutdown_grace, closes every connection, joins the I/O

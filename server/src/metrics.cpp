@@ -1,0 +1,209 @@
+#include "metrics.h"
+
+#include <prometheus/client_metric.h>
+#include <prometheus/metric_family.h>
+#include <prometheus/text_serializer.h>
+
+#include <map>
+#include <sstream>
+
+#include "request_handler.h"
+#include "server_state.h"
+
+namespace gmr::server {
+
+namespace {
+
+using prometheus::ClientMetric;
+using prometheus::MetricFamily;
+using prometheus::MetricType;
+
+// Seconds: from 10 us (a request, a frame on an idle loopback) to 1 s.
+const prometheus::Histogram::BucketBoundaries kLatencyBuckets = {
+    1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 2.5e-2, 5e-2, 0.1, 0.25, 1.0};
+
+// Families built from the server's state at scrape time.
+class Families {
+ public:
+  // One sample of family `name` (made on first use, with `help` and `type`).
+  void add(const std::string& name, const std::string& help, MetricType type, double value,
+           std::vector<ClientMetric::Label> labels = {}) {
+    auto [it, fresh] = index_.try_emplace(name, families_.size());
+    if (fresh) families_.push_back(MetricFamily{name, help, type, {}});
+    ClientMetric m;
+    m.label = std::move(labels);
+    if (type == MetricType::Counter) {
+      m.counter.value = value;
+    } else {
+      m.gauge.value = value;
+    }
+    families_[it->second].metric.push_back(std::move(m));
+  }
+  std::vector<MetricFamily>& families() { return families_; }
+
+ private:
+  std::vector<MetricFamily> families_;
+  std::map<std::string, std::size_t> index_;
+};
+
+std::string code_label(pb::ErrorCode code) {
+  std::string name = pb::ErrorCode_Name(code);
+  constexpr std::string_view kPrefix = "ERROR_CODE_";
+  if (name.rfind(kPrefix, 0) == 0) name.erase(0, kPrefix.size());
+  return name.empty() ? std::to_string(static_cast<int>(code)) : name;
+}
+
+}  // namespace
+
+Metrics::Metrics() : registry_(std::make_shared<prometheus::Registry>()) {
+  requests_ = &prometheus::BuildCounter()
+                   .Name("gmr_requests_total")
+                   .Help("Requests answered, by kind (heartbeats not counted)")
+                   .Register(*registry_);
+  request_errors_ = &prometheus::BuildCounter()
+                         .Name("gmr_request_errors_total")
+                         .Help("Requests refused, by the protocol's error code")
+                         .Register(*registry_);
+  http_responses_ = &prometheus::BuildCounter()
+                         .Name("gmr_http_responses_total")
+                         .Help("HTTP responses (the viewer's files, /metrics, /healthz, /readyz), by status")
+                         .Register(*registry_);
+  request_seconds_ = &prometheus::BuildHistogram()
+                          .Name("gmr_request_duration_seconds")
+                          .Help("Time the server took to answer a request")
+                          .Register(*registry_)
+                          .Add({}, kLatencyBuckets);
+  tick_lateness_ = &prometheus::BuildHistogram()
+                        .Name("gmr_tick_lateness_seconds")
+                        .Help("How late a stream's tick ran after it was due")
+                        .Register(*registry_)
+                        .Add({}, kLatencyBuckets);
+  auto& wait = prometheus::BuildHistogram()
+                   .Name("gmr_frame_wait_seconds")
+                   .Help("From a frame queued for a connection to the end of the write that carried it "
+                         "(the oldest frame of each write)")
+                   .Register(*registry_);
+  frame_wait_tcp_ = &wait.Add({{"transport", "tcp"}}, kLatencyBuckets);
+  frame_wait_ws_ = &wait.Add({{"transport", "websocket"}}, kLatencyBuckets);
+}
+
+void Metrics::request(std::string_view kind, Clock::duration took, pb::ErrorCode code) {
+  requests_->Add({{"request", std::string(kind)}}).Increment();
+  request_seconds_->Observe(std::chrono::duration<double>(took).count());
+  if (code != pb::ERROR_CODE_UNSPECIFIED) request_errors_->Add({{"code", code_label(code)}}).Increment();
+}
+
+void Metrics::unparsable_request() { request_errors_->Add({{"code", code_label(pb::ERROR_CODE_BAD_REQUEST)}}).Increment(); }
+
+void Metrics::http_response(unsigned status) { http_responses_->Add({{"status", std::to_string(status)}}).Increment(); }
+
+prometheus::Histogram& Metrics::frame_wait(std::string_view transport) {
+  return transport == "websocket" ? *frame_wait_ws_ : *frame_wait_tcp_;
+}
+
+std::string Metrics::text(Server::Impl& s) const {
+  Families f;
+  using T = MetricType;
+  f.add("gmr_ready", "1 once the library has loaded and the server takes clients", T::Gauge,
+        s.ready && !s.stopping ? 1 : 0);
+  f.add("gmr_library_motions", "Motions in the library", T::Gauge, static_cast<double>(s.library.size()));
+
+  // Connections and what their clients hold.
+  std::map<std::string, std::size_t> open;
+  std::map<std::string, ConnectionCounters, std::less<>> totals = s.closed_counters;
+  std::size_t views = 0;
+  std::map<std::string, std::size_t> subscriptions;
+  for (auto& [id, entry] : s.connections) {
+    auto c = entry.connection.lock();
+    if (!c) continue;
+    const std::string transport = c->transport();
+    ++open[transport];
+    const ConnectionCounters k = c->counters();
+    auto& t = totals[transport];
+    t.frames_sent += k.frames_sent;
+    t.frames_dropped += k.frames_dropped;
+    t.frames_stale += k.frames_stale;
+    t.udp_frames_sent += k.udp_frames_sent;
+    t.udp_frames_dropped += k.udp_frames_dropped;
+    t.bytes_sent += k.bytes_sent;
+    t.bytes_received += k.bytes_received;
+    if (auto h = entry.handler.lock()) {
+      views += h->view_count();
+      const auto [stream_subs, udp_subs] = h->subscription_count();
+      subscriptions[transport] += stream_subs;
+      subscriptions["udp"] += udp_subs;
+    }
+  }
+  for (const char* transport : {"tcp", "websocket"}) {
+    f.add("gmr_connections", "Open client connections", T::Gauge, static_cast<double>(open[transport]),
+          {{"transport", transport}});
+  }
+  for (const char* transport : {"tcp", "websocket"}) {
+    const auto it = s.accepted.find(transport);
+    f.add("gmr_connections_accepted_total", "Client connections accepted", T::Counter,
+          it == s.accepted.end() ? 0.0 : static_cast<double>(it->second), {{"transport", transport}});
+  }
+  f.add("gmr_connections_refused_total", "Connections refused (limits, or not ready)", T::Counter,
+        static_cast<double>(s.connections_refused));
+  f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter, static_cast<double>(s.auth_refused));
+  f.add("gmr_views", "Views clients hold", T::Gauge, static_cast<double>(views));
+  for (const char* transport : {"tcp", "udp", "websocket"}) {
+    f.add("gmr_subscriptions", "Subscriptions, by the transport their frames take", T::Gauge,
+          static_cast<double>(subscriptions[transport]), {{"transport", transport}});
+  }
+  f.add("gmr_subscriptions_refused_total", "Subscriptions refused for the send budget", T::Counter,
+        static_cast<double>(s.subscriptions_refused));
+  f.add("gmr_streams", "Streams (one kinematics and one encoding per tick, shared by their subscribers)", T::Gauge,
+        static_cast<double>(s.streams.active()));
+  f.add("gmr_committed_frames_per_second", "Frames per second all subscriptions ask for (against the send budget)",
+        T::Gauge, static_cast<double>(s.committed_mhz) / 1000.0);
+
+  // Frames: computed and encoded once per stream, then sent per subscriber.
+  f.add("gmr_frames_computed_total", "Forward-kinematics runs for streams", T::Counter,
+        static_cast<double>(s.counters.frames_computed));
+  f.add("gmr_frames_encoded_total", "Frame encodings (one per stream and tick)", T::Counter,
+        static_cast<double>(s.counters.frames_encoded));
+  f.add("gmr_frames_skipped_total", "Frames skipped because the server was late (per subscriber)", T::Counter,
+        static_cast<double>(s.counters.frames_skipped));
+  std::map<std::string, ConnectionCounters> by_transport;
+  for (const auto& [transport, t] : totals) {
+    auto& own = by_transport[transport];
+    own.frames_sent = t.frames_sent - t.udp_frames_sent;
+    own.frames_dropped = t.frames_dropped - t.udp_frames_dropped;
+    own.frames_stale = t.frames_stale;
+    own.bytes_sent = t.bytes_sent;
+    own.bytes_received = t.bytes_received;
+    by_transport["udp"].frames_sent += t.udp_frames_sent;
+    by_transport["udp"].frames_dropped += t.udp_frames_dropped;
+  }
+  for (const char* transport : {"tcp", "udp", "websocket"}) {
+    const ConnectionCounters& t = by_transport[transport];
+    f.add("gmr_frames_sent_total", "Frames sent to subscribers", T::Counter, static_cast<double>(t.frames_sent),
+          {{"transport", transport}});
+    f.add("gmr_frames_dropped_total",
+          "Frames given up for a subscriber (a newer one replaced it, a bound, or its age)", T::Counter,
+          static_cast<double>(t.frames_dropped), {{"transport", transport}});
+  }
+  for (const char* transport : {"tcp", "websocket"}) {
+    const ConnectionCounters& t = by_transport[transport];
+    f.add("gmr_frames_stale_total", "Of the frames dropped: waited past their subscriber's staleness bound",
+          T::Counter, static_cast<double>(t.frames_stale), {{"transport", transport}});
+    f.add("gmr_bytes_sent_total", "Bytes written to client connections", T::Counter,
+          static_cast<double>(t.bytes_sent), {{"transport", transport}});
+    f.add("gmr_bytes_received_total", "Bytes read from client connections", T::Counter,
+          static_cast<double>(t.bytes_received), {{"transport", transport}});
+  }
+  f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm",
+        T::Counter, static_cast<double>(s.udp.rejected()));
+  f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,
+        static_cast<double>(s.buffers.held));
+  f.add("gmr_view_bytes", "Motion bytes edited views own", T::Gauge, static_cast<double>(s.view_bytes));
+
+  auto families = registry_->Collect();
+  for (auto& family : f.families()) families.push_back(std::move(family));
+  std::ostringstream out;
+  prometheus::TextSerializer().Serialize(out, families);
+  return out.str();
+}
+
+}  // namespace gmr::server

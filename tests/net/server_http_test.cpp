@@ -1,0 +1,454 @@
+// gmr-server's HTTP port (docs/viewer.md, docs/operations.md): files, health
+// and readiness, and the WebSocket, which carries the TCP protocol's requests
+// and replies (binary, or protobuf's JSON mapping) under the same limits and
+// admission. A Boost.Beast client on 127.0.0.1; reads have deadlines.
+#include <gtest/gtest.h>
+
+#include <google/protobuf/util/json_util.h>
+#include <sys/socket.h>
+
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "gmr/wire/framing.h"
+#include "net_test_util.h"
+
+namespace gmr::test {
+namespace {
+
+namespace net = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+using tcp = net::ip::tcp;
+
+// Reads on `s` fail after `timeout` instead of blocking.
+void read_deadline(tcp::socket& s, std::chrono::milliseconds timeout) {
+  timeval tv{static_cast<time_t>(timeout.count() / 1000), static_cast<suseconds_t>((timeout.count() % 1000) * 1000)};
+  ::setsockopt(s.native_handle(), SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+}
+
+struct HttpReply {
+  unsigned status = 0;
+  std::string body;
+  std::string content_type;
+  std::string content_length;
+};
+
+// One request on a fresh connection; `raw` is sent as it is when given.
+HttpReply http_request(std::uint16_t port, http::verb verb, const std::string& target, const std::string& raw = {}) {
+  net::io_context io;
+  tcp::socket s(io);
+  s.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  read_deadline(s, std::chrono::seconds(5));
+  if (raw.empty()) {
+    http::request<http::empty_body> req{verb, target, 11};
+    req.set(http::field::host, "127.0.0.1");
+    http::write(s, req);
+  } else {
+    net::write(s, net::buffer(raw));
+  }
+  beast::flat_buffer buf;
+  http::response_parser<http::string_body> parser;
+  parser.skip(verb == http::verb::head);
+  parser.body_limit(16 << 20);
+  beast::error_code ec;
+  http::read(s, buf, parser, ec);
+  if (ec) return {};
+  const auto& res = parser.get();
+  return {res.result_int(), res.body(), std::string(res[http::field::content_type]),
+          std::string(res[http::field::content_length])};
+}
+
+HttpReply get(std::uint16_t port, const std::string& target) { return http_request(port, http::verb::get, target); }
+
+// The server's answer to a WebSocket upgrade of /ws that it refuses (a
+// status other than 101), with the subprotocol and Origin given.
+HttpReply refused_upgrade(std::uint16_t port, const std::string& protocol, const std::string& origin = {}) {
+  std::string raw = "GET /ws HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) +
+                    "\r\nConnection: Upgrade\r\nUpgrade: websocket\r\nSec-WebSocket-Version: 13\r\n"
+                    "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
+  if (!protocol.empty()) raw += "Sec-WebSocket-Protocol: " + protocol + "\r\n";
+  if (!origin.empty()) raw += "Origin: " + origin + "\r\n";
+  return http_request(port, http::verb::get, "/ws", raw + "\r\n");
+}
+
+// A WebSocket client of /ws.
+class WsClient {
+ public:
+  // `protocol` empty: none asked for. `origin` empty: none sent.
+  WsClient(std::uint16_t port, const std::string& protocol, const std::string& origin = {}) : ws_(io_) {
+    ws_.next_layer().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+    read_deadline(ws_.next_layer(), std::chrono::seconds(5));
+    ws_.set_option(websocket::stream_base::decorator([protocol, origin](websocket::request_type& req) {
+      if (!protocol.empty()) req.set(http::field::sec_websocket_protocol, protocol);
+      if (!origin.empty()) req.set(http::field::origin, origin);
+    }));
+    ws_.handshake(response_, "127.0.0.1:" + std::to_string(port), "/ws", error_);
+  }
+  bool open() const { return !error_; }
+  std::string chosen_protocol() const { return std::string(response_[http::field::sec_websocket_protocol]); }
+
+  void send(const pb::ClientMessage& m) {
+    ws_.binary(true);
+    ws_.write(net::buffer(m.SerializeAsString()));
+  }
+  void send_text(const std::string& text) {
+    ws_.text(true);
+    ws_.write(net::buffer(text));
+  }
+  void send_bytes(const std::string& bytes) {
+    ws_.binary(true);
+    beast::error_code ec;
+    ws_.write(net::buffer(bytes), ec);
+  }
+  // The next message as text (JSON) or bytes; nothing when closed or late.
+  std::optional<std::string> receive_raw(bool* text = nullptr) {
+    beast::flat_buffer buf;
+    beast::error_code ec;
+    ws_.read(buf, ec);
+    if (ec) {
+      closed_ = true;
+      return std::nullopt;
+    }
+    if (text) *text = ws_.got_text();
+    return beast::buffers_to_string(buf.data());
+  }
+  std::optional<pb::ServerMessage> receive() {
+    auto bytes = receive_raw();
+    if (!bytes) return std::nullopt;
+    pb::ServerMessage m;
+    EXPECT_TRUE(m.ParseFromString(*bytes));
+    return m;
+  }
+  // The next message that is not a pushed frame or heartbeat.
+  std::optional<pb::ServerMessage> reply() {
+    for (;;) {
+      auto m = receive();
+      if (!m || (!m->has_frame() && !m->has_heartbeat())) return m;
+    }
+  }
+  pb::ServerMessage ask(pb::ClientMessage m, std::uint64_t id) {
+    m.set_request_id(id);
+    send(m);
+    auto r = reply();
+    EXPECT_TRUE(r.has_value()) << "no reply to request " << id;
+    return r.value_or(pb::ServerMessage{});
+  }
+  bool closed() const { return closed_; }
+  // True once the server ended the connection within the read deadline.
+  bool wait_closed() {
+    for (int i = 0; i < 1000 && !closed_; ++i) receive_raw();
+    return closed_;
+  }
+
+ private:
+  net::io_context io_;
+  websocket::stream<tcp::socket> ws_;
+  websocket::response_type response_;
+  beast::error_code error_;
+  bool closed_ = false;
+};
+
+pb::ClientMessage hello() {
+  pb::ClientMessage m;
+  m.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+  m.mutable_hello()->set_client_name("http test");
+  return m;
+}
+
+server::ServerConfig http_config() {
+  server::ServerConfig cfg;
+  cfg.http_port = 0;
+  return cfg;
+}
+
+// A web root with an index and a script, removed with the object.
+struct WebRoot {
+  WebRoot() {
+    dir = std::filesystem::temp_directory_path() / ("gmr_web_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir / "sub");
+    std::ofstream(dir / "index.html") << "<!doctype html><title>gmr</title>";
+    std::ofstream(dir / "sub" / "app.js") << "export const x = 1;\n";
+  }
+  ~WebRoot() { std::filesystem::remove_all(dir); }
+  std::filesystem::path dir;
+};
+
+TEST(Http, HealthzAnswersWhileLoadingAndReadyzOnceTheLibraryIsThere) {
+  server::ServerConfig cfg = http_config();
+  cfg.port = 0;
+  cfg.udp_port = 0;
+  server::Server s(cfg);  // its library comes later
+  s.start();
+  const std::uint16_t port = s.http_port();
+  ASSERT_NE(port, 0);
+  EXPECT_EQ(get(port, "/healthz").status, 200u);
+  const auto loading = get(port, "/readyz");
+  EXPECT_EQ(loading.status, 503u);
+  EXPECT_EQ(loading.body, "loading the library\n");
+  const auto early = refused_upgrade(port, "gmr.stream.v1");
+  EXPECT_EQ(early.status, 503u);
+  EXPECT_NE(early.body.find("still loading"), std::string::npos) << early.body;
+  // A TCP client that connects meanwhile waits, and is answered once ready.
+  RawConnection tcp_client(s.tcp_port());
+  tcp_client.send(hello());
+  EXPECT_FALSE(tcp_client.receive(std::chrono::milliseconds(300)).has_value());
+  s.set_library(test_library());
+  auto reply = tcp_client.reply();
+  ASSERT_TRUE(reply.has_value());
+  EXPECT_TRUE(reply->has_hello());
+  const auto ready = get(port, "/readyz");
+  EXPECT_EQ(ready.status, 200u);
+  EXPECT_EQ(ready.body, "ready: " + std::to_string(test_library().size()) + " motions\n");
+  WsClient late(port, "gmr.stream.v1");
+  EXPECT_TRUE(late.open());
+  s.stop();
+}
+
+TEST(Http, ServesItsFilesAndSaysWhatIsWrongWithABadRequest) {
+  WebRoot web;
+  server::ServerConfig cfg = http_config();
+  cfg.web_root = web.dir.string();
+  cfg.three_dir = (web.dir / "sub").string();
+  TestServer s(cfg);
+  const std::uint16_t port = s.server.http_port();
+
+  const auto index = get(port, "/");
+  EXPECT_EQ(index.status, 200u);
+  EXPECT_EQ(index.body, "<!doctype html><title>gmr</title>");
+  EXPECT_EQ(index.content_type, "text/html; charset=utf-8");
+  const auto script = get(port, "/sub/app.js?v=1");
+  EXPECT_EQ(script.status, 200u);
+  EXPECT_EQ(script.content_type, "text/javascript; charset=utf-8");
+  EXPECT_EQ(get(port, "/three/app.js").body, "export const x = 1;\n");  // three_dir
+  const auto head = http_request(port, http::verb::head, "/sub/app.js");
+  EXPECT_EQ(head.status, 200u);
+  EXPECT_EQ(head.content_length, "20");
+  EXPECT_TRUE(head.body.empty());
+
+  EXPECT_EQ(get(port, "/missing.js").status, 404u);
+  EXPECT_EQ(get(port, "/sub").status, 404u);  // a folder is not a file
+  EXPECT_EQ(get(port, "/../etc/passwd").status, 400u);
+  EXPECT_EQ(get(port, "/three/../../etc/passwd").status, 400u);
+  EXPECT_EQ(get(port, "/sub//app.js").status, 400u);
+  EXPECT_EQ(get(port, "/%2e%2e/etc/passwd").status, 400u);
+  EXPECT_EQ(http_request(port, http::verb::post, "/").status, 405u);
+  const auto upgrade_needed = get(port, "/ws");
+  EXPECT_EQ(upgrade_needed.status, 426u);
+  EXPECT_NE(upgrade_needed.body.find("gmr.stream.v1.json"), std::string::npos);
+  // Headers past 8 KiB, and bytes that are not HTTP.
+  const std::string huge = "GET / HTTP/1.1\r\nHost: x\r\nX-Pad: " + std::string(10000, 'a') + "\r\n\r\n";
+  EXPECT_EQ(http_request(port, http::verb::get, "/", huge).status, 431u);
+  const auto garbage = http_request(port, http::verb::get, "/", "\x16\x03\x01 not http\r\n\r\n");
+  EXPECT_EQ(garbage.status, 400u);
+  EXPECT_NE(garbage.body.find("bad HTTP request"), std::string::npos);
+}
+
+TEST(Http, TooManyOpenConnectionsAreToldSo) {
+  server::ServerConfig cfg = http_config();
+  cfg.max_http_sessions = 2;
+  TestServer s(cfg);
+  const std::uint16_t port = s.server.http_port();
+  net::io_context io;
+  std::vector<tcp::socket> idle;
+  for (int i = 0; i < 2; ++i) {
+    idle.emplace_back(io);
+    idle.back().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  }
+  // The third is answered 503 at once; the first two still work afterwards.
+  for (int i = 0; i < 50 && get(port, "/healthz").status != 503u; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ(get(port, "/healthz").status, 503u);
+  idle.clear();
+  bool served = false;
+  for (int i = 0; i < 100 && !served; ++i) {
+    served = get(port, "/healthz").status == 200u;
+    if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_TRUE(served);
+}
+
+TEST(WebSocket, CarriesTheProtocolInBinaryWithFramesEqualToAQuery) {
+  TestServer s(http_config());
+  WsClient ws(s.server.http_port(), "gmr.stream.v1");
+  ASSERT_TRUE(ws.open());
+  EXPECT_EQ(ws.chosen_protocol(), "gmr.stream.v1");
+  EXPECT_TRUE(ws.ask(hello(), 1).has_hello());
+  pb::ClientMessage list;
+  list.mutable_list_motions();
+  EXPECT_EQ(ws.ask(list, 2).motions().motions_size(), static_cast<int>(test_library().size()));
+  pb::ClientMessage create;
+  create.mutable_create_view()->set_motion("walk");
+  const std::uint32_t view = ws.ask(create, 3).view().view_id();
+  pb::ClientMessage shift;
+  shift.mutable_shift_root()->set_view_id(view);
+  shift.mutable_shift_root()->set_joint("l_wrist");
+  ASSERT_TRUE(ws.ask(shift, 4).has_view());
+  pb::ClientMessage query;
+  query.mutable_query_frames()->set_view_id(view);
+  query.mutable_query_frames()->set_begin(0);
+  query.mutable_query_frames()->set_end(240);
+  const pb::FrameBlock block = ws.ask(query, 5).frames();
+  const int joints = block.joints_size();
+  ASSERT_GT(joints, 0);
+  pb::ClientMessage sub;
+  sub.mutable_subscribe()->set_view_id(view);
+  sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
+  sub.mutable_subscribe()->set_rate_hz(240);
+  sub.mutable_subscribe()->set_max_frames(40);
+  ASSERT_TRUE(ws.ask(sub, 6).has_subscribed());
+  int frames = 0;
+  while (auto m = ws.receive()) {
+    if (m->has_subscription_ended()) break;
+    if (!m->has_frame()) continue;
+    const auto& f = m->frame();
+    ASSERT_EQ(f.positions_f64_size(), joints * 3);
+    const std::size_t at = f.frame_index() * static_cast<std::size_t>(joints) * 3;
+    for (int k = 0; k < joints * 3; ++k) ASSERT_EQ(f.positions_f64(k), block.positions(static_cast<int>(at) + k));
+    ++frames;
+  }
+  EXPECT_EQ(frames, 40);
+}
+
+TEST(WebSocket, SpeaksProtobufsJsonMappingAndRefusesBadJsonWithAReason) {
+  TestServer s(http_config());
+  WsClient ws(s.server.http_port(), "chat, gmr.stream.v1.json");
+  ASSERT_TRUE(ws.open());
+  EXPECT_EQ(ws.chosen_protocol(), "gmr.stream.v1.json");
+  ws.send_text(R"({"requestId": "1", "hello": {"protocolVersion": 1, "clientName": "json"}})");
+  bool text = false;
+  auto reply = ws.receive_raw(&text);
+  ASSERT_TRUE(reply.has_value());
+  EXPECT_TRUE(text);
+  pb::ServerMessage m;
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(*reply, &m).ok()) << *reply;
+  EXPECT_EQ(m.request_id(), 1u);
+  EXPECT_TRUE(m.has_hello());
+
+  for (const std::string& bad : {std::string("{not json"), std::string(R"({"requestId": 2, "noSuchRequest": {}})")}) {
+    ws.send_text(bad);
+    reply = ws.receive_raw();
+    ASSERT_TRUE(reply.has_value());
+    ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(*reply, &m).ok()) << *reply;
+    EXPECT_EQ(m.error().code(), pb::ERROR_CODE_BAD_REQUEST) << bad;
+    EXPECT_NE(m.error().message().find("JSON"), std::string::npos) << m.error().message();
+  }
+  // A refusal comes back in JSON like any reply; binary requests work too.
+  ws.send_text(R"({"requestId": "3", "createView": {"motion": "nope"}})");
+  reply = ws.receive_raw();
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(*reply, &m).ok());
+  EXPECT_EQ(m.error().code(), pb::ERROR_CODE_NOT_FOUND);
+  EXPECT_NE(reply->find("\"ERROR_CODE_NOT_FOUND\""), std::string::npos) << *reply;
+  pb::ClientMessage list;
+  list.set_request_id(4);
+  list.mutable_list_motions();
+  ws.send(list);
+  reply = ws.receive_raw(&text);
+  EXPECT_TRUE(text);
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(*reply, &m).ok());
+  EXPECT_EQ(m.motions().motions_size(), static_cast<int>(test_library().size()));
+}
+
+TEST(WebSocket, UnknownSubprotocolsAndForeignPagesAreRefused) {
+  server::ServerConfig cfg = http_config();
+  cfg.http_allowed_origins = {"http://viewer.example:8080"};
+  TestServer s(cfg);
+  const std::uint16_t port = s.server.http_port();
+  WsClient other(port, "mqtt");
+  EXPECT_FALSE(other.open());
+  EXPECT_EQ(refused_upgrade(port, "mqtt").status, 400u);
+  WsClient foreign(port, "gmr.stream.v1", "http://evil.example");
+  EXPECT_FALSE(foreign.open());
+  const auto refused = refused_upgrade(port, "gmr.stream.v1", "http://evil.example");
+  EXPECT_EQ(refused.status, 403u);
+  EXPECT_NE(refused.body.find("another origin"), std::string::npos) << refused.body;
+  WsClient own(port, "gmr.stream.v1", "http://127.0.0.1:" + std::to_string(port));
+  EXPECT_TRUE(own.open());
+  WsClient allowed(port, "gmr.stream.v1", "http://viewer.example:8080");
+  EXPECT_TRUE(allowed.open());
+  WsClient program(port, "");  // no Origin, no subprotocol: a program, binary
+  EXPECT_TRUE(program.open());
+  EXPECT_TRUE(program.ask(hello(), 1).has_hello());
+}
+
+TEST(WebSocket, HasTheLimitsOfATcpClient) {
+  server::ServerConfig cfg = http_config();
+  cfg.max_message_bytes = 8192;
+  cfg.max_connections = 3;
+  cfg.handshake_timeout = std::chrono::milliseconds(300);
+  TestServer s(cfg);
+  const std::uint16_t port = s.server.http_port();
+
+  // Bytes that are not a ClientMessage: an error reply, the connection stays.
+  WsClient ws(port, "gmr.stream.v1");
+  ASSERT_TRUE(ws.open());
+  ws.send_bytes("\xff\xff\xff not protobuf");
+  auto bad = ws.reply();
+  ASSERT_TRUE(bad.has_value());
+  EXPECT_EQ(bad->error().code(), pb::ERROR_CODE_BAD_REQUEST);
+  EXPECT_TRUE(ws.ask(hello(), 1).has_hello());
+
+  // No Hello in time: closed, as over TCP.
+  WsClient silent(port, "gmr.stream.v1");
+  ASSERT_TRUE(silent.open());
+  EXPECT_TRUE(silent.wait_closed());
+
+  // WebSockets and TCP clients share max_connections.
+  RawConnection tcp_client(s.port());
+  tcp_client.handshake();
+  WsClient third(port, "gmr.stream.v1");
+  ASSERT_TRUE(third.open());
+  const auto fourth = refused_upgrade(port, "gmr.stream.v1");
+  EXPECT_EQ(fourth.status, 503u);
+  EXPECT_NE(fourth.body.find("--max-connections"), std::string::npos) << fourth.body;
+
+  // A message longer than max_message_bytes closes the connection.
+  ws.send_bytes(std::string(9000, 'x'));
+  EXPECT_TRUE(ws.wait_closed());
+}
+
+TEST(WebSocket, AClientThatStopsReadingGetsLatestFramesThenIsClosed) {
+  server::ServerConfig cfg = http_config();
+  cfg.write_timeout = std::chrono::milliseconds(1500);
+  cfg.idle_timeout = std::chrono::seconds(60);
+  cfg.socket_send_buffer = 4096;
+  TestServer s(cfg);
+  WsClient ws(s.server.http_port(), "gmr.stream.v1");
+  ASSERT_TRUE(ws.open());
+  ASSERT_TRUE(ws.ask(hello(), 1).has_hello());
+  pb::ClientMessage create;
+  create.mutable_create_view()->set_motion("walk");
+  const std::uint32_t view = ws.ask(create, 2).view().view_id();
+  pb::ClientMessage sub;
+  sub.mutable_subscribe()->set_view_id(view);
+  sub.mutable_subscribe()->set_loop(true);
+  sub.mutable_subscribe()->set_rate_hz(2000);
+  sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
+  ASSERT_TRUE(ws.ask(sub, 3).has_subscribed());
+  // This client reads nothing more. The server drops frames it cannot
+  // write (bounded memory), then closes the stuck connection.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  std::uint64_t dropped = 0, max_queued = 0;
+  std::size_t connections = 1;
+  while (std::chrono::steady_clock::now() < deadline && connections != 0) {
+    const auto st = s.server.stats();
+    connections = st.connections;
+    for (const auto& session : st.sessions) {
+      dropped = std::max(dropped, session.frames_dropped);
+      max_queued = std::max(max_queued, session.max_queued_bytes);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(connections, 0u) << "the stuck WebSocket was not closed";
+  EXPECT_GT(dropped, 0u);
+  EXPECT_LE(max_queued, cfg.max_frame_bytes_per_connection + (64u << 10));
+}
+
+}  // namespace
+}  // namespace gmr::test
