@@ -3,7 +3,8 @@
 # its headers have no protobuf types), the C ABI (libgmr_client_c.so, its
 # header, a pkg-config file and gmr::client_c), the programs, the Python
 # client (lib/python3/dist-packages/gmr_client, its protocol module
-# generated) and the Blender add-on (share/gmr/blender/gmr_live_link).
+# generated), the Blender add-on (share/gmr/blender/gmr_live_link) and the
+# browser viewer's files (share/gmr/web).
 # Components: gmr, client, client_c, programs, python. find_package(gmr COMPONENTS client
 # client_c) loads the client targets (cmake/gmrConfig.cmake.in).
 include(GNUInstallDirs)
@@ -51,3 +52,8 @@ foreach(program gmr_cli gmr_server_bin gmr_load)
     install(TARGETS ${program} RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT programs)
   endif()
 endforeach()
+# The browser viewer's files, which the installed gmr-server finds beside it
+# (BINDIR/../share/gmr/web); three.js comes from Debian's libjs-three.
+if(TARGET gmr_server_bin)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/server/web/ DESTINATION ${CMAKE_INSTALL_DATADIR}/gmr/web COMPONENT programs)
+endif()

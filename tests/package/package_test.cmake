@@ -48,7 +48,8 @@ if(CLIENT)
        bin/gmr bin/gmr-server bin/gmr-load
        ${INSTALL_LIBDIR}/python3/dist-packages/gmr_client/stream_pb2.py
        ${INSTALL_LIBDIR}/python3/dist-packages/gmr_client/client.py
-       share/gmr/blender/gmr_live_link/__init__.py share/gmr/blender/gmr_live_link/link.py)
+       share/gmr/blender/gmr_live_link/__init__.py share/gmr/blender/gmr_live_link/link.py
+       share/gmr/web/index.html share/gmr/web/viewer.js share/gmr/web/viewer.css)
 else()
   run("install" ${CMAKE_COMMAND} --install ${GMR_BINARY_DIR} --prefix ${prefix} --component gmr)
 endif()
@@ -100,7 +101,7 @@ if(CLIENT)
   # No semicolons: CMake would split the script at them. The server writes to
   # a file, so it never holds execute_process's pipe.
   set(script "
-    '${prefix}/bin/gmr-server' --port 0 --port-file '${WORK_DIR}/port' --log-level warn >'${WORK_DIR}/server.log' 2>&1 &
+    '${prefix}/bin/gmr-server' --port 0 --port-file '${WORK_DIR}/port' >'${WORK_DIR}/server.log' 2>&1 &
     pid=$!
     for i in $(seq 200)
     do
@@ -135,6 +136,11 @@ if(CLIENT)
     endif()
   endif()
   message("${run_output}")
+  # The installed server serves the installed viewer, not the source tree's.
+  file(READ ${WORK_DIR}/server.log server_log)
+  if(NOT server_log MATCHES "viewer: http://127.0.0.1:[0-9]+/ .*files from ${prefix}/share/gmr/web")
+    message(FATAL_ERROR "the installed gmr-server does not serve ${prefix}/share/gmr/web:\n${server_log}")
+  endif()
   foreach(line "client consumer: [0-9]+ motions, 10 frames" "c consumer: frame [0-9]+ of")
     if(NOT run_output MATCHES "${line}")
       message(FATAL_ERROR "clients against the installed server: no '${line}' in\n${run_output}")

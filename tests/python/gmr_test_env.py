@@ -36,17 +36,21 @@ def have_data() -> bool:
 class Server:
     """gmr-server on 127.0.0.1 with any free port, stopped on exit."""
 
-    def __init__(self, bin_dir, *args, library=None):
+    def __init__(self, bin_dir, *args, library=None, http=False):
         self.bin_dir = pathlib.Path(bin_dir)
         self._tmp = tempfile.TemporaryDirectory(prefix="gmr_py_")
         port_file = pathlib.Path(self._tmp.name) / "port"
+        http_port_file = pathlib.Path(self._tmp.name) / "http_port"
         cmd = [str(self.bin_dir / "gmr-server"), "--port", "0", "--port-file", str(port_file), "--log-level", "warn"]
+        # HTTP (the viewer, /metrics) on any free port, or none.
+        cmd += ["--http-port", "0", "--http-port-file", str(http_port_file)] if http else ["--http-port", "-1"]
         if library is not None:
             cmd += ["--library", str(library)]
         cmd += list(args)
         self.process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 60
-        while not port_file.exists() or not port_file.read_text().strip():
+        files = [port_file, http_port_file] if http else [port_file]
+        while not all(f.exists() and f.read_text().strip() for f in files):
             if self.process.poll() is not None:
                 raise RuntimeError(f"gmr-server exited with {self.process.returncode}: {self.process.stderr.read()}")
             if time.monotonic() > deadline:
@@ -54,6 +58,7 @@ class Server:
                 raise RuntimeError("gmr-server did not start listening within 60 s")
             time.sleep(0.02)
         self.port = int(port_file.read_text())
+        self.http_port = int(http_port_file.read_text()) if http else None
 
     def stop(self):
         if self.process.poll() is None:
@@ -114,3 +119,30 @@ def compose_locals(parents, rotations, translations):
             frames[j] = frames[p] @ r
             positions[j] = positions[p] + frames[p] @ translations[j]
     return positions
+
+
+def http_get(port, path, method="GET"):
+    """(status, content type, body) of an HTTP request to a server on 127.0.0.1."""
+    import urllib.error
+    import urllib.request
+    request = urllib.request.Request(f"http://127.0.0.1:{port}{path}", method=method)
+    try:
+        with urllib.request.urlopen(request, timeout=10) as r:
+            return r.status, r.headers.get("Content-Type"), r.read().decode()
+    except urllib.error.HTTPError as e:
+        return e.code, e.headers.get("Content-Type"), e.read().decode()
+
+
+def scrape_metrics(port):
+    """/metrics through the Prometheus client library's own parser: ({(name, ((label, value), ...)): value},
+    {family: type})."""
+    from prometheus_client.parser import text_string_to_metric_families
+    status, content_type, text = http_get(port, "/metrics")
+    assert status == 200, (status, text)
+    assert content_type.startswith("text/plain; version=0.0.4"), content_type
+    samples, types = {}, {}
+    for family in text_string_to_metric_families(text):
+        types[family.name] = family.type
+        for s in family.samples:
+            samples[(s.name, tuple(sorted(s.labels.items())))] = s.value
+    return samples, types

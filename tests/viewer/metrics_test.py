@@ -1,0 +1,132 @@
+"""gmr-server's operator surface scraped as Prometheus would: /metrics parsed
+by the Prometheus client library's own parser (Debian's
+python3-prometheus-client) while TCP and UDP streams flow, /healthz and
+/readyz, the HTTP errors.
+
+  metrics_test.py --bin-dir BUILD/bin --python-dir BUILD/python
+
+Exit 77 (skipped) outside CI when prometheus_client, numpy or protobuf is
+missing; under CI=true that is a failure."""
+
+import argparse
+import pathlib
+import sys
+import time
+import unittest
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "python"))
+import gmr_test_env as env  # noqa: E402
+
+ARGS = None
+
+
+get = env.http_get
+scrape = env.scrape_metrics
+
+
+def value(samples, name, **labels):
+    return samples.get((name, tuple(sorted(labels.items()))))
+
+
+class Metrics(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.server = env.Server(ARGS.bin_dir, http=True)
+        cls.client = gmr_client.Client(port=cls.server.port, name="metrics test")
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.client.close()
+        cls.server.stop()
+
+    def test_health_and_readiness(self):
+        self.assertEqual(get(self.server.http_port, "/healthz")[::2], (200, "ok\n"))
+        status, _, body = get(self.server.http_port, "/readyz")
+        self.assertEqual((status, body), (200, "ready: 4 motions\n"))
+
+    def test_http_errors_say_what(self):
+        port = self.server.http_port
+        self.assertEqual(get(port, "/no-such-file.js")[0], 404)
+        self.assertEqual(get(port, "/metrics", method="POST")[0], 405)
+        status, _, body = get(port, "/ws")
+        self.assertEqual(status, 426)
+        self.assertIn("gmr.stream.v1.json", body)
+
+    def test_counters_move_as_frames_flow(self):
+        c = self.client
+        before, types = scrape(self.server.http_port)
+        for name, kind in [("gmr_frames_sent", "counter"), ("gmr_frames_computed", "counter"),
+                           ("gmr_request_duration_seconds", "histogram"), ("gmr_frame_wait_seconds", "histogram"),
+                           ("gmr_tick_lateness_seconds", "histogram"), ("gmr_connections", "gauge"),
+                           ("gmr_subscriptions", "gauge"), ("gmr_ready", "gauge")]:
+            self.assertEqual(types.get(name), kind, name)
+        self.assertEqual(value(before, "gmr_ready"), 1)
+        self.assertEqual(value(before, "gmr_library_motions"), 4)
+        self.assertGreaterEqual(value(before, "gmr_connections", transport="tcp"), 1)
+
+        tcp = c.subscribe(c.create_view("walk").id, loop=True)
+        udp = c.subscribe(c.create_view("wave").id, loop=True, udp=True)
+        with self.assertRaises(gmr_client.GmrError):
+            c.create_view("no such motion")
+        got = {"tcp": 0, "udp": 0}
+        deadline = time.monotonic() + 10
+        while min(got.values()) < 30:
+            self.assertLess(time.monotonic(), deadline, f"frames received in 10 s: {got}")
+            c.poll(0.05)
+            got["tcp"] += len(tcp.frames())
+            got["udp"] += len(udp.frames())
+        during, _ = scrape(self.server.http_port)
+        self.assertEqual(value(during, "gmr_subscriptions", transport="tcp"), 1)
+        self.assertEqual(value(during, "gmr_subscriptions", transport="udp"), 1)
+        self.assertEqual(value(during, "gmr_views"), 2)
+        self.assertGreaterEqual(value(during, "gmr_streams"), 2)
+        for transport in ("tcp", "udp"):
+            sent = value(during, "gmr_frames_sent_total", transport=transport) - \
+                value(before, "gmr_frames_sent_total", transport=transport)
+            self.assertGreaterEqual(sent, 30, transport)
+        self.assertGreater(value(during, "gmr_frames_computed_total"), value(before, "gmr_frames_computed_total"))
+        self.assertGreater(value(during, "gmr_frames_encoded_total"), value(before, "gmr_frames_encoded_total"))
+        self.assertGreater(value(during, "gmr_bytes_sent_total", transport="tcp"),
+                           value(before, "gmr_bytes_sent_total", transport="tcp"))
+        self.assertEqual((value(during, "gmr_request_errors_total", code="NOT_FOUND") or 0) -
+                         (value(before, "gmr_request_errors_total", code="NOT_FOUND") or 0), 1)
+        self.assertGreaterEqual(value(during, "gmr_requests_total", request="subscribe"), 2)
+        self.assertGreater(value(during, "gmr_request_duration_seconds_count"),
+                           value(before, "gmr_request_duration_seconds_count"))
+        self.assertGreater(value(during, "gmr_tick_lateness_seconds_count"),
+                           value(before, "gmr_tick_lateness_seconds_count") or 0)
+        self.assertGreater(value(during, "gmr_frame_wait_seconds_count", transport="tcp"), 0)
+
+        # Half a second later the counters have moved on, not back.
+        time.sleep(0.5)
+        while tcp.latest() is None:
+            c.poll(0.05)
+        c.poll(0.2)
+        after, _ = scrape(self.server.http_port)
+        for key, v in during.items():
+            if key[0].endswith("_total") or key[0].endswith("_count"):
+                self.assertGreaterEqual(after.get(key, 0), v, key)
+        self.assertGreater(value(after, "gmr_frames_sent_total", transport="tcp"),
+                           value(during, "gmr_frames_sent_total", transport="tcp"))
+        tcp.unsubscribe()
+        udp.unsubscribe()
+        ended, _ = scrape(self.server.http_port)
+        self.assertEqual(value(ended, "gmr_subscriptions", transport="tcp"), 0)
+        self.assertEqual(value(ended, "gmr_subscriptions", transport="udp"), 0)
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--bin-dir", required=True)
+    parser.add_argument("--python-dir", required=True)
+    ARGS, rest = parser.parse_known_args()
+    try:
+        import numpy  # noqa: F401
+        import google.protobuf  # noqa: F401
+        import prometheus_client.parser  # noqa: F401
+    except ImportError as e:
+        env.skip_or_fail(f"{e.name} is missing (scripts/install-deps.sh installs python3-prometheus-client, "
+                         "python3-numpy and python3-protobuf)")
+    sys.path.insert(0, ARGS.python_dir)
+    import gmr_client  # noqa: E402
+    unittest.main(argv=[sys.argv[0]] + rest, verbosity=2)
