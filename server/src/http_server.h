@@ -1,4 +1,4 @@
-// HttpListener: gmr-server's HTTP port (docs/viewer.md, docs/operations.md).
+// HttpListener: gmr-server's HTTP port (docs/viewer.md, docs/monitoring.md).
 // Boost.Beast, on the server's I/O thread:
 //
 //   GET /                 the viewer (index.html, viewer.js, viewer.css from config.web_root)

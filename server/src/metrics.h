@@ -1,4 +1,4 @@
-// Metrics: what gmr-server tells Prometheus on /metrics (docs/operations.md
+// Metrics: what gmr-server tells Prometheus on /metrics (docs/monitoring.md
 // lists every family). Histograms and event counters live in a
 // prometheus-cpp Registry and are updated where things happen; the figures
 // the server keeps anyway (connections, streams, frames per transport) are

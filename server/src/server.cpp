@@ -287,6 +287,12 @@ void Server::start() {
                    "(--tls-cert and --tls-key, docs/security.md)",
                    d.cfg.bind_address, d.cfg.credentials ? " and tokens" : "");
     }
+    if (d.http.port() != 0) {
+      spdlog::warn("the HTTP port {} (viewer, WebSocket, /metrics) listens on {} in plain HTTP: WebSocket "
+                   "tokens and frames cross the network in the clear; put a TLS proxy in front or use "
+                   "--http-port -1 (docs/security.md)",
+                   d.http.port(), d.cfg.bind_address);
+    }
   }
   d.started = true;
   if (d.ready) d.accept_loop();

@@ -68,7 +68,12 @@ class GmrSocket {
 
   async hello() {
     const t0 = Date.now();
-    const reply = await this.ask({ hello: { protocolVersion: PROTOCOL_VERSION, clientName: 'gmr viewer' } });
+    // A token, if the server wants one, comes in the address's fragment
+    // (#token=...), which the browser never sends in an HTTP request.
+    const token = new URLSearchParams(location.hash.slice(1)).get('token');
+    const hello = { protocolVersion: PROTOCOL_VERSION, clientName: 'gmr viewer' };
+    if (token) hello.authToken = token;
+    const reply = await this.ask({ hello });
     const t1 = Date.now();
     if (reply.hello.serverTimeNs) this.clockOffsetMs = Number(reply.hello.serverTimeNs) / 1e6 - (t0 + t1) / 2;
     const every = Math.min(HEARTBEAT_MS, (reply.hello.idleTimeoutMs || 30000) / 3);
@@ -387,7 +392,7 @@ class Viewer {
     $('btn-split').onclick = () => this.edit('split', { joint: this.selected }).catch((e) => this.fail(e));
     $('btn-join').onclick = () => this.edit('join', { root: this.selected }).catch((e) => this.fail(e));
     $('viewpoint').onchange = () => this.setViewpoint($('viewpoint').checked ? this.selected : null).catch((e) => this.fail(e));
-    for (const [key, panel] of Object.entries(this.panels)) {
+    for (const panel of Object.values(this.panels)) {
       // A click (not a drag of the orbit camera) on a joint selects it.
       let down = null;
       panel.canvas.addEventListener('pointerdown', (e) => { down = { x: e.clientX, y: e.clientY }; });
@@ -395,7 +400,6 @@ class Viewer {
         if (!down || Math.hypot(e.clientX - down.x, e.clientY - down.y) > 4) return;
         const joint = panel.pick(e.clientX, e.clientY);
         if (joint) this.select(joint);
-        void key;
       });
     }
   }

@@ -129,10 +129,24 @@ def main():
             s = sample(browser, "world", 5, expected, names, size, "world")
             check(s["roots"] == ["Hips"], f"roots before the click: {s['roots']}")
 
-            # 2. Pause (a real click), click a joint, make it the root.
+            # 2. The transport: a click on the seek bar's middle jumps there, pause stops the frames.
+            frames = len(expected)
+            box = browser.evaluate("(() => { const r = document.getElementById('seek').getBoundingClientRect();"
+                                   " return {x: r.left, y: r.top + r.height / 2, w: r.width}; })()")
+            browser.click(box["x"] + box["w"] * 0.5, box["y"])
+            target = int(browser.evaluate("Number(document.getElementById('seek').value)"))
+            check(abs(target - (frames - 1) / 2) <= frames * 0.05, f"the seek bar's middle is frame {target}")
+            browser.wait_for(f"(f => f >= {target} && f < {target} + 60)(gmrViewer.state().world.frame)", 10,
+                             f"the world panel to jump to frame {target}")
             browser.click_element("#play")
             browser.wait_for("document.getElementById('play').textContent === 'Play'", 10, "pause")
             time.sleep(0.3)
+            paused_at = browser.evaluate("gmrViewer.state().world.frame")
+            time.sleep(0.5)
+            check(browser.evaluate("gmrViewer.state().world.frame") == paused_at, "frames still arrive when paused")
+            print(f"seek to frame {target}: drawn; pause holds frame {paused_at}")
+
+            # 3. Click a joint, make it the root.
             click_joint(browser, "world", PICKED)
             browser.click_element("#btn-shift")
             browser.wait_for(f"JSON.stringify(gmrViewer.state().roots) === '[\"{PICKED}\"]'", 10,
@@ -145,7 +159,7 @@ def main():
                        version=old_version)
             check(s["world"]["version"] != old_version, "the skeleton version did not change with the root")
 
-            # 3. The view from a joint: click it, tick the toggle.
+            # 4. The view from a joint: click it, tick the toggle.
             browser.click_element("#play")
             browser.wait_for("document.getElementById('play').textContent === 'Play'", 10, "pause")
             time.sleep(0.3)
@@ -162,7 +176,7 @@ def main():
             check(s["world"]["frame"] is not None and s["figures"]["fps"] > 0, f"live figures: {s['figures']}")
             check(not s["errors"], f"the page reported errors: {s['errors']}")
 
-            # 4. Something is drawn, and a screenshot shows it.
+            # 5. Something is drawn, and a screenshot shows it.
             time.sleep(1.2)  # a second of figures on screen
             world_pixels = non_background_pixels(browser, "world-canvas")
             joint_pixels = non_background_pixels(browser, "joint-canvas")
@@ -173,7 +187,7 @@ def main():
             browser.screenshot(shot)
             check(shot.stat().st_size > 10000, f"the screenshot {shot} is {shot.stat().st_size} bytes")
             print(f"screenshot: {shot}")
-            # 5. The page's traffic, as /metrics reports it.
+            # 6. The page's traffic, as /metrics reports it.
             samples, _ = env.scrape_metrics(server.http_port)
             ws = (("transport", "websocket"),)
             check(samples.get(("gmr_connections", ws)) == 1, "gmr_connections{transport=websocket} is not 1")

@@ -17,7 +17,7 @@ struct ServerConfig {
   std::uint16_t port = 0;                  // TCP; 0 picks a free port (read it back with Server::tcp_port)
   int udp_port = -1;                       // -1: the TCP port number (any free port when port is 0); 0: any free port
   std::string server_name = "gmr-server";
-  // HTTP (docs/viewer.md, docs/operations.md): the browser viewer, its
+  // HTTP (docs/viewer.md, docs/monitoring.md): the browser viewer, its
   // WebSocket, /metrics, /healthz and /readyz on a port of their own, on
   // bind_address. -1: no HTTP; 0: any free port (read it back with
   // Server::http_port).

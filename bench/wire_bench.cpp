@@ -1,0 +1,93 @@
+// What a pushed frame costs on the wire side, per transport's encoding: the
+// shared binary body (once per stream and tick), the per-subscriber head, and
+// the conversion to protobuf's JSON mapping that a WebSocket JSON subscriber
+// (the browser viewer) costs per frame (docs/protocol.md, "WebSocket"): by
+// protobuf's MessageToJsonString, and by the server's frame_to_json.
+// A frame of 38 joints (CMU's BVH skeleton with its end sites), float64.
+#include <benchmark/benchmark.h>
+#include <google/protobuf/util/json_util.h>
+
+#include <random>
+#include <vector>
+
+#include "gmr/wire/frames.h"
+#ifdef GMR_HAVE_SERVER
+#include "ws_connection.h"
+#endif
+
+namespace gmr::bench {
+namespace {
+
+constexpr std::size_t kJoints = 38;
+
+std::vector<double> positions() {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> d(-100.0, 100.0);
+  std::vector<double> p(kJoints * 3);
+  for (auto& v : p) v = d(rng);
+  return p;
+}
+
+std::string body() {
+  static const std::vector<double> p = positions();
+  wire::FrameContent c;
+  c.float64 = true;
+  c.skeleton_version = 3;
+  c.frame_index = 1234;
+  c.motion_time = 10.28;
+  c.sequence = 99999;
+  c.server_send_time_ns = 1795000000000000000;
+  c.positions_f64 = p;
+  return wire::encode_frame_body(c);
+}
+
+void BM_EncodeBody(benchmark::State& state) {
+  for (auto _ : state) benchmark::DoNotOptimize(body());
+}
+BENCHMARK(BM_EncodeBody)->Name("frame/encode_body_f64");
+
+void BM_Head(benchmark::State& state) {
+  const std::string b = body();
+  for (auto _ : state) benchmark::DoNotOptimize(wire::frame_head_for(1, 2, 3, b.size(), false));
+}
+BENCHMARK(BM_Head)->Name("frame/subscriber_head");
+
+void BM_ToJson(benchmark::State& state) {
+  const std::string message = wire::frame_message_for(1, 2, 3, body());
+  google::protobuf::util::JsonPrintOptions options;
+  std::size_t bytes = 0;
+  for (auto _ : state) {
+    ::gmr::stream::v1::ServerMessage m;
+    m.ParseFromString(message);
+    std::string json;
+    (void)google::protobuf::util::MessageToJsonString(m, &json, options);
+    bytes = json.size();
+    benchmark::DoNotOptimize(json);
+  }
+  state.counters["binary_bytes"] = static_cast<double>(message.size());
+  state.counters["json_bytes"] = static_cast<double>(bytes);
+}
+BENCHMARK(BM_ToJson)->Name("frame/protobuf_json");
+
+#ifdef GMR_HAVE_SERVER
+// What the WebSocket actually does per JSON subscriber and frame: parse the
+// binary message, write the mapping by hand.
+void BM_FastJson(benchmark::State& state) {
+  const std::string message = wire::frame_message_for(1, 2, 3, body());
+  std::size_t bytes = 0;
+  for (auto _ : state) {
+    ::gmr::stream::v1::ServerMessage m;
+    m.ParseFromString(message);
+    std::string json = server::frame_to_json(m);
+    bytes = json.size();
+    benchmark::DoNotOptimize(json);
+  }
+  state.counters["json_bytes"] = static_cast<double>(bytes);
+}
+BENCHMARK(BM_FastJson)->Name("frame/websocket_json");
+#endif
+
+}  // namespace
+}  // namespace gmr::bench
+
+BENCHMARK_MAIN();
