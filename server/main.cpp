@@ -38,7 +38,7 @@ std::string default_web_root() {
 
 int main(int argc, char** argv) {
   using namespace gmr::server;
-  CLI::App app{"gmr-server: streams GMR motions over TCP and UDP"};
+  CLI::App app{"gmr-server: streams GMR motions over TCP, UDP and WebSocket, with a browser viewer and /metrics on HTTP"};
   ServerConfig cfg;
   cfg.port = 7400;  // the port the gmr command, gmr-load and docker/ expect by default
   std::string library_dir;
@@ -159,7 +159,7 @@ int main(int argc, char** argv) {
   }
   if (cfg.max_message_bytes < 4096 || cfg.max_connections == 0 || cfg.max_views_per_connection == 0 ||
       cfg.max_subscriptions_per_connection == 0 || cfg.frames_per_subscription == 0 ||
-      cfg.max_pending_handshakes == 0) {
+      cfg.max_pending_handshakes == 0 || cfg.max_http_sessions == 0) {
     std::fprintf(stderr, "gmr-server: --max-message-bytes must be at least 4096 and the other limits at least 1\n");
     return 1;
   }

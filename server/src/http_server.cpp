@@ -116,9 +116,10 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
         return;
       }
       // A request that does not parse, or passes a bound: say which, then close.
-      const bool too_large = ec == http::error::header_limit || ec == http::error::body_limit;
-      respond(text_response(too_large ? http::status::request_header_fields_too_large : http::status::bad_request, 11,
-                            false, "bad HTTP request: " + ec.message() + "\n"));
+      const http::status status = ec == http::error::header_limit ? http::status::request_header_fields_too_large
+                                  : ec == http::error::body_limit   ? http::status::payload_too_large
+                                                                    : http::status::bad_request;
+      respond(text_response(status, 11, false, "bad HTTP request: " + ec.message() + "\n"));
       return;
     }
     Request req = parser_->release();

@@ -118,15 +118,7 @@ std::string Metrics::text(Server::Impl& s) const {
     if (!c) continue;
     const std::string transport = c->transport();
     ++open[transport];
-    const ConnectionCounters k = c->counters();
-    auto& t = totals[transport];
-    t.frames_sent += k.frames_sent;
-    t.frames_dropped += k.frames_dropped;
-    t.frames_stale += k.frames_stale;
-    t.udp_frames_sent += k.udp_frames_sent;
-    t.udp_frames_dropped += k.udp_frames_dropped;
-    t.bytes_sent += k.bytes_sent;
-    t.bytes_received += k.bytes_received;
+    totals[transport].add_totals(c->counters());
     if (auto h = entry.handler.lock()) {
       views += h->view_count();
       const auto [stream_subs, udp_subs] = h->subscription_count();

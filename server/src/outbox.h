@@ -21,6 +21,18 @@ struct ConnectionCounters {
   std::uint64_t bytes_received = 0;    // read from it
   std::uint64_t queued_bytes = 0;      // replies and frames waiting or being written
   std::uint64_t max_queued_bytes = 0;  // high-water mark
+
+  // Adds another connection's totals (the gauges, queued bytes, stay).
+  void add_totals(const ConnectionCounters& k) {
+    frames_sent += k.frames_sent;
+    frames_dropped += k.frames_dropped;
+    frames_skipped += k.frames_skipped;
+    frames_stale += k.frames_stale;
+    udp_frames_sent += k.udp_frames_sent;
+    udp_frames_dropped += k.udp_frames_dropped;
+    bytes_sent += k.bytes_sent;
+    bytes_received += k.bytes_received;
+  }
 };
 
 class Outbox {

@@ -64,17 +64,7 @@ std::shared_ptr<const CompiledForm> Server::Impl::compiled_form(std::size_t entr
 void Server::Impl::connection_closed(std::uint64_t id) {
   auto it = connections.find(id);
   if (it == connections.end()) return;
-  if (auto c = it->second.connection.lock()) {
-    const ConnectionCounters k = c->counters();
-    auto& t = closed_counters[c->transport()];
-    t.frames_sent += k.frames_sent;
-    t.frames_dropped += k.frames_dropped;
-    t.frames_stale += k.frames_stale;
-    t.udp_frames_sent += k.udp_frames_sent;
-    t.udp_frames_dropped += k.udp_frames_dropped;
-    t.bytes_sent += k.bytes_sent;
-    t.bytes_received += k.bytes_received;
-  }
+  if (auto c = it->second.connection.lock()) closed_counters[c->transport()].add_totals(c->counters());
   if (auto n = per_address.find(it->second.address); n != per_address.end() && --n->second == 0) per_address.erase(n);
   connections.erase(it);
   pending_hello.erase(id);

@@ -1,10 +1,11 @@
 // Private to the server: what the listener, the request handlers and the
 // streams share. Touched only on the I/O thread.
 //
-//   Listener --accept--> Connection (transport) --bodies--> RequestHandler (views, subscriptions)
-//                                                                 |  subscribe / edit
+//   Listener --accept--> Connection (TCP) ------+
+//   HttpListener --/ws--> WsConnection (WebSocket) --bodies--> RequestHandler (views, subscriptions)
+//     /metrics: Metrics, read from here                           |  subscribe / edit
 //                                                                 v
-//   UdpPublisher <--UdpTarget-- Stream (one FK + one encoding per tick) --TcpTarget--> Connection
+//   UdpPublisher <--UdpTarget-- Stream (one FK + one encoding per tick) --TcpTarget--> Connection or WsConnection
 //                                 ^ kept and shared by StreamRegistry
 #pragma once
 

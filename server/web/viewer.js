@@ -328,7 +328,15 @@ class Viewer {
 
   async start() {
     this.socket.onPush = (m) => this.push(m);
-    this.socket.onClose = (e) => this.status(`disconnected (${e.code}${e.reason ? ': ' + e.reason : ''})`, 'bad');
+    // The server went away (a restart, a stop): say so, and try again until it is back.
+    // (A connection refused at Hello, a bad token say, stays refused: its error shows.)
+    this.socket.onClose = (e) => {
+      const was = this.connected;
+      this.connected = false;
+      const why = `disconnected (${e.code}${e.reason ? ': ' + e.reason : ''})`;
+      this.status(was ? `${why}; retrying in 3 s` : why, 'bad');
+      if (was) setTimeout(() => location.reload(), 3000);
+    };
     try {
       await this.socket.open();
       const hello = await this.socket.hello();

@@ -252,6 +252,8 @@ TEST(Http, ServesItsFilesAndSaysWhatIsWrongWithABadRequest) {
   // Headers past 8 KiB, and bytes that are not HTTP.
   const std::string huge = "GET / HTTP/1.1\r\nHost: x\r\nX-Pad: " + std::string(10000, 'a') + "\r\n\r\n";
   EXPECT_EQ(http_request(port, http::verb::get, "/", huge).status, 431u);
+  const std::string with_body = "POST / HTTP/1.1\r\nHost: x\r\nContent-Length: 5\r\n\r\nhello";
+  EXPECT_EQ(http_request(port, http::verb::post, "/", with_body).status, 413u);
   const auto garbage = http_request(port, http::verb::get, "/", "\x16\x03\x01 not http\r\n\r\n");
   EXPECT_EQ(garbage.status, 400u);
   EXPECT_NE(garbage.body.find("bad HTTP request"), std::string::npos);

@@ -173,11 +173,12 @@ def main():
             s = sample(browser, "joint", 5, seen_from, seen_names, size, f"seen from {VIEWPOINT}")
             head = s["joint"]["joints"][VIEWPOINT]
             check(max(abs(v) for v in head) <= 1e-4 * size, f"{VIEWPOINT} seen from itself is at {head}")
-            check(s["world"]["frame"] is not None and s["figures"]["fps"] > 0, f"live figures: {s['figures']}")
             check(not s["errors"], f"the page reported errors: {s['errors']}")
 
             # 5. Something is drawn, and a screenshot shows it.
-            time.sleep(1.2)  # a second of figures on screen
+            time.sleep(2.2)  # a whole second of figures on screen
+            figures = browser.evaluate("gmrViewer.state().figures")
+            check(figures["fps"] > 60, f"live figures: {figures} (the motion plays at 120 Hz)")
             world_pixels = non_background_pixels(browser, "world-canvas")
             joint_pixels = non_background_pixels(browser, "joint-canvas")
             print(f"non-background pixels: world {world_pixels}, from the joint {joint_pixels}")

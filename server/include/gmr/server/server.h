@@ -1,7 +1,9 @@
 // The streaming server: a TCP listener for requests and pushed frames, a UDP
-// socket for registered endpoints, and the library it serves.
+// socket for registered endpoints, an HTTP port (the browser viewer, the same
+// protocol over WebSocket, /metrics, /healthz, /readyz), and the library it
+// serves.
 //
-//   client --TCP--> Connection --bodies--> RequestHandler --edits--> View (per connection)
+//   client --TCP or WebSocket--> Connection --bodies--> RequestHandler --edits--> View (per connection)
 //                      ^                        | subscribe
 //                      | frames (TcpTarget)     v
 //                   Stream (one FK + one encoding per tick) --UdpTarget--> UdpPublisher --> registered endpoint
