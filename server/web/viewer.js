@@ -16,6 +16,7 @@ import { OrbitControls } from '/three/examples/jsm/controls/OrbitControls.js';
 
 const PROTOCOL_VERSION = 1;
 const HEARTBEAT_MS = 2000;
+const STALENESS_MS = 250;  // frames older than this are neither sent (the server's bound) nor drawn
 const $ = (id) => document.getElementById(id);
 
 // ------------------------------------------------------------------ protocol
@@ -320,7 +321,7 @@ class Viewer {
     this.viewpoint = null;   // the joint the right panel is seen from
     this.playing = true;
     this.motion = null;
-    this.figures = { frames: 0, windowStart: performance.now(), fps: 0, latencies: [], drops: 0, lastSeq: new Map() };
+    this.figures = { frames: 0, windowStart: performance.now(), fps: 0, latencies: [], drops: 0, stale: 0, lastSeq: new Map() };
     this.motions = [];
     this.errors = [];
     this.connected = false;
@@ -446,7 +447,7 @@ class Viewer {
       loop: $('loop').checked,
       speed: Number($('speed').value),
       precision: 'PRECISION_FLOAT64',
-      maxStalenessMs: 250,
+      maxStalenessMs: STALENESS_MS,
     } });
     const sub = reply.subscribed;
     this.subs[key] = sub;
@@ -592,18 +593,23 @@ class Viewer {
     const panel = this.panels[key];
     if ((f.skeletonVersion || 0) !== panel.version) return;  // its SkeletonChanged comes first
     const frame = Number(f.frameIndex || 0);
-    panel.setFrame(f.positionsF64 || f.positions || [], frame);
+    const latency = f.serverSendTimeNs ? Date.now() - (Number(f.serverSendTimeNs) / 1e6 - this.socket.clockOffsetMs) : 0;
+    // A page that fell behind (a busy tab) skips what waited past the
+    // staleness bound, as the other clients do, and so catches up.
+    const stale = latency > STALENESS_MS;
+    if (!stale) panel.setFrame(f.positionsF64 || f.positions || [], frame);
     if (key !== 'world') return;
     const seq = Number(f.sequence || 0);
     const last = this.figures.lastSeq.get(f.subscriptionId);
     if (last !== undefined && seq > last + 1) this.figures.drops += seq - last - 1;
     this.figures.lastSeq.set(f.subscriptionId, seq);
     this.figures.frames++;
+    if (stale) this.figures.stale++;
     if (f.serverSendTimeNs) {
-      const latency = Date.now() - (Number(f.serverSendTimeNs) / 1e6 - this.socket.clockOffsetMs);
       this.figures.latencies.push(latency);
       if (this.figures.latencies.length > 120) this.figures.latencies.shift();
     }
+    if (stale) return;
     if (document.activeElement !== $('seek')) $('seek').value = String(frame);
     $('frame-label').textContent = this.frameLabel(frame);
     $('fig-frame').textContent = String(frame);
@@ -621,6 +627,7 @@ class Viewer {
     const sorted = [...f.latencies].sort((a, b) => a - b);
     $('fig-latency').textContent = sorted.length ? `${sorted[Math.floor(sorted.length / 2)].toFixed(1)} ms (median)` : '–';
     $('fig-drops').textContent = String(f.drops);
+    $('fig-stale').textContent = String(f.stale);
   }
 }
 
@@ -642,7 +649,7 @@ window.gmrViewer = {
       selected: viewer.selected,
       viewpoint: viewer.viewpoint,
       roots: viewer.views.world ? viewer.views.world.skeleton.joints.map(jointOf).filter((j) => j.parent < 0).map((j) => j.name) : [],
-      figures: { fps: viewer.figures.fps, drops: viewer.figures.drops },
+      figures: { fps: viewer.figures.fps, drops: viewer.figures.drops, stale: viewer.figures.stale },
       world: viewer.panels.world.drawn(),
       joint: viewer.panels.joint.drawn(),
     };
