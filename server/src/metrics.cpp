@@ -135,7 +135,7 @@ std::string Metrics::text(Server::Impl& s) const {
     f.add("gmr_connections_accepted_total", "Client connections accepted", T::Counter,
           it == s.accepted.end() ? 0.0 : static_cast<double>(it->second), {{"transport", transport}});
   }
-  f.add("gmr_connections_refused_total", "Connections refused (limits, or not ready)", T::Counter,
+  f.add("gmr_connections_refused_total", "Connections refused for a connection limit (TCP and WebSocket)", T::Counter,
         static_cast<double>(s.connections_refused));
   f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter, static_cast<double>(s.auth_refused));
   f.add("gmr_views", "Views clients hold", T::Gauge, static_cast<double>(views));
