@@ -63,16 +63,12 @@ Connection::~Connection() {
 }
 
 void Connection::account() {
-  if (budget_ == nullptr) return;
-  const std::uint64_t now = queued_bytes() + body_.size();
-  budget_->held = budget_->held - accounted_ + now;
-  budget_->max_held = std::max(budget_->max_held, budget_->held);
-  accounted_ = now;
+  if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + body_.size());
 }
 
 bool Connection::may_read() const {
   return reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
-         !(budget_ != nullptr && budget_->over() && accounted_ > budget_->fair_share);
+         (budget_ == nullptr || budget_->allows_reading(accounted_));
 }
 
 void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std::uint64_t)> on_closed) {

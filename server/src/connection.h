@@ -20,6 +20,7 @@
 // handshake comes before the first read. Everything runs on the I/O thread.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <deque>
 #include <functional>
@@ -50,6 +51,14 @@ struct BufferBudget {
   // everyone out).
   std::uint64_t fair_share = 0;
   bool over() const { return limit != 0 && held > limit; }
+  // A connection that counted `accounted` bytes now holds `now`.
+  void settle(std::uint64_t& accounted, std::uint64_t now) {
+    held = held - accounted + now;
+    max_held = std::max(max_held, held);
+    accounted = now;
+  }
+  // Whether a connection holding `accounted` bytes may be read.
+  bool allows_reading(std::uint64_t accounted) const { return !(over() && accounted > fair_share); }
 };
 
 struct ConnectionLimits {
