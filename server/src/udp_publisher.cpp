@@ -2,8 +2,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include <netinet/udp.h>
 #include <sys/random.h>
+#include <sys/socket.h>
 
+#include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
@@ -26,6 +30,8 @@ void UdpPublisher::open(const net::ip::address& address, std::uint16_t port) {
                              ec.message());
   }
   port_ = socket_.local_endpoint().port();
+  // Reads past the first datagram of a pass (receive()) must not block.
+  socket_.non_blocking(true, ec);
 }
 
 void UdpPublisher::start() { receive(); }
@@ -81,23 +87,149 @@ UdpPublisher::Session* UdpPublisher::find(const wire::UdpToken& token) {
   return &it->second;
 }
 
+#ifndef UDP_SEGMENT
+#define UDP_SEGMENT 103  // linux/udp.h, for C libraries that predate it
+#endif
+
+namespace {
+
+// UDP GSO limits: at most 64 segments, and the whole message within one
+// IP datagram's 64 KiB.
+constexpr std::size_t kMaxGsoSegments = std::min<std::size_t>(64, 65000 / wire::kMaxDatagramBytes);
+// Entries per sendmmsg call (the kernel caps a call at UIO_MAXIOV, 1024).
+constexpr std::size_t kSendBatch = 256;
+// Datagrams read per pass of the event loop.
+constexpr int kReceiveBatch = 64;
+
+}  // namespace
+
 bool UdpPublisher::send(const std::shared_ptr<Registration>& to, std::string_view message) {
   if (closed_ || !to->endpoint) return false;
-  auto datagrams = wire::fragment_message(to->next_message_id++, message);
-  if (to->in_flight + datagrams.size() > max_in_flight_) return false;
-  for (auto& d : datagrams) {
-    auto held = std::make_shared<const std::string>(std::move(d));
-    ++to->in_flight;
-    socket_.async_send_to(net::buffer(*held), *to->endpoint,
-                          [to, held](const boost::system::error_code&, std::size_t) { --to->in_flight; });
+  const std::size_t count =
+      std::max<std::size_t>(1, (message.size() + wire::kMaxFragmentPayload - 1) / wire::kMaxFragmentPayload);
+  if (to->in_flight + count > max_in_flight_) return false;
+  std::size_t at = batch_bytes_.size();
+  const std::size_t appended = wire::append_fragments(batch_bytes_, to->next_message_id++, message);
+  const std::size_t end = batch_bytes_.size();
+  // Without GSO every datagram is its own entry; with it, runs of up to
+  // kMaxGsoSegments share one.
+  const std::size_t per_entry = gso_ ? kMaxGsoSegments : 1;
+  for (std::size_t done = 0; done < appended;) {
+    const std::size_t n = std::min(per_entry, appended - done);
+    const std::size_t bytes = std::min(n * wire::kMaxDatagramBytes, end - at);
+    batch_.push_back(Batched{at, bytes, n, *to->endpoint, to});
+    at += bytes;
+    done += n;
+  }
+  to->in_flight += appended;
+  if (!flush_posted_ && !awaiting_writable_) {
+    flush_posted_ = true;
+    net::post(socket_.get_executor(), [this] {
+      flush_posted_ = false;
+      flush();
+    });
   }
   return true;
+}
+
+void UdpPublisher::release(std::size_t first) {
+  for (std::size_t i = first; i < batch_.size(); ++i) batch_[i].registration->in_flight -= batch_[i].count;
+}
+
+void UdpPublisher::flush() {
+  if (closed_) {
+    release(batch_sent_);
+    batch_.clear();
+    batch_bytes_.clear();
+    batch_sent_ = 0;
+    return;
+  }
+  std::array<mmsghdr, kSendBatch> msgs;
+  std::array<iovec, kSendBatch> iovs;
+  alignas(cmsghdr) std::array<char, kSendBatch * CMSG_SPACE(sizeof(std::uint16_t))> controls;
+  const int fd = socket_.native_handle();
+  while (batch_sent_ < batch_.size()) {
+    const std::size_t n = std::min(kSendBatch, batch_.size() - batch_sent_);
+    for (std::size_t i = 0; i < n; ++i) {
+      Batched& b = batch_[batch_sent_ + i];
+      iovs[i] = iovec{batch_bytes_.data() + b.offset, b.bytes};
+      msghdr& h = msgs[i].msg_hdr;
+      h = msghdr{};
+      h.msg_name = b.to.data();
+      h.msg_namelen = static_cast<socklen_t>(b.to.size());
+      h.msg_iov = &iovs[i];
+      h.msg_iovlen = 1;
+      if (b.count > 1) {
+        char* control = controls.data() + i * CMSG_SPACE(sizeof(std::uint16_t));
+        h.msg_control = control;
+        h.msg_controllen = CMSG_SPACE(sizeof(std::uint16_t));
+        cmsghdr* c = CMSG_FIRSTHDR(&h);
+        c->cmsg_level = SOL_UDP;
+        c->cmsg_type = UDP_SEGMENT;
+        c->cmsg_len = CMSG_LEN(sizeof(std::uint16_t));
+        const auto segment = static_cast<std::uint16_t>(wire::kMaxDatagramBytes);
+        std::memcpy(CMSG_DATA(c), &segment, sizeof segment);
+      }
+    }
+    const int sent = ::sendmmsg(fd, msgs.data(), static_cast<unsigned>(n), MSG_DONTWAIT);
+    ++send_calls_;
+    if (sent > 0) {
+      for (int i = 0; i < sent; ++i) {
+        Batched& b = batch_[batch_sent_ + static_cast<std::size_t>(i)];
+        b.registration->in_flight -= b.count;
+        datagrams_sent_ += b.count;
+      }
+      batch_sent_ += static_cast<std::size_t>(sent);
+      continue;
+    }
+    const int err = sent < 0 ? errno : EAGAIN;
+    if (err == EINTR) continue;
+    if (err == EAGAIN || err == EWOULDBLOCK || err == ENOBUFS) {
+      // The socket buffer is full: the rest goes when the kernel has room.
+      awaiting_writable_ = true;
+      socket_.async_wait(udp::socket::wait_write, [this](const boost::system::error_code& ec) {
+        awaiting_writable_ = false;
+        if (ec == net::error::operation_aborted) closed_ = true;
+        flush();
+      });
+      return;
+    }
+    // The first entry failed on its own (an address the kernel will not send
+    // to, or a GSO message the device cannot segment): it is lost, as any
+    // datagram may be, and the rest still go.
+    Batched& b = batch_[batch_sent_];
+    if (b.count > 1 && (err == EIO || err == EINVAL || err == ENOPROTOOPT)) {
+      if (gso_) {
+        gso_ = false;
+        spdlog::warn("UDP: the kernel refuses GSO messages ({}); sending each datagram on its own from now on",
+                     std::strerror(err));
+      }
+    } else if (rejected_sends_++ % 1000 == 0) {
+      spdlog::warn("UDP: cannot send {} bytes to {}:{}: {} ({} so far)", b.bytes, b.to.address().to_string(),
+                   b.to.port(), std::strerror(err), rejected_sends_);
+    }
+    b.registration->in_flight -= b.count;
+    ++batch_sent_;
+  }
+  batch_.clear();
+  batch_bytes_.clear();
+  batch_sent_ = 0;
+  if (batch_bytes_.capacity() > (std::size_t{4} << 20)) batch_bytes_.shrink_to_fit();
 }
 
 void UdpPublisher::receive() {
   socket_.async_receive_from(net::buffer(buffer_), sender_, [this](const boost::system::error_code& ec, std::size_t n) {
     if (ec == net::error::operation_aborted || closed_) return;
     if (!ec) handle(std::string_view(buffer_.data(), n));
+    // Whatever else is waiting, now: a server busy fanning frames out runs
+    // this handler once per pass of its event loop, and registrations
+    // arriving faster than that would otherwise time out in the queue.
+    for (int more = 0; more < kReceiveBatch && !closed_; ++more) {
+      boost::system::error_code again;
+      const std::size_t m = socket_.receive_from(net::buffer(buffer_), sender_, 0, again);
+      if (again) break;
+      handle(std::string_view(buffer_.data(), m));
+    }
     receive();
   });
 }

@@ -3,6 +3,12 @@
 // to receive that session's frames by echoing a challenge sent there) and
 // sends frames as fragments (gmr/wire/udp.h), with a bound on the datagrams
 // in flight per registration. Tokens are 128 bits from getrandom(2).
+//
+// Frames are not sent one syscall each: send() appends a frame's fragments to
+// a batch, and the batch goes out after the handlers already due have run
+// (so one tick's fan-out is one batch) with sendmmsg(2), a frame's fragments
+// as one UDP GSO message (UDP_SEGMENT) where the kernel takes it. A full
+// socket buffer parks the batch until the socket is writable.
 #pragma once
 
 #include <array>
@@ -11,7 +17,9 @@
 #include <functional>
 #include <optional>
 #include <string_view>
+#include <string>
 #include <unordered_map>
+#include <vector>
 
 #include "gmr/wire/udp.h"
 #include "net.h"
@@ -23,7 +31,7 @@ class UdpPublisher {
   // Where one session's UDP frames go, once registered.
   struct Registration {
     std::optional<udp::endpoint> endpoint;
-    std::size_t in_flight = 0;          // datagrams handed to the kernel, not yet sent
+    std::size_t in_flight = 0;          // datagrams batched, not yet handed to the kernel
     std::uint32_t next_message_id = 0;  // fragments of one message share an id
   };
   using OnRegister = std::function<void(const udp::endpoint&)>;
@@ -49,6 +57,11 @@ class UdpPublisher {
   // datagrams in flight.
   bool send(const std::shared_ptr<Registration>& to, std::string_view message);
 
+  // sendmmsg calls made, and the datagrams they carried (a GSO message
+  // counts its segments).
+  std::uint64_t send_calls() const { return send_calls_; }
+  std::uint64_t datagrams_sent() const { return datagrams_sent_; }
+
   // Datagrams that were not a valid registration or confirm.
   std::uint64_t rejected() const { return rejected_; }
   // Challenges sent (one per valid registration datagram).
@@ -61,6 +74,18 @@ class UdpPublisher {
     std::optional<udp::endpoint> challenged;  // the address a challenge went to, awaiting its confirm
     wire::UdpToken cookie{};
   };
+  // Consecutive fragments of one frame to one address: one sendmmsg entry
+  // (a GSO message when `count` > 1).
+  struct Batched {
+    std::size_t offset = 0;  // into batch_bytes_
+    std::size_t bytes = 0;
+    std::size_t count = 0;   // datagrams
+    udp::endpoint to;
+    std::shared_ptr<Registration> registration;
+  };
+  void flush();
+  // Gives the entries from `first` on back to their registrations, unsent.
+  void release(std::size_t first);
   void receive();
   void handle(std::string_view datagram);
   // The live session holding `token` (constant-time compare), or null.
@@ -75,6 +100,16 @@ class UdpPublisher {
   udp::endpoint sender_;
   std::uint64_t rejected_ = 0;
   std::uint64_t challenges_ = 0;
+  std::uint64_t rejected_sends_ = 0;
+
+  std::string batch_bytes_;
+  std::vector<Batched> batch_;
+  std::size_t batch_sent_ = 0;  // entries of batch_ already handed to the kernel
+  bool flush_posted_ = false;
+  bool awaiting_writable_ = false;
+  bool gso_ = true;  // until the kernel refuses a GSO message
+  std::uint64_t send_calls_ = 0;
+  std::uint64_t datagrams_sent_ = 0;
 };
 
 }  // namespace gmr::server

@@ -84,22 +84,26 @@ bool same_token(const UdpToken& a, const UdpToken& b) {
   return diff == 0;
 }
 
-std::vector<std::string> fragment_message(std::uint32_t message_id, std::string_view message) {
+std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view message) {
   const std::size_t count = std::max<std::size_t>(1, (message.size() + kMaxFragmentPayload - 1) / kMaxFragmentPayload);
+  out.reserve(out.size() + count * kFragmentHeaderBytes + message.size());
+  for (std::size_t i = 0; i < count; ++i) {
+    put_header(out, DatagramKind::kFragment);
+    put_be(out, message_id);
+    put_be(out, static_cast<std::uint16_t>(i));
+    put_be(out, static_cast<std::uint16_t>(count));
+    put_be(out, static_cast<std::uint32_t>(message.size()));
+    out.append(message.substr(std::min(message.size(), i * kMaxFragmentPayload), kMaxFragmentPayload));
+  }
+  return count;
+}
+
+std::vector<std::string> fragment_message(std::uint32_t message_id, std::string_view message) {
+  std::string all;
+  const std::size_t count = append_fragments(all, message_id, message);
   std::vector<std::string> out;
   out.reserve(count);
-  for (std::size_t i = 0; i < count; ++i) {
-    const std::string_view part = message.substr(std::min(message.size(), i * kMaxFragmentPayload), kMaxFragmentPayload);
-    std::string d;
-    d.reserve(kFragmentHeaderBytes + part.size());
-    put_header(d, DatagramKind::kFragment);
-    put_be(d, message_id);
-    put_be(d, static_cast<std::uint16_t>(i));
-    put_be(d, static_cast<std::uint16_t>(count));
-    put_be(d, static_cast<std::uint32_t>(message.size()));
-    d.append(part);
-    out.push_back(std::move(d));
-  }
+  for (std::size_t i = 0; i < count; ++i) out.push_back(all.substr(i * kMaxDatagramBytes, kMaxDatagramBytes));
   return out;
 }
 

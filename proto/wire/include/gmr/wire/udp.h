@@ -68,6 +68,10 @@ bool same_token(const UdpToken& a, const UdpToken& b);
 // Splits `message` into datagrams (at least one, even for an empty message).
 // Requires message.size() <= kMaxUdpMessageBytes.
 std::vector<std::string> fragment_message(std::uint32_t message_id, std::string_view message);
+// The same datagrams appended back to back to `out`, for a sender that
+// batches them: every one but the last is exactly kMaxDatagramBytes long.
+// Returns how many there are.
+std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view message);
 
 // Rebuilds messages from fragments that may arrive late, twice, out of order
 // or not at all. Keeps at most kMaxPartial messages in progress; starting one
