@@ -3,10 +3,11 @@
 #   make test   installs what is missing, builds, and runs every test
 BUILD ?= build
 ASAN_BUILD ?= build-sanitize
+TSAN_BUILD ?= build-tsan
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: setup configure build run test test-unit test-sanitize fuzz clean
+.PHONY: setup configure build run test test-unit test-sanitize test-tsan fuzz clean
 
 setup:
 	@scripts/install-deps.sh
@@ -34,13 +35,22 @@ test-sanitize: setup
 	@cmake --build $(ASAN_BUILD) -j $(JOBS) --target gmr_sanitize_tests
 	@cd $(ASAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize
 
+# The server and client tests (the server's thread, the clients' shared
+# EventLoop threads, 1,000 subscribers across them) under ThreadSanitizer; a
+# race fails the test (TSan's exit code). Only gmr_net_tests is built here.
+test-tsan: setup
+	@cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DGMR_TSAN=ON \
+	  -DCMAKE_CXX_COMPILER=clang++ -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_NET=ON >/dev/null
+	@cmake --build $(TSAN_BUILD) -j $(JOBS) --target gmr_net_tests
+	@cd $(TSAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize -E '_NOT_BUILT$$'
+
 # Coverage-guided fuzzing (libFuzzer, clang, ASan/UBSan) of every reader and
 # the wire decoders, FUZZ_SECONDS each (default 60), seeded from ../shared/data
 # (scripts/fuzz.sh; longer runs' figures are in docs/reliability.md).
 fuzz: setup
 	@scripts/fuzz.sh
 
-test: test-unit test-sanitize fuzz
+test: test-unit test-sanitize test-tsan fuzz
 
 clean:
-	rm -rf $(BUILD) $(ASAN_BUILD) build-fuzz
+	rm -rf $(BUILD) $(ASAN_BUILD) $(TSAN_BUILD) build-fuzz

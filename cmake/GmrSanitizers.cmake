@@ -6,6 +6,16 @@ if(GMR_SANITIZE OR GMR_FUZZ)
   add_link_options(-fsanitize=address,undefined)
   add_compile_definitions(GMR_SANITIZED=1)
 endif()
+# GMR_TSAN=ON: ThreadSanitizer instead (it cannot be combined with ASan); a
+# reported race fails the test (halt_on_error in the tests' environment).
+if(GMR_TSAN)
+  if(GMR_SANITIZE OR GMR_FUZZ)
+    message(FATAL_ERROR "GMR_TSAN cannot be combined with GMR_SANITIZE or GMR_FUZZ")
+  endif()
+  add_compile_options(-fsanitize=thread -fno-omit-frame-pointer -g)
+  add_link_options(-fsanitize=thread)
+  add_compile_definitions(GMR_SANITIZED=1 GMR_TSAN=1)
+endif()
 # GMR_FUZZ: every object is instrumented for libFuzzer's coverage; the
 # harnesses (fuzz/) link its main.
 if(GMR_FUZZ)

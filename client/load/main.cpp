@@ -2,45 +2,147 @@
 //
 //   gmr-load [--host H] [--port P] [--token T] [--tls-ca CA] [--clients N] [--motion M] [--seconds S]
 //            [--rate HZ] [--udp] [--shared] [--orientations] [--float64] [--threads T]
+//            [--server-pid PID] [--start-at EPOCH_S] [--json FILE] [--plot FILE.png]
+//   gmr-load --merge A.json B.json ... [--json FILE] [--plot FILE.png]
 //
-// The clients share T I/O threads (gmr::client::EventLoop), not one each.
+// The clients share T I/O threads (gmr::client::EventLoop) and are set up
+// concurrently, so one process drives thousands of them; several processes
+// (on one host or several, pointed at the same server at the same time) each
+// write --json and `--merge` adds them up.
 //
-// Prints latency (server send time -> client receive time, both system_clock
-// on the same machine, so only meaningful on one host or with synced clocks)
-// p50/p99/max, frames and drops per second (sequence gaps seen by clients and
-// frames the server dropped for slow clients), and the drop policy in effect.
+// Reports frames delivered against those due, sequence gaps, latency (server
+// send time -> client receive time, both system_clock, so only meaningful on
+// one host or with synced clocks) as p50/p99/p99.9/max and a histogram, the
+// server's counters over the measured window only, this process's CPU (so
+// the reader knows whether the load generator was what saturated) and, with
+// --server-pid on the same host, the server's CPU per delivered frame.
 #include <CLI/CLI.hpp>
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <fstream>
+#include <functional>
 #include <memory>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "connect_options.h"
 #include "gmr/client/client.h"
+#include "gmr/core/file_util.h"
+#include "report.h"
 
 namespace {
+
+using gmr::load::Histogram;
+using gmr::load::LoadResult;
+
+std::atomic<bool> g_measuring{false};
+
+// One latency histogram per thread that receives frames (the client
+// library's I/O threads), merged at the end.
+struct ThreadHistogram {
+  std::mutex mutex;
+  Histogram histogram;
+};
+std::mutex g_histograms_mutex;
+std::vector<std::unique_ptr<ThreadHistogram>> g_histograms;
+
+ThreadHistogram& this_threads_histogram() {
+  thread_local ThreadHistogram* mine = nullptr;
+  if (mine == nullptr) {
+    std::lock_guard lock(g_histograms_mutex);
+    g_histograms.push_back(std::make_unique<ThreadHistogram>());
+    mine = g_histograms.back().get();
+  }
+  return *mine;
+}
 
 struct ClientRun {
   std::unique_ptr<gmr::client::Client> client;
   std::uint32_t subscription = 0;
-  std::mutex mutex;
-  std::vector<std::int64_t> latencies_ns;
-  std::uint64_t frames = 0;
-  std::uint64_t gaps = 0;
+  double rate_hz = 0;
+  // Written by this client's frame callbacks, which do not overlap.
+  std::atomic<std::uint64_t> frames{0};
+  std::atomic<std::uint64_t> gaps{0};
   std::uint64_t last_sequence = 0;
-  bool measuring = false;
+  bool seen = false;
+  // The server's per-connection counters at the window's start.
+  gmr::client::ServerCounters before;
+
+  void on_frame(const gmr::client::ReceivedFrame& f) {
+    if (g_measuring.load(std::memory_order_relaxed)) {
+      if (seen && f.sequence > last_sequence + 1) gaps.fetch_add(f.sequence - last_sequence - 1, std::memory_order_relaxed);
+      frames.fetch_add(1, std::memory_order_relaxed);
+      ThreadHistogram& h = this_threads_histogram();
+      std::lock_guard lock(h.mutex);
+      h.histogram.add(f.receive_time_ns - f.server_send_time_ns);
+    }
+    seen = true;
+    last_sequence = f.sequence;
+  }
 };
 
-double percentile(std::vector<std::int64_t>& v, double p) {
-  if (v.empty()) return 0.0;
-  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size() - 1) + 0.5));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return static_cast<double>(v[k]) / 1e6;
+// Runs fn(0..n-1) on `workers` threads; stops handing out work once fn
+// returns false.
+void parallel_for(std::size_t n, unsigned workers, const std::function<bool(std::size_t)>& fn) {
+  std::atomic<std::size_t> next{0};
+  std::atomic<bool> stop{false};
+  std::vector<std::thread> pool;
+  for (unsigned w = 0; w < std::max(1u, workers); ++w) {
+    pool.emplace_back([&] {
+      for (std::size_t i; !stop && (i = next++) < n;) {
+        if (!fn(i)) stop = true;
+      }
+    });
+  }
+  for (auto& t : pool) t.join();
+}
+
+double cpu_seconds(const timeval& tv) { return static_cast<double>(tv.tv_sec) + static_cast<double>(tv.tv_usec) / 1e6; }
+
+// utime + stime of a process, in seconds, or -1 when /proc cannot tell.
+double process_cpu_seconds(int pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat;
+  if (!std::getline(in, stat)) return -1;
+  // The command name (field 2) is in parentheses and may hold spaces.
+  const auto close = stat.rfind(')');
+  if (close == std::string::npos) return -1;
+  std::istringstream fields(stat.substr(close + 2));
+  std::string f;
+  unsigned long long utime = 0, stime = 0;
+  for (int field = 3; field <= 15 && fields >> f; ++field) {
+    if (field == 14) utime = std::stoull(f);
+    if (field == 15) stime = std::stoull(f);
+  }
+  return static_cast<double>(utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
+}
+
+int finish(const LoadResult& r, const std::string& json, const std::string& png) {
+  std::fputs(gmr::load::describe(r).c_str(), stdout);
+  int rc = 0;
+  if (!json.empty()) {
+    if (auto st = gmr::write_file_atomic(json, gmr::load::to_json(r)); !st.ok()) {
+      std::fprintf(stderr, "gmr-load: %s\n", st.error().to_string().c_str());
+      rc = 1;
+    }
+  }
+  if (!png.empty()) {
+    if (const std::string err = gmr::load::plot(r, png); !err.empty()) {
+      std::fprintf(stderr, "gmr-load: no plot: %s\n", err.c_str());
+      rc = 1;
+    } else {
+      std::printf("plot             %s\n", png.c_str());
+    }
+  }
+  return rc;
 }
 
 }  // namespace
@@ -49,33 +151,64 @@ int main(int argc, char** argv) {
   CLI::App app{"gmr-load: load-test a gmr-server with N streaming clients"};
   gmr::client::ClientOptions connect_options;
   int clients = 10;
-  std::string motion = "walk";
+  std::string motion;
   double seconds = 5.0;
   double warmup = 0.5;
   double rate = 0.0;
   bool udp = false, shared = false, orientations = false, float64 = false;
   gmr::cli::add_connect_options(app, connect_options);
-  app.add_option("--clients", clients, "Connections, one subscription each")->capture_default_str()->check(CLI::Range(1, 10000));
-  app.add_option("--motion", motion, "Motion to stream (looped)")->capture_default_str();
+  app.add_option("--clients", clients, "Connections, one subscription each")->capture_default_str()->check(CLI::Range(1, 20000));
+  app.add_option("--motion", motion, "Motion to stream, looped (default: the first in the server's list)");
   app.add_option("--seconds", seconds, "Measurement time")->capture_default_str()->check(CLI::PositiveNumber);
-  app.add_option("--warmup", warmup, "Seconds ignored after subscribing")->capture_default_str();
+  app.add_option("--warmup", warmup, "Seconds ignored after the last client subscribed")->capture_default_str();
   app.add_option("--rate", rate, "Output rate in Hz (0: the motion's rate)")->capture_default_str();
   app.add_flag("--udp", udp, "Frames over UDP");
   app.add_flag("--shared", shared, "All clients join one shared stream (one FK and encoding per tick)");
   app.add_flag("--orientations", orientations, "Send orientations too");
   app.add_flag("--float64", float64, "Send float64 numbers");
   unsigned threads = 2;
-  app.add_option("--threads", threads, "I/O threads all the clients share (0: one per client, as before)")
-      ->capture_default_str();
+  app.add_option("--threads", threads, "I/O threads all the clients share (0: one per client)")->capture_default_str();
+  unsigned setup_threads = 16;
+  app.add_option("--setup-threads", setup_threads, "Clients connecting and subscribing at once")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 256));
   int max_staleness_ms = 0;
   app.add_option("--max-staleness-ms", max_staleness_ms,
                  "Each subscription's staleness bound: older frames are dropped by the server and the clients, and "
                  "counted (0: none, so every frame's latency is measured)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  int server_pid = 0;
+  app.add_option("--server-pid", server_pid,
+                 "The server's process id, on this host: report its CPU over the window and per delivered frame");
+  double start_at = 0;
+  app.add_option("--start-at", start_at,
+                 "Open the measured window at this time (seconds since the Unix epoch, after set-up and warm-up): "
+                 "gmr-load processes given the same time measure the same window, for --merge");
+  std::string json, png;
+  std::vector<std::string> merge_files;
+  app.add_option("--json", json, "Also write the result as JSON (for --merge and scripts)");
+  app.add_option("--plot", png, "Also plot the latency distribution as a PNG (gnuplot)");
+  app.add_option("--merge", merge_files, "Merge the --json results of runs made at the same time, and report them")
+      ->check(CLI::ExistingFile);
   CLI11_PARSE(app, argc, argv);
 
-  std::vector<std::unique_ptr<ClientRun>> runs;
+  if (!merge_files.empty()) {
+    std::vector<LoadResult> runs;
+    try {
+      for (const auto& f : merge_files) {
+        std::ifstream in(f);
+        std::stringstream text;
+        text << in.rdbuf();
+        runs.push_back(gmr::load::from_json(text.str(), f));
+      }
+      return finish(gmr::load::merge(runs), json, png);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "gmr-load: %s\n", e.what());
+      return 1;
+    }
+  }
+
   gmr::client::SubscribeOptions so;
   so.loop = true;
   so.rate_hz = rate;
@@ -84,120 +217,163 @@ int main(int argc, char** argv) {
   so.orientations = orientations;
   so.float64 = float64;
   so.max_staleness = std::chrono::milliseconds(max_staleness_ms);
-  double rate_in_effect = 0.0;
   if (threads > 0) connect_options.loop = std::make_shared<gmr::client::EventLoop>(threads);
+
   const auto setup_started = std::chrono::steady_clock::now();
-  for (int i = 0; i < clients; ++i) {
+  std::vector<std::unique_ptr<ClientRun>> runs(static_cast<std::size_t>(clients));
+  std::mutex error_mutex;
+  std::string error;         // the first failure, which ends the set-up
+  std::string admission;     // the server's admission control refused one
+  auto connect_one = [&](std::size_t i) -> std::unique_ptr<ClientRun> {
     auto run = std::make_unique<ClientRun>();
     gmr::client::ClientOptions co = connect_options;
     co.client_name = "gmr-load " + std::to_string(i);
     auto c = gmr::client::Client::connect(co);
     if (!c.ok()) {
-      std::fprintf(stderr, "gmr-load: client %d: %s\n", i, c.error().to_string().c_str());
-      return 1;
+      std::lock_guard lock(error_mutex);
+      if (error.empty()) error = "client " + std::to_string(i) + ": " + c.error().to_string();
+      return nullptr;
     }
     run->client = std::move(c).value();
-    auto view = run->client->create_view(motion);
+    return run;
+  };
+  // The first client alone: it picks the motion and proves the server is there.
+  runs[0] = connect_one(0);
+  if (!runs[0]) {
+    std::fprintf(stderr, "gmr-load: %s\n", error.c_str());
+    return 1;
+  }
+  if (motion.empty()) {
+    auto list = runs[0]->client->list_motions();
+    if (!list.ok() || list->empty()) {
+      std::fprintf(stderr, "gmr-load: %s\n",
+                   list.ok() ? "the server has no motions" : list.error().to_string().c_str());
+      return 1;
+    }
+    motion = list->front().name;
+  }
+  auto subscribe_one = [&](std::size_t i) -> bool {
+    if (!runs[i]) runs[i] = connect_one(i);
+    if (!runs[i]) return false;
+    ClientRun* r = runs[i].get();
+    auto view = r->client->create_view(motion);
     if (!view.ok()) {
-      std::fprintf(stderr, "gmr-load: %s\n", view.error().to_string().c_str());
-      return 1;
+      std::lock_guard lock(error_mutex);
+      if (error.empty()) error = view.error().to_string();
+      return false;
     }
-    ClientRun* r = run.get();
-    auto sub = run->client->subscribe(view->id, so, [r](const gmr::client::ReceivedFrame& f) {
-      std::lock_guard lock(r->mutex);
-      if (!r->measuring) {
-        r->last_sequence = f.sequence;
-        return;
-      }
-      if (r->frames > 0 && f.sequence > r->last_sequence + 1) r->gaps += f.sequence - r->last_sequence - 1;
-      r->last_sequence = f.sequence;
-      ++r->frames;
-      r->latencies_ns.push_back(f.receive_time_ns - f.server_send_time_ns);
-    });
+    auto sub = r->client->subscribe(view->id, so, [r](const gmr::client::ReceivedFrame& f) { r->on_frame(f); });
     if (!sub.ok()) {
-      // The server's admission control: measure the clients it took.
-      if (!runs.empty() && sub.error().message.find("RESOURCE_EXHAUSTED") != std::string::npos) {
-        std::printf("gmr-load: the server admitted %zu of %d subscriptions: %s\n", runs.size(), clients,
-                    sub.error().message.c_str());
-        std::printf("          (gmr-server --send-budget 0 turns admission off to overload it on purpose)\n");
-        clients = static_cast<int>(runs.size());
-        break;
+      std::lock_guard lock(error_mutex);
+      if (sub.error().message.find("RESOURCE_EXHAUSTED") != std::string::npos) {
+        if (admission.empty()) admission = sub.error().message;
+      } else if (error.empty()) {
+        error = sub.error().to_string();
       }
-      std::fprintf(stderr, "gmr-load: %s\n", sub.error().to_string().c_str());
-      return 1;
+      runs[i].reset();
+      return false;
     }
-    rate_in_effect = sub->rate_hz;
-    run->subscription = sub->id;
-    runs.push_back(std::move(run));
+    r->rate_hz = sub->rate_hz;
+    r->subscription = sub->id;
+    return true;
+  };
+  parallel_for(runs.size(), setup_threads, subscribe_one);
+  if (!error.empty()) {
+    std::fprintf(stderr, "gmr-load: %s\n", error.c_str());
+    return 1;
   }
-  const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_started).count();
+  // Admission control: measure the clients the server took.
+  std::erase_if(runs, [](const auto& r) { return !r || r->subscription == 0; });
+  if (!admission.empty()) {
+    std::printf("gmr-load: the server admitted %zu of %d subscriptions: %s\n", runs.size(), clients, admission.c_str());
+    std::printf("          (gmr-server --send-budget 0 turns admission off to overload it on purpose)\n");
+  }
+  if (runs.empty()) return 1;
+  LoadResult result;
+  result.clients = runs.size();
+  result.motion = motion;
+  result.udp = udp;
+  result.shared = shared;
+  result.rate_hz = runs.front()->rate_hz;
+  result.threads = threads;
+  result.setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_started).count();
   std::this_thread::sleep_for(std::chrono::duration<double>(warmup));
-  for (auto& r : runs) {
-    std::lock_guard lock(r->mutex);
-    r->measuring = true;
+  if (start_at > 0) {
+    const auto at = std::chrono::system_clock::time_point(
+        std::chrono::duration_cast<std::chrono::system_clock::duration>(std::chrono::duration<double>(start_at)));
+    const double late = std::chrono::duration<double>(std::chrono::system_clock::now() - at).count();
+    if (late > 0) {
+      std::fprintf(stderr, "gmr-load: set-up and warm-up ended %.2f s after --start-at: the window opens late\n", late);
+    }
+    std::this_thread::sleep_until(at);
   }
+
+  // The window: the server's counters just before and just after it.
+  std::atomic<bool> have_server{true};
+  std::string stats_refused;
+  auto snapshot = [&](std::vector<gmr::client::ServerCounters>& into) {
+    into.assign(runs.size(), {});
+    parallel_for(runs.size(), setup_threads, [&](std::size_t i) {
+      auto st = runs[i]->client->stats();
+      if (!st.ok()) {
+        std::lock_guard lock(error_mutex);
+        if (stats_refused.empty()) stats_refused = st.error().message;
+        have_server = false;
+        return false;
+      }
+      into[i] = *st;
+      return true;
+    });
+  };
+  std::vector<gmr::client::ServerCounters> before, after;
+  snapshot(before);
+  rusage usage_before{}, usage_after{};
+  ::getrusage(RUSAGE_SELF, &usage_before);
+  const double server_cpu_before = server_pid > 0 ? process_cpu_seconds(server_pid) : -1;
+  g_measuring = true;
   const auto t0 = std::chrono::steady_clock::now();
   std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
-  for (auto& r : runs) {
-    std::lock_guard lock(r->mutex);
-    r->measuring = false;
-  }
-  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  g_measuring = false;
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double server_cpu_after = server_pid > 0 ? process_cpu_seconds(server_pid) : -1;
+  ::getrusage(RUSAGE_SELF, &usage_after);
+  snapshot(after);
 
-  std::vector<std::int64_t> all;
-  std::uint64_t frames = 0, gaps = 0, server_dropped = 0, server_sent = 0, server_skipped = 0;
-  std::string stats_refused;  // why the server's own figures are missing (a 'read' token)
-  for (auto& r : runs) {
-    {
-      std::lock_guard lock(r->mutex);
-      all.insert(all.end(), r->latencies_ns.begin(), r->latencies_ns.end());
-      frames += r->frames;
-      gaps += r->gaps;
-    }
-    if (auto st = r->client->stats(); st.ok()) {
-      server_dropped += st->frames_dropped;
-      server_skipped += st->frames_skipped;
-      server_sent += st->frames_sent;
-    } else if (stats_refused.empty()) {
-      stats_refused = st.error().message;
-    }
-    (void)r->client->unsubscribe(r->subscription);
+  result.cpu_user_seconds = cpu_seconds(usage_after.ru_utime) - cpu_seconds(usage_before.ru_utime);
+  result.cpu_system_seconds = cpu_seconds(usage_after.ru_stime) - cpu_seconds(usage_before.ru_stime);
+  if (server_cpu_before >= 0 && server_cpu_after >= 0) result.server_cpu_seconds = server_cpu_after - server_cpu_before;
+  for (const auto& r : runs) {
+    result.frames += r->frames.load();
+    result.gaps += r->gaps.load();
+    result.stale += r->client->counters().frames_stale;
   }
-  std::uint64_t computed = 0, encoded = 0;
-  if (!runs.empty()) {
-    if (auto st = runs[0]->client->stats(); st.ok()) {
-      computed = st->frames_computed;
-      encoded = st->frames_encoded;
+  {
+    std::lock_guard lock(g_histograms_mutex);
+    for (const auto& h : g_histograms) {
+      std::lock_guard hl(h->mutex);
+      result.latency.add(h->histogram);
     }
   }
-  if (!stats_refused.empty()) {
+  result.have_server = have_server;
+  if (have_server) {
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      result.server_sent += after[i].frames_sent - before[i].frames_sent;
+      result.server_dropped += after[i].frames_dropped - before[i].frames_dropped;
+      result.server_skipped += after[i].frames_skipped - before[i].frames_skipped;
+    }
+    result.server_computed = after[0].frames_computed - before[0].frames_computed;
+    result.server_encoded = after[0].frames_encoded - before[0].frames_encoded;
+    result.server_late_total = after[0].frames_skipped_total - before[0].frames_skipped_total;
+  } else {
     std::printf("gmr-load: the server's figures below are missing: %s\n", stats_refused.c_str());
   }
-  const double max_ms = all.empty() ? 0.0 : static_cast<double>(*std::max_element(all.begin(), all.end())) / 1e6;
-  std::printf("gmr-load: %d clients, motion %s, %s, %.1f Hz each, %s stream%s, %.1f s measured\n", clients,
-              motion.c_str(), udp ? "UDP" : "TCP", rate_in_effect, shared ? "one shared" : "one",
-              shared ? "" : " per client", elapsed);
-  std::printf("set-up           %.2f s for %d clients on %s\n", setup_seconds, clients,
-              threads > 0 ? (std::to_string(threads) + " shared I/O threads").c_str() : "a thread each");
-  std::printf("frames received  %llu (%.1f/s in all, %.1f/s per client; expected %.1f/s per client)\n",
-              static_cast<unsigned long long>(frames), static_cast<double>(frames) / elapsed,
-              static_cast<double>(frames) / elapsed / clients, rate_in_effect);
-  std::printf("latency          p50 %.3f ms  p99 %.3f ms  max %.3f ms\n", percentile(all, 0.50), percentile(all, 0.99),
-              max_ms);
-  std::uint64_t stale = 0;
-  for (const auto& r : runs) stale += r->client->counters().frames_stale;
-  std::printf("drops            %.2f/s seen by clients (sequence gaps), %llu dropped by the server in all, "
-              "%llu by the clients as older than --max-staleness-ms\n",
-              static_cast<double>(gaps) / elapsed, static_cast<unsigned long long>(server_dropped),
-              static_cast<unsigned long long>(stale));
-  std::printf("server late      %llu ticks skipped in all (the server could not keep the rate)\n",
-              static_cast<unsigned long long>(server_skipped));
-  std::printf("server work      %llu FK runs, %llu encodings, %llu frames sent (whole run)\n",
-              static_cast<unsigned long long>(computed), static_cast<unsigned long long>(encoded),
-              static_cast<unsigned long long>(server_sent));
+  parallel_for(runs.size(), setup_threads, [&](std::size_t i) {
+    (void)runs[i]->client->unsubscribe(runs[i]->subscription);
+    return true;
+  });
   std::printf("policy           %s\n",
               udp ? "UDP: a frame is dropped whole when its connection has too many datagrams in flight; "
                     "a client drops a frame with a lost fragment"
                   : "TCP: bounded queue per client, latest-frame-wins per subscription, drop counter");
-  return 0;
+  return finish(result, json, png);
 }

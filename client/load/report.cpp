@@ -1,0 +1,328 @@
+#include "report.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <unistd.h>
+
+namespace gmr::load {
+
+// ---- Histogram ----------------------------------------------------------
+
+std::size_t Histogram::bucket_of(std::int64_t ns) {
+  if (ns < 64) return ns < 0 ? 0 : static_cast<std::size_t>(ns);
+  const auto v = static_cast<std::uint64_t>(ns);
+  const int shift = std::bit_width(v) - 1 - kSubBits;
+  const std::size_t b = (std::size_t{32} * static_cast<std::size_t>(shift)) + static_cast<std::size_t>(v >> shift);
+  return std::min(b, kBuckets - 1);
+}
+
+std::int64_t Histogram::bucket_low(std::size_t b) {
+  if (b < 64) return static_cast<std::int64_t>(b);
+  const std::size_t shift = b / 32 - 1;
+  return static_cast<std::int64_t>((b - 32 * shift) << shift);
+}
+
+std::int64_t Histogram::bucket_high(std::size_t b) {
+  if (b < 64) return static_cast<std::int64_t>(b) + 1;
+  const std::size_t shift = b / 32 - 1;
+  return static_cast<std::int64_t>((b - 32 * shift + 1) << shift);
+}
+
+void Histogram::add(std::int64_t ns) {
+  ++counts_[bucket_of(ns)];
+  ++count_;
+  max_ = std::max(max_, ns);
+}
+
+void Histogram::add(const Histogram& other) {
+  for (std::size_t b = 0; b < kBuckets; ++b) counts_[b] += other.counts_[b];
+  count_ += other.count_;
+  max_ = std::max(max_, other.max_);
+}
+
+void Histogram::set(std::size_t bucket, std::uint64_t n) {
+  count_ += n - counts_[bucket];
+  counts_[bucket] = n;
+  if (n > 0) max_ = std::max(max_, bucket_high(bucket) - 1);
+}
+
+double Histogram::quantile_ns(double q) const {
+  if (count_ == 0) return 0;
+  if (q >= 1) return static_cast<double>(max_);
+  const auto rank = std::max<std::uint64_t>(1, static_cast<std::uint64_t>(std::ceil(q * static_cast<double>(count_))));
+  std::uint64_t seen = 0;
+  for (std::size_t b = 0; b < kBuckets; ++b) {
+    seen += counts_[b];
+    if (seen >= rank) {
+      const double mid = 0.5 * static_cast<double>(bucket_low(b) + bucket_high(b) - 1);
+      return std::min(mid, static_cast<double>(max_));
+    }
+  }
+  return static_cast<double>(max_);
+}
+
+// ---- JSON ---------------------------------------------------------------
+
+std::string to_json(const LoadResult& r) {
+  nlohmann::json j;
+  j["format"] = "gmr-load 1";
+  j["processes"] = r.processes;
+  j["clients"] = r.clients;
+  j["motion"] = r.motion;
+  j["transport"] = r.udp ? "udp" : "tcp";
+  j["shared"] = r.shared;
+  j["rate_hz"] = r.rate_hz;
+  j["seconds"] = r.seconds;
+  j["setup_seconds"] = r.setup_seconds;
+  j["frames"] = r.frames;
+  j["gaps"] = r.gaps;
+  j["stale"] = r.stale;
+  j["threads"] = r.threads;
+  j["cpu_user_seconds"] = r.cpu_user_seconds;
+  j["cpu_system_seconds"] = r.cpu_system_seconds;
+  if (r.have_server) {
+    j["server"] = {{"frames_sent", r.server_sent},         {"frames_dropped", r.server_dropped},
+                   {"frames_skipped", r.server_skipped},   {"frames_computed", r.server_computed},
+                   {"frames_encoded", r.server_encoded},   {"frames_skipped_total", r.server_late_total}};
+  }
+  if (r.server_cpu_seconds >= 0) j["server_cpu_seconds"] = r.server_cpu_seconds;
+  // The histogram's non-empty buckets as [lowest ns, count].
+  nlohmann::json buckets = nlohmann::json::array();
+  for (std::size_t b = 0; b < Histogram::kBuckets; ++b) {
+    if (r.latency.at(b) != 0) buckets.push_back({Histogram::bucket_low(b), r.latency.at(b)});
+  }
+  j["latency_ns"] = {{"max", r.latency.max()}, {"buckets", buckets}};
+  // Derived, for scripts (from_json reads the buckets back instead).
+  j["delivered_per_second"] = r.seconds > 0 ? static_cast<double>(r.frames) / r.seconds : 0.0;
+  j["expected_per_second"] = r.rate_hz * static_cast<double>(r.clients);
+  j["latency_ms"] = {{"p50", r.latency.quantile_ns(0.5) / 1e6},
+                     {"p99", r.latency.quantile_ns(0.99) / 1e6},
+                     {"p99.9", r.latency.quantile_ns(0.999) / 1e6},
+                     {"max", static_cast<double>(r.latency.max()) / 1e6}};
+  return j.dump(1) + "\n";
+}
+
+LoadResult from_json(const std::string& text, const std::string& label) {
+  LoadResult r;
+  try {
+    const nlohmann::json j = nlohmann::json::parse(text);
+    if (j.value("format", "") != "gmr-load 1") {
+      throw std::runtime_error("not a gmr-load result (\"format\": \"gmr-load 1\" missing)");
+    }
+    r.processes = j.at("processes").get<int>();
+    r.clients = j.at("clients").get<std::uint64_t>();
+    r.motion = j.at("motion").get<std::string>();
+    r.udp = j.at("transport").get<std::string>() == "udp";
+    r.shared = j.at("shared").get<bool>();
+    r.rate_hz = j.at("rate_hz").get<double>();
+    r.seconds = j.at("seconds").get<double>();
+    r.setup_seconds = j.at("setup_seconds").get<double>();
+    r.frames = j.at("frames").get<std::uint64_t>();
+    r.gaps = j.at("gaps").get<std::uint64_t>();
+    r.stale = j.at("stale").get<std::uint64_t>();
+    r.threads = j.at("threads").get<unsigned>();
+    r.cpu_user_seconds = j.at("cpu_user_seconds").get<double>();
+    r.cpu_system_seconds = j.at("cpu_system_seconds").get<double>();
+    if (j.contains("server")) {
+      const auto& s = j.at("server");
+      r.have_server = true;
+      r.server_sent = s.at("frames_sent").get<std::uint64_t>();
+      r.server_dropped = s.at("frames_dropped").get<std::uint64_t>();
+      r.server_skipped = s.at("frames_skipped").get<std::uint64_t>();
+      r.server_computed = s.at("frames_computed").get<std::uint64_t>();
+      r.server_encoded = s.at("frames_encoded").get<std::uint64_t>();
+      r.server_late_total = s.at("frames_skipped_total").get<std::uint64_t>();
+    }
+    r.server_cpu_seconds = j.value("server_cpu_seconds", -1.0);
+    for (const auto& b : j.at("latency_ns").at("buckets")) {
+      const auto low = b.at(0).get<std::int64_t>();
+      const std::size_t bucket = Histogram::bucket_of(low);
+      if (Histogram::bucket_low(bucket) != low) {
+        throw std::runtime_error("latency bucket " + std::to_string(low) + " ns is not a bucket boundary");
+      }
+      r.latency.set(bucket, b.at(1).get<std::uint64_t>());
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(label + ": " + e.what());
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(label + ": " + e.what());
+  }
+  return r;
+}
+
+LoadResult merge(const std::vector<LoadResult>& runs) {
+  if (runs.empty()) throw std::runtime_error("nothing to merge");
+  LoadResult m = runs.front();
+  m.processes = 0;
+  m.clients = m.frames = m.gaps = m.stale = 0;
+  m.latency = Histogram{};
+  m.cpu_user_seconds = m.cpu_system_seconds = 0;
+  m.threads = 0;
+  m.server_sent = m.server_dropped = m.server_skipped = 0;
+  m.have_server = true;
+  for (const LoadResult& r : runs) {
+    if (r.udp != m.udp || r.shared != m.shared || r.motion != m.motion) {
+      throw std::runtime_error("the runs measured different things (motion, transport or sharing differ)");
+    }
+    m.processes += r.processes;
+    m.clients += r.clients;
+    m.frames += r.frames;
+    m.gaps += r.gaps;
+    m.stale += r.stale;
+    m.latency.add(r.latency);
+    m.cpu_user_seconds += r.cpu_user_seconds;
+    m.cpu_system_seconds += r.cpu_system_seconds;
+    m.threads += r.threads;
+    m.seconds = std::max(m.seconds, r.seconds);
+    m.setup_seconds = std::max(m.setup_seconds, r.setup_seconds);
+    m.have_server = m.have_server && r.have_server;
+    m.server_sent += r.server_sent;
+    m.server_dropped += r.server_dropped;
+    m.server_skipped += r.server_skipped;
+    m.server_computed = std::max(m.server_computed, r.server_computed);
+    m.server_encoded = std::max(m.server_encoded, r.server_encoded);
+    m.server_late_total = std::max(m.server_late_total, r.server_late_total);
+    m.server_cpu_seconds = std::max(m.server_cpu_seconds, r.server_cpu_seconds);
+  }
+  return m;
+}
+
+// ---- text ---------------------------------------------------------------
+
+namespace {
+
+std::string format(const char* fmt, auto... args) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, fmt, args...);
+  return buf;
+}
+
+double ms(double ns) { return ns / 1e6; }
+
+}  // namespace
+
+std::string describe(const LoadResult& r) {
+  const double window = r.seconds > 0 ? r.seconds : 1;
+  const double clients = static_cast<double>(std::max<std::uint64_t>(1, r.clients));
+  const double expected = r.rate_hz * clients;
+  const double got = static_cast<double>(r.frames) / window;
+  std::string out;
+  out += format("gmr-load: %llu clients%s, motion %s, %s, %.1f Hz each, %s, %.1f s measured\n",
+                static_cast<unsigned long long>(r.clients),
+                r.processes > 1 ? format(" in %d processes", r.processes).c_str() : "", r.motion.c_str(),
+                r.udp ? "UDP" : "TCP", r.rate_hz, r.shared ? "one shared stream" : "one stream per client", r.seconds);
+  out += format("set-up           %.2f s\n", r.setup_seconds);
+  out += format("delivered        %.0f of %.0f frames/s expected (%.2f%%), %.1f/s per client\n", got, expected,
+                expected > 0 ? 100.0 * got / expected : 0.0, got / clients);
+  const double lost = static_cast<double>(r.gaps);
+  out += format("lost             %llu frames never arrived (sequence gaps, %.3f%% of those due)%s\n",
+                static_cast<unsigned long long>(r.gaps),
+                r.frames + r.gaps > 0 ? 100.0 * lost / static_cast<double>(r.frames + r.gaps) : 0.0,
+                r.stale > 0 ? format(", %llu dropped here as stale", static_cast<unsigned long long>(r.stale)).c_str()
+                            : "");
+  out += format("latency          p50 %.3f ms  p99 %.3f ms  p99.9 %.3f ms  max %.3f ms  (%llu frames)\n",
+                ms(r.latency.quantile_ns(0.5)), ms(r.latency.quantile_ns(0.99)), ms(r.latency.quantile_ns(0.999)),
+                ms(static_cast<double>(r.latency.max())), static_cast<unsigned long long>(r.latency.count()));
+  // The distribution in powers of two of milliseconds, with a bar.
+  if (r.latency.count() > 0) {
+    out += "histogram        (latency up to; share of frames)\n";
+    std::int64_t edge = 125'000;  // 0.125 ms
+    std::size_t b = 0;
+    std::uint64_t total = r.latency.count(), seen = 0;
+    while (seen < total) {
+      std::uint64_t in = 0;
+      while (b < Histogram::kBuckets && Histogram::bucket_low(b) < edge) in += r.latency.at(b++);
+      seen += in;
+      const double share = static_cast<double>(in) / static_cast<double>(total);
+      const int bar = static_cast<int>(std::lround(share * 50));
+      out += format("  %9.3f ms %7.3f%% %s\n", ms(static_cast<double>(edge)), 100 * share, std::string(bar, '#').c_str());
+      edge *= 2;
+    }
+  }
+  const double cpu = r.cpu_user_seconds + r.cpu_system_seconds;
+  out += format("gmr-load CPU     %.2f cores (%.0f%% of it in the kernel) on %u I/O threads%s\n", cpu / window,
+                cpu > 0 ? 100 * r.cpu_system_seconds / cpu : 0.0, r.threads,
+                cpu / window > 0.9 * r.threads ? ": the load generator was saturated, not only the server" : "");
+  if (r.have_server) {
+    out += format("server, window   %llu frames sent to these clients, %llu dropped for them (slow reader or full "
+                  "UDP queue), %llu skipped (late); %llu FK runs, %llu encodings, %llu ticks skipped in all\n",
+                  static_cast<unsigned long long>(r.server_sent), static_cast<unsigned long long>(r.server_dropped),
+                  static_cast<unsigned long long>(r.server_skipped), static_cast<unsigned long long>(r.server_computed),
+                  static_cast<unsigned long long>(r.server_encoded),
+                  static_cast<unsigned long long>(r.server_late_total));
+  } else {
+    out += "server, window   (the server's counters were not available)\n";
+  }
+  if (r.server_cpu_seconds >= 0) {
+    out += format("server CPU       %.2f cores, %.0f ns per delivered frame\n", r.server_cpu_seconds / window,
+                  r.frames > 0 ? 1e9 * r.server_cpu_seconds / static_cast<double>(r.frames) : 0.0);
+  }
+  return out;
+}
+
+// ---- plot ---------------------------------------------------------------
+
+std::string plot(const LoadResult& r, const std::string& png) {
+  if (r.latency.count() == 0) return "no latencies to plot";
+  namespace fs = std::filesystem;
+  const fs::path data = fs::temp_directory_path() / ("gmr-load-" + std::to_string(::getpid()) + ".dat");
+  {
+    std::ofstream out(data);
+    // Per bucket: its midpoint in ms, the share of frames in it scaled to a
+    // bucket 1/32 of an octave wide (buckets are linear within an octave, so
+    // on a log axis their widths differ: without the scaling the plot would
+    // step at every power of two), and the cumulative share.
+    std::uint64_t seen = 0;
+    for (std::size_t b = 0; b < Histogram::kBuckets; ++b) {
+      if (r.latency.at(b) == 0) continue;
+      seen += r.latency.at(b);
+      const double lo = static_cast<double>(Histogram::bucket_low(b)) / 1e6;
+      const double hi = static_cast<double>(Histogram::bucket_high(b)) / 1e6;
+      const double share = static_cast<double>(r.latency.at(b)) / static_cast<double>(r.latency.count());
+      out << 0.5 * (lo + hi) << ' ' << share * (std::log(2.0) / 32) / std::log(hi / std::max(lo, 0.5e-6)) << ' '
+          << static_cast<double>(seen) / static_cast<double>(r.latency.count()) << '\n';
+    }
+    if (!out) return "cannot write " + data.string();
+  }
+  // gnuplot writes beside the target, and the rename makes it whole at once.
+  const std::string partial = png + ".partial";
+  std::string quoted = "'";
+  for (char c : partial) quoted += c == '\'' ? std::string("''") : std::string(1, c);
+  quoted += "'";
+  const std::string title = format("gmr-load: %llu clients, %s%s, %.0f Hz; p50 %.2f ms, p99 %.2f ms, p99.9 %.2f ms",
+                                   static_cast<unsigned long long>(r.clients), r.udp ? "UDP" : "TCP",
+                                   r.shared ? " shared" : "", r.rate_hz, ms(r.latency.quantile_ns(0.5)),
+                                   ms(r.latency.quantile_ns(0.99)), ms(r.latency.quantile_ns(0.999)));
+  const std::string script = "set terminal pngcairo size 960,600 font ',11'\nset output " + quoted +
+                             "\nset title '" + title + "'\nset logscale x\nset xlabel 'latency (ms)'\n"
+                             "set ylabel 'share of frames per 1/32 octave'\nset y2label 'cumulative share'\n"
+                             "set y2range [0:1]\nset ytics nomirror\nset y2tics\nset grid\n"
+                             "plot '" + data.string() + "' using 1:2 with impulses lw 2 title 'frames', '" +
+                             data.string() + "' using 1:3 axes x1y2 with lines lw 2 title 'cumulative'\n";
+  FILE* gp = ::popen("gnuplot 2>&1", "w");
+  if (gp == nullptr) {
+    fs::remove(data);
+    return "cannot run gnuplot (apt-get install gnuplot-nox)";
+  }
+  std::fputs(script.c_str(), gp);
+  const int status = ::pclose(gp);
+  fs::remove(data);
+  std::error_code ec;
+  if (status != 0 || !fs::exists(partial, ec)) {
+    fs::remove(partial, ec);
+    return "gnuplot failed (is it installed? apt-get install gnuplot-nox)";
+  }
+  fs::rename(partial, png, ec);
+  if (ec) return "cannot write " + png + ": " + ec.message();
+  return {};
+}
+
+}  // namespace gmr::load
