@@ -10,14 +10,14 @@ packages=(
   libbenchmark-dev          # benchmarks in bench/
   libhwy-dev                # Highway: run-time SIMD dispatch for the fast FK path
   libcli11-dev              # argument parsing for the gmr and gmr-server commands
-  nlohmann-json3-dev        # JSON output of the research harness (gmr-bench fk --json)
+  nlohmann-json3-dev        # JSON: gmr-bench fk --json, gmr-load --json and --merge
   libspdlog-dev libfmt-dev  # logging outside lib/
   libboost-dev libboost-system-dev # Boost.Asio for the server and client; Boost.Beast for HTTP and WebSocket
   prometheus-cpp-dev        # /metrics in the Prometheus text format
   libjs-three               # three.js for the browser viewer, served by gmr-server (no CDN)
   libssl-dev                # OpenSSL: TLS (Asio's SSL), token digests, the tests' certificates
   libprotobuf-dev protobuf-compiler # the wire protocol
-  gnuplot-nox               # the Figure 4 plot (gmr-bench figure4)
+  gnuplot-nox               # plots: gmr-bench figure4, gmr-load --plot, bench/server
   python3                   # the layout check (tests/layout/check_layout.py)
   python3-protobuf python3-numpy # the Python client (client/python) and the Blender add-on
   python3-prometheus-client # the metrics test parses /metrics with Prometheus's own parser

@@ -1,0 +1,99 @@
+#!/usr/bin/env bash
+# The server throughput grid of docs/performance.md ("Throughput: the grid"):
+# subscribers x {TCP, UDP} x {own stream, one shared stream} at 120 Hz, each
+# point on a freshly started gmr-server pinned to CPU 0 with gmr-load pinned
+# to CPU 1, repeated; the medians go to a CSV and a PNG.
+#
+#   bench/server/run.sh [BUILD_DIR] [OUT_DIR]
+#     SUBSCRIBERS="100 1000 3000 10000"  REPEATS=3  SECONDS_PER_POINT=10  RATE=120
+#     MOTION_FILE=../shared/data/bvh/cmu/01_01.bvh  TRANSPORTS="tcp udp"  MODES="own shared"
+#     CLIENTS_PER_PROCESS=(what the open-files limit allows)  LOAD_THREADS=1
+#
+# Writes OUT_DIR/runs/*.json (every run, gmr-load --json), OUT_DIR/grid.csv
+# (one row per point, medians over the repeats) and OUT_DIR/grid.png. No send
+# budget (--send-budget 0): the grid means to find where the server stops
+# keeping up. The full grid takes about 45 minutes and both cores; it is a
+# benchmark, not a CI step.
+set -euo pipefail
+build=${1:-build}
+out=${2:-bench/server/results}
+subscribers=${SUBSCRIBERS:-100 1000 3000 10000}
+repeats=${REPEATS:-3}
+seconds=${SECONDS_PER_POINT:-10}
+rate=${RATE:-120}
+motion_file=${MOTION_FILE:-../shared/data/bvh/cmu/01_01.bvh}
+load_threads=${LOAD_THREADS:-1}
+transports=${TRANSPORTS:-tcp udp}
+modes=${MODES:-own shared}
+bin="$build/bin"
+here=$(dirname "$0")
+
+[ -x "$bin/gmr-server" ] && [ -x "$bin/gmr-load" ] || { echo "server bench: build gmr-server and gmr-load in $build first" >&2; exit 1; }
+[ -f "$motion_file" ] || { echo "server bench: no $motion_file (../shared/data, or set MOTION_FILE)" >&2; exit 1; }
+[ "$(nproc)" -ge 2 ] || { echo "server bench: needs two CPUs (server on 0, load on 1)" >&2; exit 1; }
+# A gmr-load process holds a socket per TCP client, two per UDP client: a
+# point that needs more than the open-files limit allows runs several
+# processes at once (all on CPU 1), whose results gmr-load --merge adds up.
+ulimit -n "$(ulimit -Hn)"
+clients_per_process() {  # transport
+  [ -n "${CLIENTS_PER_PROCESS:-}" ] && { echo "$CLIENTS_PER_PROCESS"; return; }
+  local fds=1; [ "$1" = udp ] && fds=2
+  echo $(( ($(ulimit -n) - 200) / fds ))
+}
+
+mkdir -p "$out/runs"
+library=$(mktemp -d)
+ln -s "$(realpath "$motion_file")" "$library/"
+motion=$(basename "$motion_file"); motion=${motion%.*}
+spid=""
+start_server() {
+  rm -f "$library/port"
+  taskset -c 0 "$bin/gmr-server" --library "$library" --port 0 --port-file "$library/port" --http-port -1 \
+    --max-connections 30000 --max-connections-per-address 0 --max-pending-handshakes 30000 --send-budget 0 \
+    --log-level warn >"$library/server.log" 2>&1 &
+  spid=$!
+  for _ in $(seq 200); do [ -s "$library/port" ] && return; sleep 0.1; done
+  echo "server bench: gmr-server did not start:" >&2; cat "$library/server.log" >&2; exit 1
+}
+stop_server() { [ -n "$spid" ] && kill -INT "$spid" 2>/dev/null && wait "$spid" 2>/dev/null; spid=""; }
+cleanup() { stop_server || true; rm -rf "$library"; }
+trap cleanup EXIT
+
+for n in $subscribers; do
+  for transport in $transports; do
+    for mode in $modes; do
+      for rep in $(seq "$repeats"); do
+        name="$transport-$mode-$n-$rep"
+        flags=()
+        [ "$transport" = udp ] && flags+=(--udp)
+        [ "$mode" = shared ] && flags+=(--shared)
+        start_server
+        per_process=$(clients_per_process "$transport")
+        processes=$(( (n + per_process - 1) / per_process ))
+        pids=(); parts=()
+        # Several processes share one window, opened after the slowest
+        # set-up (up to about 20 ms per client on an overloaded server).
+        window=()
+        [ "$processes" -gt 1 ] && window=(--start-at $(( $(date +%s) + 10 + n / 50 )))
+        for p in $(seq "$processes"); do
+          share=$(( n / processes + (p <= n % processes ? 1 : 0) ))
+          part="$out/runs/$name.part$p"
+          taskset -c 1 "$bin/gmr-load" --port "$(cat "$library/port")" --clients "$share" --rate "$rate" \
+            --seconds "$seconds" --warmup 2 --threads "$load_threads" --motion "$motion" --server-pid "$spid" \
+            "${window[@]}" "${flags[@]}" --json "$part.json" >"$part.txt" 2>&1 &
+          pids+=($!); parts+=("$part.json")
+        done
+        failed=0
+        for pid in "${pids[@]}"; do wait "$pid" || failed=1; done
+        if [ "$failed" = 0 ]; then
+          "$bin/gmr-load" --merge "${parts[@]}" --json "$out/runs/$name.json" >"$out/runs/$name.txt" 2>&1 || failed=1
+        fi
+        [ "$failed" = 0 ] || { echo "server bench: $name failed:" >&2; cat "$out/runs/$name".part*.txt >&2; }
+        rm -f "$out/runs/$name".part*
+        stop_server
+        grep -E "^delivered|^latency" "$out/runs/$name.txt" | sed "s/^/$name: /" || true
+      done
+    done
+  done
+done
+python3 "$here/summarize.py" "$out/runs" "$out/grid.csv" "$out/grid.png"
