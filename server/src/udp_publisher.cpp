@@ -105,9 +105,7 @@ constexpr int kReceiveBatch = 64;
 
 bool UdpPublisher::send(const std::shared_ptr<Registration>& to, std::string_view message) {
   if (closed_ || !to->endpoint) return false;
-  const std::size_t count =
-      std::max<std::size_t>(1, (message.size() + wire::kMaxFragmentPayload - 1) / wire::kMaxFragmentPayload);
-  if (to->in_flight + count > max_in_flight_) return false;
+  if (to->in_flight + wire::fragment_count(message.size()) > max_in_flight_) return false;
   std::size_t at = batch_bytes_.size();
   const std::size_t appended = wire::append_fragments(batch_bytes_, to->next_message_id++, message);
   const std::size_t end = batch_bytes_.size();
@@ -139,9 +137,7 @@ void UdpPublisher::release(std::size_t first) {
 void UdpPublisher::flush() {
   if (closed_) {
     release(batch_sent_);
-    batch_.clear();
-    batch_bytes_.clear();
-    batch_sent_ = 0;
+    clear_batch();
     return;
   }
   std::array<mmsghdr, kSendBatch> msgs;
@@ -211,10 +207,14 @@ void UdpPublisher::flush() {
     b.registration->in_flight -= b.count;
     ++batch_sent_;
   }
+  clear_batch();
+}
+
+void UdpPublisher::clear_batch() {
   batch_.clear();
   batch_bytes_.clear();
   batch_sent_ = 0;
-  if (batch_bytes_.capacity() > (std::size_t{4} << 20)) batch_bytes_.shrink_to_fit();
+  if (batch_bytes_.capacity() > (std::size_t{4} << 20)) batch_bytes_.shrink_to_fit();  // after a burst
 }
 
 void UdpPublisher::receive() {

@@ -15,9 +15,10 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
-#include <string_view>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <vector>
 
@@ -86,6 +87,7 @@ class UdpPublisher {
   void flush();
   // Gives the entries from `first` on back to their registrations, unsent.
   void release(std::size_t first);
+  void clear_batch();
   void receive();
   void handle(std::string_view datagram);
   // The live session holding `token` (constant-time compare), or null.

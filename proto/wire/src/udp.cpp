@@ -85,7 +85,7 @@ bool same_token(const UdpToken& a, const UdpToken& b) {
 }
 
 std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view message) {
-  const std::size_t count = std::max<std::size_t>(1, (message.size() + kMaxFragmentPayload - 1) / kMaxFragmentPayload);
+  const std::size_t count = fragment_count(message.size());
   out.reserve(out.size() + count * kFragmentHeaderBytes + message.size());
   for (std::size_t i = 0; i < count; ++i) {
     put_header(out, DatagramKind::kFragment);

@@ -68,6 +68,10 @@ bool same_token(const UdpToken& a, const UdpToken& b);
 // Splits `message` into datagrams (at least one, even for an empty message).
 // Requires message.size() <= kMaxUdpMessageBytes.
 std::vector<std::string> fragment_message(std::uint32_t message_id, std::string_view message);
+// How many datagrams a message of `message_bytes` takes (at least one).
+inline std::size_t fragment_count(std::size_t message_bytes) {
+  return message_bytes == 0 ? 1 : (message_bytes + kMaxFragmentPayload - 1) / kMaxFragmentPayload;
+}
 // The same datagrams appended back to back to `out`, for a sender that
 // batches them: every one but the last is exactly kMaxDatagramBytes long.
 // Returns how many there are.
