@@ -40,11 +40,13 @@ std::string format_seconds(double s) {
 struct InfoOptions {
   std::string file;
   std::string asf;
+  std::string model;  // marker input: a skeleton model to fit (built-in name or file)
   double fps = 0.0;  // .amc input: frames per second (0: 120)
 };
 
 void run_info(const InfoOptions& o) {
-  if (is_marker_file(o.file)) return run_marker_info(o.file);  // .c3d, .trc: cmd_markers.cpp
+  if (is_marker_file(o.file)) return run_marker_info(o.file, o.model);  // .c3d, .trc: cmd_markers.cpp
+  if (!o.model.empty()) throw CommandError("--model applies to marker files (.c3d, .trc), not to " + o.file);
   Warnings warnings;
   const Motion m = load(o.file, o.asf, o.fps, warnings);
   const Skeleton& sk = m.skeleton;
@@ -104,10 +106,15 @@ struct ConvertOptions {
   double fps = 0.0;  // .amc input: frames per second (0: 120)
   bool force = false;  // .amc output: replace an .asf beside it that holds another skeleton
   bool single_root = false;  // .bvh output: a forest as one ROOT
+  std::string model;  // marker input: the skeleton model (built-in name or file)
+  std::string roots;  // marker input with a model: the essential joints, A,B
 };
 
 void run_convert(const ConvertOptions& o) {
-  if (is_marker_file(o.in)) return run_marker_convert(o.in, o.out);  // markers -> .trc: cmd_markers.cpp
+  if (is_marker_file(o.in)) return run_marker_convert(o.in, o.out, o.model, o.roots);  // cmd_markers.cpp
+  if (!o.model.empty() || !o.roots.empty()) {
+    throw CommandError("--model and --roots apply to marker files (.c3d, .trc), not to " + o.in);
+  }
   Warnings warnings;
   const Motion m = load(o.in, o.asf, o.fps, warnings);
   LoadOptions save;
@@ -204,17 +211,24 @@ void add_file_commands(CLI::App& app) {
     cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
     add_fps_option(*cmd, o->fps);
+    cmd->add_option("--model", o->model,
+                    "Marker file: fit this skeleton model (built-in name such as cmu41, or a model file) and report "
+                    "the residuals");
     cmd->callback([o] { run_info(*o); });
   }
   {
     auto o = std::make_shared<ConvertOptions>();
     CLI::App* cmd = app.add_subcommand("convert", "Convert a motion file by extension (.bvh <-> .gmr); atomic write");
     cmd->add_option("IN", o->in, "Input motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
-    cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr); .trc for marker input")->required();
+    cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr, .gmrb, .amc); .trc for marker input")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc input (default: the single .asf beside it)");
     add_fps_option(*cmd, o->fps);
     cmd->add_flag("--force", o->force, "For .amc output: replace an existing .asf that holds another skeleton");
     add_single_root_flag(*cmd, o->single_root);
+    cmd->add_option("--model", o->model,
+                    "Marker input: the skeleton model that turns markers into a motion (built-in name such as cmu41, "
+                    "or a model file; docs/markers.md)");
+    cmd->add_option("--roots", o->roots, "Marker input with --model: the essential joints, the motion's roots (A,B)");
     cmd->callback([o] { run_convert(*o); });
   }
   {

@@ -13,9 +13,12 @@
 #include "commands.h"
 #include "gmr/core/file_util.h"
 #include "gmr/markers/c3d.h"
+#include "gmr/io/motion_file.h"
+#include "gmr/io/positions_csv.h"
+#include "gmr/markers/marker_model.h"
+#include "gmr/markers/marker_solve.h"
 #include "gmr/markers/markers.h"
 #include "gmr/markers/trc.h"
-#include "gmr/io/positions_csv.h"
 
 namespace gmr::cli {
 namespace {
@@ -68,9 +71,52 @@ void run_markers(const MarkersOptions& o) {
   print_warnings(warnings);
 }
 
+// The fit report of `gmr info FILE --model M`: per part, frames fitted,
+// interpolated and held, outliers, the fit's RMS and the RMS/max distance
+// between measured markers and the markers the motion carries; per joint,
+// how it was found and what the take determined.
+std::string fit_report(const MarkerSolveResult& r, const std::string& units) {
+  std::string out;
+  char line[256];
+  const std::string u = units.empty() ? std::string("mm") : units;
+  std::snprintf(line, sizeof line, "%-11s %7s %7s %6s %8s %10s %12s %10s\n", "part", "fitted", "interp", "held",
+                "outliers", "fit rms", "motion rms", "max");
+  out += line;
+  for (const PartFit& p : r.parts) {
+    std::snprintf(line, sizeof line, "%-11s %7zu %7zu %6zu %8zu %10.2f %12.2f %10.2f\n", p.name.c_str(), p.fitted,
+                  p.interpolated, p.held, p.outliers, p.fit_rms, p.motion_rms, p.motion_max);
+    out += line;
+  }
+  out += "(distances in " + u + "; motion rms: measured markers against the markers the motion carries)\n";
+  std::snprintf(line, sizeof line, "%-11s %-10s %10s %10s %10s %10s %10s\n", "joint", "found by", "determined",
+                "from prior", "fit rms", "bone", "bone rms");
+  out += line;
+  for (const JointFit& j : r.joints) {
+    if (j.functional) {
+      std::snprintf(line, sizeof line, "%-11s %-10s %8d/3 %10.2f %10.2f %10.2f %10.2f\n", j.name.c_str(), "centre",
+                    j.determined, j.prior_distance, j.fit_rms, j.bone_length, j.bone_rms);
+    } else {
+      std::snprintf(line, sizeof line, "%-11s %-10s %10s %10s %10s %10.2f %10.2f\n", j.name.c_str(), "markers", "-",
+                    "-", "-", j.bone_length, j.bone_rms);
+    }
+    out += line;
+  }
+  return out;
+}
+
+MarkerSolveResult solve(const MarkerTrajectories& d, const std::string& model_name, const std::string& roots,
+                        Warnings& warnings) {
+  const MarkerModel model = take(find_marker_model(model_name));
+  MarkerSolveOptions options;
+  if (!roots.empty()) options.roots = split_list(roots);
+  MarkerSolveResult r = take(solve_markers(d, model, options));
+  warnings.insert(warnings.end(), r.warnings.begin(), r.warnings.end());
+  return r;
+}
+
 }  // namespace
 
-void run_marker_info(const std::string& file) {
+void run_marker_info(const std::string& file, const std::string& model) {
   Warnings warnings;
   const MarkerTrajectories d = take(load_markers(file, &warnings));
   const std::size_t points = d.frame_count * d.marker_count();
@@ -95,18 +141,39 @@ void run_marker_info(const std::string& file) {
   out += "names:      ";
   for (const std::string& n : d.names) out += " " + n;
   out += "\n";
+  if (!model.empty()) {
+    const MarkerSolveResult r = solve(d, model, {}, warnings);
+    out += "model:       " + model + " (" + std::to_string(r.motion.skeleton.size()) + " joints)\n";
+    out += fit_report(r, d.units);
+  }
   std::fwrite(out.data(), 1, out.size(), stdout);
   print_warnings(warnings);
 }
 
-void run_marker_convert(const std::string& in, const std::string& out) {
+void run_marker_convert(const std::string& in, const std::string& out, const std::string& model,
+                        const std::string& roots) {
   const std::string ext = lower_extension(out);
-  if (ext != ".trc") {
-    throw CommandError(out + ": cannot write markers as '" + ext + "': expected .trc (markers are not turned into a skeleton)");
+  if (ext == ".trc") {
+    if (!model.empty() || !roots.empty()) {
+      throw CommandError(out + ": a .trc output keeps the markers; --model and --roots make a motion (.gmr, .gmrb, "
+                               ".bvh, .amc)");
+    }
+    Warnings warnings;
+    const MarkerTrajectories d = take(load_markers(in, &warnings));
+    check(write_trc(d, out));
+    print_warnings(warnings);
+    return;
+  }
+  if (model.empty()) {
+    std::string known;
+    for (const std::string& n : builtin_marker_model_names()) known += (known.empty() ? "" : ", ") + n;
+    throw CommandError(out + ": markers become a motion through a skeleton model: add --model NAME or --model FILE "
+                             "(built in: " + known + "), or write .trc");
   }
   Warnings warnings;
   const MarkerTrajectories d = take(load_markers(in, &warnings));
-  check(write_trc(d, out));
+  const MarkerSolveResult r = solve(d, model, roots, warnings);
+  check(save_motion(r.motion, out));
   print_warnings(warnings);
 }
 

@@ -7,10 +7,13 @@
 namespace gmr::cli {
 
 // Prints the marker summary of a .c3d or .trc file (markers, frames, rate,
-// units, first frame, missing points, analog channels skipped).
-void run_marker_info(const std::string& file);
-// Converts a marker file to .trc (atomic write); any other output extension
-// is a CommandError.
-void run_marker_convert(const std::string& in, const std::string& out);
+// units, first frame, missing points, analog channels skipped) and, with a
+// skeleton model (a built-in name or a model file), the fit report.
+void run_marker_info(const std::string& file, const std::string& model);
+// Converts a marker file: to .trc (atomic write), or with a skeleton model to
+// a motion (.gmr, .gmrb, .bvh, .amc) whose roots are `roots` (A,B; empty:
+// the model's). A motion output without a model is a CommandError.
+void run_marker_convert(const std::string& in, const std::string& out, const std::string& model,
+                        const std::string& roots);
 
 }  // namespace gmr::cli

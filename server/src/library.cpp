@@ -9,8 +9,10 @@
 
 #include "gmr/core/file_util.h"
 #include "gmr/demo/demo_library.h"
-#include "gmr/ops/convert.h"
 #include "gmr/io/motion_file.h"
+#include "gmr/markers/marker_model.h"
+#include "gmr/markers/marker_solve.h"
+#include "gmr/ops/convert.h"
 
 namespace gmr::server {
 namespace fs = std::filesystem;
@@ -22,7 +24,38 @@ struct Job {
   LoadOptions options;
   std::string name;
   std::string source;  // the path relative to the library folder: clients never see the server's own paths
+  fs::path model;      // a marker file's skeleton model (see marker_model_for)
 };
+
+// A marker file (.c3d, .trc) is served when a skeleton model sits beside it:
+// X.model for X.c3d, else markers.model for every marker file of the folder.
+// The model file holds a model (docs/markers.md) or just `builtin cmu41`.
+fs::path marker_model_for(const fs::path& file) {
+  std::error_code ec;
+  fs::path own = file;
+  own.replace_extension(".model");
+  if (fs::is_regular_file(own, ec)) return own;
+  const fs::path shared = file.parent_path() / "markers.model";
+  if (fs::is_regular_file(shared, ec)) return shared;
+  return {};
+}
+
+// Markers and their model -> the motion the solver builds (pre-rotation).
+Result<Motion> load_markers_as_motion(const Job& job, double& metres_per_unit) {
+  auto markers = load_markers(job.path);
+  if (!markers.ok()) return markers.error();
+  metres_per_unit = millimetres_per_marker_unit(markers->units) / 1000;
+  auto model = read_marker_model(job.model);
+  if (!model.ok()) return model.error();
+  auto solved = solve_markers(*markers, *model);
+  if (!solved.ok()) {
+    Error e = solved.error();
+    e.message = "with model " + job.model.filename().string() + ": " + e.message;
+    e.file = job.path.string();
+    return e;
+  }
+  return std::move(solved->motion);
+}
 
 Result<LibraryEntry> load_one(const Job& job);
 
@@ -37,7 +70,9 @@ Result<LibraryEntry> load_one_guarded(const Job& job) {
 }
 
 Result<LibraryEntry> load_one(const Job& job) {
-  auto loaded = load_motion(job.path, job.options);
+  double metres_per_unit = 0;
+  auto loaded = job.model.empty() ? load_motion(job.path, job.options) : load_markers_as_motion(job, metres_per_unit);
+  if (job.model.empty()) metres_per_unit = declared_metres_per_unit(job.path, job.options);
   if (!loaded.ok()) return loaded.error();
   auto pre = to_pre_rotation(*loaded);
   if (!pre.ok()) return pre.error();
@@ -45,8 +80,7 @@ Result<LibraryEntry> load_one(const Job& job) {
   if (pre->frame_count == 0) return Error{job.path.string(), 0, 0, "the motion has no frames"};
   if (!(pre->frame_time > 0.0)) return Error{job.path.string(), 0, 0, "the motion has no frame time"};
   if (auto s = check_motion_limits(*pre, job.limits); !s.ok()) return Error{job.path.string(), 0, 0, s.error().message};
-  return LibraryEntry{job.name, job.source, std::make_shared<const Motion>(std::move(pre).value()),
-                      declared_metres_per_unit(job.path, job.options)};
+  return LibraryEntry{job.name, job.source, std::make_shared<const Motion>(std::move(pre).value()), metres_per_unit};
 }
 
 }  // namespace
@@ -94,6 +128,8 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
     const fs::path relative = f.lexically_relative(dir);
     Job job{f, limits, file_options, fs::path(relative).replace_extension().generic_string(), relative.generic_string()};
     if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") {
+      jobs.push_back(std::move(job));
+    } else if ((ext == ".c3d" || ext == ".trc") && !(job.model = marker_model_for(f)).empty()) {
       jobs.push_back(std::move(job));
     } else {
       ++out.skipped;

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "cli_test_util.h"
+#include "gmr/core/file_util.h"
 #include "gmr/markers/c3d.h"
 #include "gmr/markers/markers.h"
 #include "gmr/markers/trc.h"
@@ -92,10 +93,63 @@ TEST_F(CliMarkers, OneLineErrors) {
   const std::string params = test::data_file("malformed/TRUNC_cmu_02_01_in_parameters.c3d").string();
   expect_one_line_error("markers " + shell_quote(params), params + ": at byte ");
   expect_one_line_error("convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.bvh"),
-                        "cannot write markers as '.bvh': expected .trc");
+                        "markers become a motion through a skeleton model: add --model NAME or --model FILE "
+                        "(built in: cmu41), or write .trc");
+  expect_one_line_error("convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.bvh") +
+                            " --model cmu99",
+                        "'cmu99' is neither a built-in marker model (cmu41) nor a file");
+  expect_one_line_error("convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.trc") +
+                            " --model cmu41",
+                        "a .trc output keeps the markers");
+  // A take without the CMU markers: the model names what is missing.
+  expect_one_line_error("convert " + shell_quote(test::data_file("c3d/opensim_walking2.c3d").string()) + " " +
+                            path("x.bvh") + " --model cmu41",
+                        "the marker file lacks ");
   expect_one_line_error("markers " + path("none.bvh"), "cannot load '.bvh' files as markers: expected .c3d or .trc");
   expect_one_line_error("markers " + shell_quote(trunc) + " --frames 5:2", "gmr: ");
   EXPECT_FALSE(std::filesystem::exists(dir_ / "x.bvh"));  // nothing written by the failed convert
+}
+
+// Markers -> motion: convert with the built-in CMU model to every motion
+// format, positions read back from the file equal the library's solve, the
+// roots move, and info reports the fit.
+TEST_F(CliMarkers, ConvertWithAModelWritesAMotionAndInfoReportsTheFit) {
+  GMR_REQUIRE_DATA();
+  const std::string c3d = shell_quote(test::data_file("c3d/cmu_02_01.c3d").string());
+  const auto conv = gmr("convert " + c3d + " " + path("walk.gmr") + " --model cmu41");
+  ASSERT_EQ(conv.status, 0) << conv.err;
+  const auto pos = gmr("positions " + path("walk.gmr") + " --frames 100:101");
+  ASSERT_EQ(pos.status, 0) << pos.err;
+  EXPECT_THAT(pos.out, HasSubstr("\n100,lfemur,"));
+  EXPECT_EQ(lines(pos.out), 1 + 21u);  // the 21 joints of cmu41
+
+  // Another set of roots: the same positions, to print precision.
+  const auto rooted = gmr("convert " + c3d + " " + path("walk2.gmr") + " --model cmu41 --roots lfemur,head");
+  ASSERT_EQ(rooted.status, 0) << rooted.err;
+  const auto info = gmr("info " + path("walk2.gmr"));
+  EXPECT_THAT(info.out, HasSubstr("lfemur, head"));
+  const auto pos2 = gmr("positions " + path("walk2.gmr") + " --frames 100:101");
+  ASSERT_EQ(pos2.status, 0) << pos2.err;
+  EXPECT_EQ(lines(pos2.out), lines(pos.out));
+
+  for (const char* ext : {"bvh", "gmrb"}) {
+    const auto r = gmr("convert " + c3d + " " + path(std::string("walk.") + ext) + " --model cmu41");
+    EXPECT_EQ(r.status, 0) << ext << ": " << r.err;
+  }
+
+  // A model file beside the data: `builtin cmu41`.
+  ASSERT_TRUE(write_file_atomic(dir_ / "cmu.model", "builtin cmu41\n").ok());
+  const auto report = gmr("info " + c3d + " --model " + path("cmu.model"));
+  ASSERT_EQ(report.status, 0) << report.err;
+  EXPECT_THAT(report.out, HasSubstr("model:       "));
+  EXPECT_THAT(report.out, HasSubstr("\nlthigh "));
+  EXPECT_THAT(report.out, HasSubstr("\nlfemur      centre "));
+  EXPECT_THAT(report.out, HasSubstr("motion rms"));
+  expect_one_line_error("info " + path("walk.gmr") + " --model cmu41", "--model applies to marker files");
+  expect_one_line_error("convert " + path("walk.gmr") + " " + path("w.bvh") + " --roots head",
+                        "--model and --roots apply to marker files");
+  expect_one_line_error("convert " + c3d + " " + path("w.bvh") + " --model cmu41 --roots nose",
+                        "unknown joint 'nose'");
 }
 
 }  // namespace

@@ -93,6 +93,41 @@ TEST(Library, NamesFilesAsFoundAndPicksEachAmcsSkeleton) {
   EXPECT_TRUE(lib->rejected.empty()) << lib->rejected.front().reason;
 }
 
+// A marker file is served when a skeleton model sits beside it (X.model, or
+// markers.model for the folder); without one it is skipped, and a bad model
+// rejects the file with the model's error.
+TEST(Library, MarkerFilesWithAModelBesideThemBecomeMotions) {
+  GMR_REQUIRE_DATA();
+  TempDir d;
+  namespace fs = std::filesystem;
+  fs::create_directories(d.path / "own");
+  fs::create_directories(d.path / "shared");
+  fs::create_directories(d.path / "none");
+  fs::create_directories(d.path / "bad");
+  fs::create_symlink(data_file("c3d/cmu_02_01.c3d"), d.path / "own" / "walk.c3d");
+  std::ofstream(d.path / "own" / "walk.model") << "builtin cmu41\n";
+  fs::create_symlink(data_file("c3d/cmu_02_01.c3d"), d.path / "shared" / "walk.c3d");
+  std::ofstream(d.path / "shared" / "markers.model") << "# every take here\nbuiltin cmu41\n";
+  fs::create_symlink(data_file("c3d/cmu_02_01.c3d"), d.path / "none" / "walk.c3d");
+  fs::create_symlink(data_file("c3d/opensim_walking2.c3d"), d.path / "bad" / "gait.c3d");
+  std::ofstream(d.path / "bad" / "gait.model") << "builtin cmu41\n";
+  auto lib = server::load_library(d.path, 2);
+  ASSERT_TRUE(lib.ok()) << lib.error().to_string();
+  std::vector<std::string> names;
+  for (const auto& e : lib->entries) names.push_back(e.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"own/walk", "shared/walk"}));
+  for (const auto& e : lib->entries) {
+    EXPECT_EQ(e.motion->frame_count, 343u);
+    EXPECT_EQ(e.motion->skeleton.size(), 21u);
+    EXPECT_GE(e.motion->skeleton.find("lfemur"), 0);
+    EXPECT_DOUBLE_EQ(e.metres_per_unit, 0.001);  // the C3D's millimetres
+    EXPECT_NEAR(e.motion->frame_time, 1.0 / 120, 1e-12);
+  }
+  ASSERT_EQ(lib->rejected.size(), 1u);
+  EXPECT_NE(lib->rejected[0].reason.find("gait.c3d"), std::string::npos) << lib->rejected[0].reason;
+  EXPECT_NE(lib->rejected[0].reason.find("the marker file lacks"), std::string::npos) << lib->rejected[0].reason;
+}
+
 // Forty roots without channels and `frames` frames: about 2 KB of BVH.
 std::string channel_less_roots(const std::string& frames) {
   std::string s = "HIERARCHY\n";

@@ -9,7 +9,7 @@
 //   spelled NaN in any case.
 // - Markers keep the file's order and names (trimmed of padding); analog
 //   channels (force plates, EMG) are skipped, only counted.
-// - Turning markers into a skeleton is not done here (not supported yet).
+// - Turning markers into a skeleton motion: gmr/markers/marker_solve.h.
 //
 // The readers and the writer are in gmr/markers/c3d.h and gmr/markers/trc.h.
 #pragma once
