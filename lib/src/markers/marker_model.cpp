@@ -13,26 +13,31 @@ namespace gmr {
 namespace {
 
 // The CMU 41-marker Vicon set. Joints are named like the bones of CMU's ASF
-// skeletons and sit where those bones end. Functional centres (hips, knees,
-// ankles, shoulders, elbows, lumbar and neck) take the coordinates the take
-// does not determine from their priors:
-// - hips: from the pelvis markers, 0.36, 0.05 and 0.435 of the width between
-//   the front waist markers medial, posterior and inferior of their midpoint
-//   (lengths here are in half-widths). Bell and Harrington's regression from
-//   the ASIS says 0.36, 0.19, 0.30; CMU's front waist markers sit higher and
-//   further back than the ASIS, and these constants put the hips where
-//   subject 01's ASF has them (docs/markers.md gives the figures);
-// - knees, ankles, elbows: half a typical joint width plus a marker radius
-//   medial of the lateral marker, medial being toward the other side's twin;
-// - shoulders: 50 mm below the acromion marker, down the thorax.
-// Wrists are the midpoint of the two wrist markers (the wrist bar), feet the
-// midpoint of the toe and fifth-metatarsal markers, the head the centre of
-// the four head markers.
+// skeletons and sit where those bones end; the constants place them where
+// CMU's own skeletons have them (set on take 01_01 against 01.asf; the
+// figures are in docs/markers.md). Functional centres (hips, knees, ankles,
+// shoulders, elbows, lumbar and neck) take what the take does not determine
+// from their priors; knees, ankles and elbows are hinges, which take only
+// their best-determined direction from the take:
+// - hips: 0.36, 0.05 and 0.435 of the width between the front waist markers
+//   medial, posterior and inferior of their midpoint (lengths in
+//   half-widths). Bell and Harrington's regression from the ASIS says 0.36,
+//   0.19, 0.30; CMU's front waist markers sit higher and further back;
+// - knees 90 mm, ankles 50 mm, elbows 65 mm medial of the lateral marker
+//   (medial: toward the other side's twin). CMU's centres are deeper than
+//   half a joint width plus a marker radius (60, 42, 40 mm);
+// - shoulders: 65 mm below the acromion marker, down the thorax;
+// - wrists: from the midpoint of the wrist-bar markers, 0.3 of the way to the
+//   elbow and 40 mm to the palm side (the bar sits on the back of the wrist):
+//   x = toward the elbow, z = x cross (toward the ulnar marker), so +z is
+//   palmar on the left arm and dorsal on the right.
+// Feet are the midpoint of the toe and fifth-metatarsal markers, the head
+// the centre of the four head markers.
 constexpr std::string_view kCmu41 = R"(gmr-marker-model 1
 name cmu41
 outlier 40mm
 min-spread 15mm
-min-relative-spread 0.2
+min-relative-spread 0.3
 
 part pelvis LFWT RFWT LBWT RBWT
 part thorax lowerback C7 T10 CLAV STRN RBAC
@@ -54,24 +59,24 @@ part rhand rradius RFIN
 
 joint root in pelvis at mean(LFWT, RFWT, LBWT, RBWT)
 joint lhipjoint parent root in pelvis centre lthigh prior local(mean(LFWT, RFWT), LFWT, mean(LBWT, RBWT), 0.72, 0.1, -0.87)
-joint lfemur parent lhipjoint in lthigh centre lshank prior along(LKNE, LKNE, RKNE, 60mm)
-joint ltibia parent lfemur in lshank centre lfoot prior along(LANK, LANK, RANK, 42mm)
+joint lfemur parent lhipjoint in lthigh centre lshank hinge prior along(LKNE, LKNE, RKNE, 90mm)
+joint ltibia parent lfemur in lshank centre lfoot hinge prior along(LANK, LANK, RANK, 50mm)
 joint lfoot parent ltibia in lfoot at mean(LTOE, LMT5)
 joint rhipjoint parent root in pelvis centre rthigh prior local(mean(LFWT, RFWT), RFWT, mean(LBWT, RBWT), 0.72, 0.1, 0.87)
-joint rfemur parent rhipjoint in rthigh centre rshank prior along(RKNE, RKNE, LKNE, 60mm)
-joint rtibia parent rfemur in rshank centre rfoot prior along(RANK, RANK, LANK, 42mm)
+joint rfemur parent rhipjoint in rthigh centre rshank hinge prior along(RKNE, RKNE, LKNE, 90mm)
+joint rtibia parent rfemur in rshank centre rfoot hinge prior along(RANK, RANK, LANK, 50mm)
 joint rfoot parent rtibia in rfoot at mean(RTOE, RMT5)
 joint lowerback parent root in pelvis centre thorax prior along(mean(LBWT, RBWT), mean(LBWT, RBWT), T10, 0.3)
 joint thorax parent lowerback in thorax at mean(C7, CLAV)
 joint upperneck parent thorax in thorax centre head prior along(mean(C7, CLAV), mean(C7, CLAV), mean(LFHD, RFHD, LBHD, RBHD), 0.5)
 joint head parent upperneck in head at mean(LFHD, RFHD, LBHD, RBHD)
-joint lclavicle parent thorax in lshoulder centre lupperarm prior along(LSHO, mean(C7, CLAV), mean(T10, STRN), 50mm)
-joint lhumerus parent lclavicle in lupperarm centre lforearm prior along(LELB, LELB, RELB, 40mm)
-joint lradius parent lhumerus in lforearm at mean(LWRA, LWRB)
+joint lclavicle parent thorax in lshoulder centre lupperarm prior along(LSHO, mean(C7, CLAV), mean(T10, STRN), 65mm)
+joint lhumerus parent lclavicle in lupperarm centre lforearm hinge prior along(LELB, LELB, RELB, 65mm)
+joint lradius parent lhumerus in lforearm at local(mean(LWRA, LWRB), lhumerus, LWRB, 0.3, 0, 40mm)
 joint lhand parent lradius in lhand at LFIN
-joint rclavicle parent thorax in rshoulder centre rupperarm prior along(RSHO, mean(C7, CLAV), mean(T10, STRN), 50mm)
-joint rhumerus parent rclavicle in rupperarm centre rforearm prior along(RELB, RELB, LELB, 40mm)
-joint rradius parent rhumerus in rforearm at mean(RWRA, RWRB)
+joint rclavicle parent thorax in rshoulder centre rupperarm prior along(RSHO, mean(C7, CLAV), mean(T10, STRN), 65mm)
+joint rhumerus parent rclavicle in rupperarm centre rforearm hinge prior along(RELB, RELB, LELB, 65mm)
+joint rradius parent rhumerus in rforearm at local(mean(RWRA, RWRB), rhumerus, RWRB, 0.3, 0, -40mm)
 joint rhand parent rradius in rhand at RFIN
 )";
 
@@ -357,9 +362,16 @@ Status Parser::statement(MarkerModel& model) {
       if (j.child_part < 0) return error_at(first.column, "joint '" + j.name + "': unknown part '" + *child + "'");
       if (j.child_part == j.part) return error_at(first.column, "joint '" + j.name + "': centre of '" + *child +
                                                                     "' within the same part");
-      auto p = word("'prior'");
+      auto p = word("'prior' or 'hinge'");
       if (!p) return p.error();
-      if (*p != "prior") return error_at(first.column, "joint '" + j.name + "': expected 'prior EXPR' after the part");
+      if (*p == "hinge") {
+        j.hinge = true;
+        p = word("'prior'");
+        if (!p) return p.error();
+      }
+      if (*p != "prior") {
+        return error_at(first.column, "joint '" + j.name + "': expected '[hinge] prior EXPR' after the part");
+      }
     } else {
       return error_at(first.column, "joint '" + j.name + "': expected 'at EXPR' or 'centre PART prior EXPR', found '" +
                                         *rule + "'");

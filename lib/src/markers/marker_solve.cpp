@@ -442,7 +442,9 @@ Status Solver::place_joint(int index) {
       for (int i = 0; i < 3; ++i) {
         const Vector3d e = eig.eigenvectors().col(i);
         const double spread = std::sqrt(lambda(i) / (4.0 * static_cast<double>(samples)));
-        const bool determined = spread >= model_.min_spread_mm / unit_mm_ && spread >= model_.min_relative_spread * top;
+        // Eigenvalues come in increasing order: a hinge keeps only column 2.
+        const bool determined = spread >= model_.min_spread_mm / unit_mm_ &&
+                                spread >= model_.min_relative_spread * top && !(mj.hinge && i < 2);
         if (determined) {
           c += e * (e.dot(b) / lambda(i));
           ++jf.determined;

@@ -231,6 +231,27 @@ TEST(MarkerSolve, AHingeCentreIsTheAxisPointNearestThePrior) {
     EXPECT_NEAR((found[f] - s.j2[f]).norm(), std::abs(along_axis), 1e-6) << f;
   }
   EXPECT_NEAR(j2.prior_distance, std::hypot(prior.y() - j2_in_arm.y(), prior.z() - j2_in_arm.z()), 1e-6);
+
+  // Marked `hinge`, the joint takes one direction from the take (the one the
+  // flexion sweeps most) and the other two from the prior: the result moves
+  // toward the prior, and keeps the determined coordinate.
+  std::string text = kChainModel;
+  text.replace(text.find("centre fore prior"), 17, "centre fore hinge prior");
+  auto hinged = parse_marker_model(text, "chain");
+  ASSERT_TRUE(hinged.ok()) << hinged.error().to_string();
+  EXPECT_TRUE(hinged->joints[static_cast<std::size_t>(hinged->find_joint("j2"))].hinge);
+  auto h = solve_markers(s.markers, *hinged);
+  ASSERT_TRUE(h.ok()) << h.error().to_string();
+  const JointFit& hj = h->joints[static_cast<std::size_t>(hinged->find_joint("j2"))];
+  EXPECT_EQ(hj.determined, 1);
+  EXPECT_LT(hj.prior_distance, j2.prior_distance);
+  // The point found is fixed in the arm (a constant distance from the true
+  // centre) and nearer the truth than the prior, one coordinate being exact.
+  const std::vector<Vector3d> hinged_found = joint_track(h->motion, "j2");
+  const double off = (hinged_found[0] - s.j2[0]).norm();
+  EXPECT_LT(off, (prior - j2_in_arm).norm());
+  EXPECT_GT(off, std::abs(along_axis));
+  for (std::size_t f = 0; f < s.j2.size(); f += 50) EXPECT_NEAR((hinged_found[f] - s.j2[f]).norm(), off, 1e-6) << f;
 }
 
 TEST(MarkerSolve, GapsAreInterpolatedOrHeldOutliersDroppedAndMissingMarkersNamed) {
@@ -441,30 +462,27 @@ void report(const std::string& take, const TakeComparison& c) {
   }
 }
 
-// The target is a median within 30 mm and a 95th percentile within
-// 60 mm for every compared joint. Today only the hips of 01_01 reach it
-// (docs/markers.md: CMU's Vicon-fitted skeleton places knees, elbows, ankles
-// and shoulders 3-6 cm medial of functional centres, and its lradius ends 6
-// cm short of the wrist markers). These bounds hold what is reached, so a
-// change that makes it worse fails; the targets stay in the note.
-void expect_reached(const TakeComparison& c, double hip_median_mm) {
+// Every compared joint within 30 mm (median over frames) and 60 mm (95th
+// percentile) of the AMC's (`max_median_mm`, `max_p95_mm` for a take whose
+// AMC plays on another subject's skeleton), bone directions within 15 deg
+// (median) and 20 deg (p95).
+void expect_reached(const TakeComparison& c, double max_median_mm, double max_p95_mm) {
   for (const JointError& e : c.errors) {
-    const bool hip = e.joint == "lhipjoint" || e.joint == "rhipjoint";
-    EXPECT_LE(e.median_mm, hip ? hip_median_mm : 110.0) << e.joint;
-    EXPECT_LE(e.p95_mm, 130.0) << e.joint;
+    EXPECT_LE(e.median_mm, max_median_mm) << e.joint;
+    EXPECT_LE(e.p95_mm, max_p95_mm) << e.joint;
   }
   for (const BoneAngle& a : c.angles) {
-    EXPECT_LE(a.median_deg, 20.0) << a.bone;
-    EXPECT_LE(a.p95_deg, 25.0) << a.bone;
+    EXPECT_LE(a.median_deg, 15.0) << a.bone;
+    EXPECT_LE(a.p95_deg, 20.0) << a.bone;
   }
   // The declared unit holds: a free scale agrees within 3%.
   EXPECT_NEAR(c.free_scale / c.declared_scale, 1.0, 0.03);
   // Every part is fitted in every frame of these takes, and the motion
-  // carries each part's markers within its fit residual (plus what making
-  // each bone constant costs).
+  // carries each part's markers within twice its fit residual plus 10 mm:
+  // what making every bone constant costs down the chain (bone_rms).
   for (const PartFit& p : c.solved.parts) {
     EXPECT_EQ(p.fitted, c.solved.motion.frame_count) << p.name;
-    EXPECT_LE(p.motion_rms, 2 * p.fit_rms + 6.0) << p.name;
+    EXPECT_LE(p.motion_rms, 2 * p.fit_rms + 10.0) << p.name;
   }
 }
 
@@ -475,7 +493,7 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
   report("01_01", c);
   // The C3D's first frame (capture frame 40) is the AMC's frame 1.
   EXPECT_EQ(c.frame_offset, 0);
-  expect_reached(c, 30.0);
+  expect_reached(c, 30.0, 60.0);
 
   // The motion moved to other roots keeps every joint's position.
   const Motion& m = c.solved.motion;
@@ -498,8 +516,9 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
 
 // 02_01's own skeleton (02.asf) is not in the corpus: its AMC is played on
 // subject 12's, whose bones differ by up to 12 cm (femur 336 mm against the
-// 460 mm these markers give), so joint positions cannot agree; bone
-// directions can.
+// 460 mm these markers give), so joint positions agree only as far as those
+// bones allow (bounds from docs/markers.md's table); bone directions agree
+// as for 01_01.
 TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
   GMR_REQUIRE_DATA();
   const TakeComparison c = compare_take("c3d/cmu_02_01.c3d", "asfamc/02/02_01.amc", "asfamc/02/12.asf");
@@ -507,7 +526,7 @@ TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
   report("02_01", c);
   // The C3D's first frame (capture frame 50) is the AMC's frame 2.
   EXPECT_EQ(c.frame_offset, 1);
-  expect_reached(c, 60.0);
+  expect_reached(c, 100.0, 120.0);
 }
 
 }  // namespace

@@ -61,13 +61,19 @@ struct ModelPart {
 struct ModelJoint {
   enum class Rule {
     kAt,      // at EXPR: fixed in its part where EXPR is on average
-    kCentre,  // centre CHILD prior EXPR: the point of its part that CHILD's markers turn about
+    kCentre,  // centre CHILD [hinge] prior EXPR: the point of its part that CHILD's markers turn about
   };
   std::string name;
   int parent = -1;  // index into MarkerModel::joints; -1: a root of the model's tree
   int part = -1;    // the part the bone parent -> joint lies in (the joint is fixed in it)
   Rule rule = Rule::kAt;
   int child_part = -1;  // kCentre
+  // kCentre: a hinge (`centre CHILD hinge prior ...`) takes at most one
+  // direction from the take, the one flexion sweeps the child's markers
+  // along most; the axis and the direction along the child bone (which a
+  // flexion of less than 90 degrees barely moves them along) take the
+  // prior's coordinates.
+  bool hinge = false;
   PointExpr where;      // kAt: the position; kCentre: the prior
   int line = 0;
 };

@@ -17,8 +17,8 @@
 //    distances (a least-squares sphere fit with one centre and a radius per
 //    marker, in the part's frame, over all fitted frames); along directions
 //    the take barely moves the markers (the model's min-spread rules) the
-//    prior decides instead, so a hinge's centre is the point of its axis
-//    nearest the prior and a joint that does not move is at its prior.
+//    prior decides instead, so a joint that does not move is at its prior;
+//    a `hinge` takes only its best-determined direction from the take.
 // 4. The motion: every joint's world frame is its part's frame at the joint,
 //    M_c; L_c = M_p(c)^-1 M_c in the pre-rotation convention, the offset t_c
 //    the mean of R_c^T (p_c - p_p(c)) over the take; roots carry the joint's
