@@ -1,4 +1,4 @@
-// Server commands: ls, skeleton, query, stream (a running gmr-server).
+// Server commands: ls, skeleton, query, stream, record (a running gmr-server).
 // Built only with GMR_BUILD_NET (GMR_WITH_NET); otherwise add_net_commands adds nothing.
 #include "commands.h"
 
@@ -19,7 +19,9 @@
 #include "connect_options.h"
 #include "gmr/client/client.h"
 #include "gmr/core/file_util.h"
+#include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
+#include "gmr/ops/convert.h"
 
 namespace gmr::cli {
 namespace {
@@ -269,6 +271,128 @@ void run_stream(const StreamOptions& o) {
   if (!std::cout) throw CommandError("cannot write to standard output");
 }
 
+// ---- gmr record
+
+struct RecordOptions {
+  ServerOptions server;
+  std::string motion;
+  std::string out;
+  ViewOptions view;
+  bool udp = false;
+  double rate = 0.0;
+  double speed = 1.0;
+  std::uint64_t count = 0;
+  double seconds = 0.0;
+  bool loop = false;
+  std::string joints;
+  std::string frames = ":";
+};
+
+// Subscribes (float64, with orientations) and writes what arrives as a GMR
+// motion: every recorded joint a root holding its world position and
+// orientation, soft-linked to its nearest recorded ancestor in the view
+// (motion_from_world_poses). A frame lost on the way (UDP) is filled with the
+// one before it, and counted.
+void run_record(const RecordOptions& o) {
+  const std::string ext = lower_extension(o.out);
+  if (ext != ".gmr" && ext != ".gmrb" && ext != ".bvh") {
+    throw CommandError(o.out + ": a recording is written as .gmr, .gmrb or .bvh");
+  }
+  auto c = connect(o.server);
+  const client::ViewState v = make_view(*c, o.motion, o.view);
+  const FrameRange r = clamp_frame_range(parse_frame_range(o.frames), v.frame_count);
+  client::SubscribeOptions so;
+  so.udp = o.udp;
+  so.rate_hz = o.rate;
+  so.speed = o.speed;
+  so.loop = o.loop;
+  so.max_frames = o.count;
+  so.start_frame = static_cast<std::uint32_t>(r.begin);
+  so.end_frame = static_cast<std::uint32_t>(r.end);
+  if (!o.joints.empty()) so.joints = split_list(o.joints);
+  so.float64 = true;
+  so.orientations = true;
+  so.conventions = o.view.engine();
+
+  struct State {
+    std::mutex mutex;
+    std::condition_variable cv;
+    bool done = false;
+    std::string end_reason;
+    std::vector<Eigen::Vector3d> positions;
+    std::vector<Eigen::Quaterniond> orientations;
+    std::uint64_t frames = 0, filled = 0, last_sequence = 0;
+  };
+  auto st = std::make_shared<State>();
+  auto on_frame = [st](const client::ReceivedFrame& f) {
+    std::lock_guard lock(st->mutex);
+    if (st->done) return;
+    const std::size_t n = f.positions.size();
+    // A gap in the sequence: repeat the last frame so frame times stay even.
+    for (std::uint64_t s = st->last_sequence + 1; st->frames > 0 && s < f.sequence; ++s) {
+      st->positions.insert(st->positions.end(), st->positions.end() - static_cast<std::ptrdiff_t>(n),
+                           st->positions.end());
+      st->orientations.insert(st->orientations.end(), st->orientations.end() - static_cast<std::ptrdiff_t>(n),
+                              st->orientations.end());
+      ++st->filled;
+    }
+    st->positions.insert(st->positions.end(), f.positions.begin(), f.positions.end());
+    st->orientations.insert(st->orientations.end(), f.orientations.begin(), f.orientations.end());
+    ++st->frames;
+    st->last_sequence = f.sequence;
+  };
+  auto on_end = [st](const client::SubscriptionEnd& e) {
+    std::lock_guard lock(st->mutex);
+    st->done = true;
+    st->end_reason = e.reason;
+    st->cv.notify_all();
+  };
+  const client::SubscriptionInfo sub = take(c->subscribe(v.id, so, on_frame, on_end));
+  bool stopped_here = false;
+  {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.seconds);
+    std::unique_lock lock(st->mutex);
+    for (;;) {
+      st->cv.wait_for(lock, std::chrono::milliseconds(200), [&] { return st->done || !c->connected(); });
+      if (st->done) break;
+      if (o.seconds > 0 && std::chrono::steady_clock::now() >= deadline) {
+        st->done = true;
+        st->end_reason = "--seconds reached";
+        stopped_here = true;
+        break;
+      }
+      if (!c->connected()) throw CommandError("the server closed the connection");
+    }
+  }
+  if (stopped_here) check(c->unsubscribe(sub.id));
+  std::lock_guard lock(st->mutex);
+  if (st->frames == 0) throw CommandError("nothing recorded: the subscription ended (" + st->end_reason + ") before a frame");
+  // Names and soft links from the view: each recorded joint hangs from its
+  // nearest recorded ancestor.
+  std::vector<std::string> names;
+  std::vector<int> soft;
+  for (int j : sub.joints) {
+    names.push_back(sub.skeleton.joint(j).name);
+    int a = sub.skeleton.joint(j).parent;
+    int link = kNoParent;
+    for (; a != kNoParent && link == kNoParent; a = sub.skeleton.joint(a).parent) {
+      const auto it = std::find(sub.joints.begin(), sub.joints.end(), a);
+      if (it != sub.joints.end() && it - sub.joints.begin() < static_cast<std::ptrdiff_t>(names.size()) - 1) {
+        link = static_cast<int>(it - sub.joints.begin());
+      }
+    }
+    soft.push_back(link);
+  }
+  const Motion m = take(motion_from_world_poses(names, soft, sub.rate_hz > 0 ? 1.0 / sub.rate_hz : 0.0,
+                                                st->positions, st->orientations));
+  check(save_motion(m, o.out));
+  std::fprintf(stderr, "recorded %llu frames of %s (%zu joints) to %s: %s%s\n",
+               static_cast<unsigned long long>(m.frame_count), o.motion.c_str(), names.size(), o.out.c_str(),
+               st->end_reason.c_str(),
+               st->filled > 0 ? (", " + std::to_string(st->filled) + " lost frames filled with the one before").c_str()
+                              : "");
+}
+
 }  // namespace
 
 void add_net_commands(CLI::App& app) {
@@ -311,6 +435,24 @@ void add_net_commands(CLI::App& app) {
     add_view_options(*cmd, o->view);
     add_connect_options(*cmd, o->server);
     cmd->callback([o] { run_stream(*o); });
+  }
+  {
+    auto o = std::make_shared<RecordOptions>();
+    CLI::App* cmd = app.add_subcommand(
+        "record", "Record what a subscription receives (its view, its conventions) as a motion file (atomic write)");
+    cmd->add_option("motion", o->motion, "Motion name (see gmr ls)")->required();
+    cmd->add_option("-o,--output", o->out, "Output file: .gmr, .gmrb or .bvh")->required();
+    cmd->add_option("--seconds", o->seconds, "Stop after this many seconds (default: when the subscription ends)");
+    cmd->add_option("--count", o->count, "Stop after N frames");
+    cmd->add_flag("--udp", o->udp, "Receive frames over UDP (lost frames are filled with the one before)");
+    cmd->add_option("--rate", o->rate, "Rate in Hz (default: the motion's own rate times --speed)");
+    cmd->add_option("--speed", o->speed, "Playback speed")->capture_default_str();
+    cmd->add_flag("--loop", o->loop, "Loop the frame range (with --seconds or --count)");
+    cmd->add_option("--frames", o->frames, "Half-open frame range A:B to play")->capture_default_str();
+    cmd->add_option("--joints", o->joints, "Only these joints, A,B,C");
+    add_view_options(*cmd, o->view);
+    add_connect_options(*cmd, o->server);
+    cmd->callback([o] { run_record(*o); });
   }
 }
 

@@ -1,6 +1,8 @@
 // The `gmr` server commands against an in-process server: `gmr query` prints
 // byte for byte what `gmr positions` prints for the same file and options,
-// `gmr stream` prints the same rows, errors are one line with exit status 1.
+// `gmr stream` prints the same rows, `gmr record` writes a file whose
+// positions and orientations are the view's, errors are one line with exit
+// status 1.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,6 +11,9 @@
 #include <cstdio>
 #include <sys/wait.h>
 
+#include "gmr/io/motion_file.h"
+#include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/ops/convert.h"
 #include "net_test_util.h"
 #include "test_data.h"
 
@@ -90,6 +95,102 @@ TEST(CliNet, ListAndSkeletonAndOneLineErrors) {
 // Over TLS, with a token: the same rows as a plain server's; without the
 // token a structural edit is one line naming the role, and a wrong token
 // one line naming the refusal.
+// Sorted lines: `gmr positions` of a recording lists its joints in the
+// view's order, `gmr query` in the motion's.
+std::vector<std::string> sorted_lines(const std::string& s) {
+  std::vector<std::string> lines;
+  std::size_t b = 0;
+  for (std::size_t e; (e = s.find('\n', b)) != std::string::npos; b = e + 1) lines.push_back(s.substr(b, e - b));
+  std::sort(lines.begin(), lines.end());
+  return lines;
+}
+
+TEST(CliNet, RecordWritesTheViewsPositionsAndOrientations) {
+  GMR_REQUIRE_DATA();
+  TestServer s;
+  TempDir dir;
+  const std::string port = " --port " + std::to_string(s.port());
+  // A re-rooted view seen from a joint, in an engine's conventions, over TCP:
+  // the recording's positions print exactly what the server's query prints.
+  const std::string view = " --roots LeftHand --relative-to Head --conventions unity";
+  const std::string rec = (dir.path / "view.gmr").string();
+  const CommandRun r = gmr("record cmu/02_01 -o '" + rec + "' --frames 10:90 --speed 20" + view + port);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("recorded 80 frames of cmu/02_01"), std::string::npos) << r.out;
+  const CommandRun p = gmr("positions '" + rec + "'");
+  const CommandRun q = gmr("query cmu/02_01 --frames 10:90" + view + port);
+  ASSERT_EQ(q.status, 0) << q.out;
+  ASSERT_EQ(p.status, 0) << p.out;
+  // Frame numbers restart at 0 in the recording: compare rows without them.
+  auto strip_frame = [](const std::string& text, std::size_t first) {
+    std::string out;
+    std::size_t b = 0;
+    for (std::size_t e; (e = text.find('\n', b)) != std::string::npos; b = e + 1) {
+      const std::string line = text.substr(b, e - b);
+      const std::size_t comma = line.find(',');
+      if (line.rfind("frame,", 0) == 0) continue;
+      out += std::to_string(std::stoul(line.substr(0, comma)) - first) + line.substr(comma) + "\n";
+    }
+    return out;
+  };
+  EXPECT_EQ(sorted_lines(strip_frame(p.out, 0)), sorted_lines(strip_frame(q.out, 10)));
+  EXPECT_GT(p.out.size(), 10000u);
+
+  // World view: orientations too, against the file's own (GMR bone frames).
+  const std::string world = (dir.path / "world.gmrb").string();
+  const CommandRun w = gmr("record cmu/02_01 -o '" + world + "' --count 30 --speed 20" + port);
+  ASSERT_EQ(w.status, 0) << w.out;
+  auto recorded = load_motion(world);
+  ASSERT_TRUE(recorded.ok()) << recorded.error().to_string();
+  auto source = load_motion(cmu_file());
+  ASSERT_TRUE(source.ok());
+  auto pre = to_pre_rotation(*source);
+  ASSERT_TRUE(pre.ok());
+  ASSERT_EQ(recorded->frame_count, 30u);
+  EXPECT_EQ(recorded->skeleton.roots().size(), recorded->skeleton.size());  // every joint a root, soft-linked
+  const std::size_t rn = recorded->skeleton.size(), sn = pre->skeleton.size();
+  std::vector<Eigen::Vector3d> rp(rn), sp(sn);
+  std::vector<Eigen::Matrix3d> ro(rn), so(sn);
+  double worst_p = 0, worst_o = 0;
+  std::size_t compared = 0;
+  for (std::size_t f = 0; f < 30; ++f) {
+    compute_frame(*recorded, f, rp, ro);
+    compute_frame(*pre, f, sp, so);
+    for (std::size_t j = 0; j < rn; ++j) {
+      const int k = pre->skeleton.find(recorded->skeleton.joint(static_cast<int>(j)).name);
+      ASSERT_GE(k, 0);
+      worst_p = std::max(worst_p, (rp[j] - sp[static_cast<std::size_t>(k)]).norm());
+      worst_o = std::max(worst_o, (ro[j] - so[static_cast<std::size_t>(k)]).norm());
+      ++compared;
+    }
+  }
+  EXPECT_EQ(compared, 30 * sn);
+  EXPECT_LT(worst_p, 1e-9 * skeleton_size(*pre));
+  EXPECT_LT(worst_o, 1e-9);
+  // Soft links follow the view's tree: a join puts the hierarchy back.
+  const Skeleton& rs = recorded->skeleton;
+  const int knee = rs.find("LeftLeg");
+  ASSERT_GE(knee, 0);
+  EXPECT_EQ(rs.joint(rs.joint(knee).soft_parent).name, "LeftUpLeg");
+
+  // UDP with a time limit, a joint subset to BVH.
+  const std::string udp = (dir.path / "udp.bvh").string();
+  const CommandRun u = gmr("record walk -o '" + udp + "' --udp --loop --seconds 0.3 --joints head,l_hand" + port);
+  ASSERT_EQ(u.status, 0) << u.out;
+  auto bvh = load_motion(udp);
+  ASSERT_TRUE(bvh.ok()) << bvh.error().to_string();
+  EXPECT_EQ(bvh->skeleton.size(), 2u);
+  EXPECT_GT(bvh->frame_count, 5u);
+
+  const CommandRun bad = gmr("record walk -o '" + (dir.path / "x.csv").string() + "'" + port);
+  EXPECT_EQ(bad.status, 1);
+  EXPECT_NE(bad.out.find("a recording is written as .gmr, .gmrb or .bvh"), std::string::npos) << bad.out;
+  const CommandRun none = gmr("record nope -o '" + (dir.path / "x.gmr").string() + "'" + port);
+  EXPECT_EQ(none.status, 1);
+  EXPECT_EQ(none.out, "gmr: NOT_FOUND: unknown motion 'nope'\n");
+  EXPECT_FALSE(std::filesystem::exists(dir.path / "x.gmr"));
+}
+
 TEST(CliNet, TlsAndTokensGiveTheSameRows) {
   const auto cert = self_signed("IP:127.0.0.1");
   server::ServerConfig cfg;

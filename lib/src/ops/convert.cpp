@@ -271,4 +271,56 @@ Result<Motion> to_bvh_interchange(const Motion& motion, const BvhExportOptions& 
   return w.to_motion();
 }
 
+Result<Motion> motion_from_world_poses(const std::vector<std::string>& names, const std::vector<int>& soft_parents,
+                                       double frame_time, std::span<const Eigen::Vector3d> positions,
+                                       std::span<const Eigen::Quaterniond> orientations) {
+  const std::size_t n = names.size();
+  if (soft_parents.size() != n) return make_error("one soft parent per joint is needed");
+  if (n == 0 || positions.size() % n != 0) return make_error("positions must hold the same number of joints per frame");
+  const std::size_t frames = positions.size() / n;
+  if (!orientations.empty() && orientations.size() != positions.size()) {
+    return make_error("orientations must be empty or one per position");
+  }
+  std::vector<Joint> joints(n);
+  for (std::size_t j = 0; j < n; ++j) {
+    joints[j].name = names[j];
+    if (soft_parents[j] != kNoParent && (soft_parents[j] < 0 || static_cast<std::size_t>(soft_parents[j]) >= j)) {
+      return make_error("joint '" + names[j] + "': its soft parent must come before it");
+    }
+    joints[j].soft_parent = soft_parents[j];
+    joints[j].channels = {ChannelType::kXposition, ChannelType::kYposition, ChannelType::kZposition};
+    if (!orientations.empty()) {
+      joints[j].channels.insert(joints[j].channels.end(),
+                                {ChannelType::kZrotation, ChannelType::kXrotation, ChannelType::kYrotation});
+    }
+  }
+  auto skeleton = Skeleton::create(std::move(joints));
+  if (!skeleton) return skeleton.error();
+  Motion m;
+  m.skeleton = std::move(*skeleton);
+  m.convention = Convention::kPreRotation;
+  m.frame_time = frame_time;
+  m.frame_count = frames;
+  m.values.assign(frames * m.stride(), 0.0);
+  static constexpr Axis kOrder[3] = {Axis::kZ, Axis::kX, Axis::kY};
+  std::vector<Eigen::Vector3d> previous(n, Eigen::Vector3d::Zero());
+  for (std::size_t f = 0; f < frames; ++f) {
+    std::span<double> row = m.frame(f);
+    std::size_t c = 0;
+    for (std::size_t j = 0; j < n; ++j) {
+      const Eigen::Vector3d& p = positions[f * n + j];
+      row[c++] = p.x();
+      row[c++] = p.y();
+      row[c++] = p.z();
+      if (orientations.empty()) continue;
+      const Eigen::Matrix3d r = orientations[f * n + j].normalized().toRotationMatrix();
+      const Eigen::Vector3d angles = decompose_euler(r, kOrder, f == 0 ? nullptr : &previous[j]);
+      previous[j] = angles;
+      for (int k = 0; k < 3; ++k) row[c++] = angles(k);
+    }
+  }
+  if (auto s = m.validate(); !s) return s.error();
+  return m;
+}
+
 }  // namespace gmr

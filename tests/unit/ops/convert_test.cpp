@@ -231,6 +231,51 @@ TEST(ToBvhInterchange, ConstantPositionChannelsBecomeTheOffset) {
   EXPECT_LE(position_error(m, out), 1e-12);
 }
 
+// World poses of random motions (positions and bone-frame orientations from
+// forward kinematics) become an all-roots motion with the same poses, each
+// joint soft-linked to its parent; bad sizes and links are refused.
+TEST(MotionFromWorldPoses, GivesBackThePosesOfRandomMotions) {
+  for (std::uint32_t seed = 1; seed <= 20; ++seed) {
+    const Motion m = to_pre_rotation(random_motion(seed)).value();
+    const std::size_t n = m.skeleton.size();
+    std::vector<std::string> names;
+    std::vector<int> soft;
+    for (const Joint& j : m.skeleton.joints()) {
+      names.push_back(j.name);
+      soft.push_back(j.parent);
+    }
+    std::vector<Eigen::Vector3d> positions, p(n);
+    std::vector<Eigen::Quaterniond> orientations;
+    std::vector<Eigen::Matrix3d> o(n);
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      compute_frame(m, f, p, o);
+      positions.insert(positions.end(), p.begin(), p.end());
+      for (const auto& r : o) orientations.emplace_back(r);
+    }
+    auto r = motion_from_world_poses(names, soft, m.frame_time, positions, orientations);
+    ASSERT_TRUE(r.ok()) << r.error().to_string();
+    EXPECT_EQ(r->skeleton.roots().size(), n);
+    EXPECT_LE(position_error(m, *r), 1e-12 * skeleton_size(m)) << "seed " << seed;
+    std::vector<Eigen::Vector3d> rp(n);
+    std::vector<Eigen::Matrix3d> ro(n);
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      compute_frame(m, f, p, o);
+      compute_frame(*r, f, rp, ro);
+      for (std::size_t j = 0; j < n; ++j) EXPECT_LT((ro[j] - o[j]).norm(), 1e-12) << "seed " << seed;
+    }
+    for (std::size_t j = 0; j < n; ++j) EXPECT_EQ(r->skeleton.joint(static_cast<int>(j)).soft_parent, soft[j]);
+  }
+  const std::vector<Eigen::Vector3d> two(2, Eigen::Vector3d::Zero());
+  EXPECT_FALSE(motion_from_world_poses({"a", "b"}, {kNoParent, kNoParent}, 0.1, std::span(two).first(1), {}).ok());
+  EXPECT_FALSE(motion_from_world_poses({"a", "b"}, {1, kNoParent}, 0.1, two, {}).ok());
+  EXPECT_FALSE(motion_from_world_poses({"a", "a"}, {kNoParent, kNoParent}, 0.1, two, {}).ok());
+  const std::vector<Eigen::Quaterniond> one(1, Eigen::Quaterniond::Identity());
+  EXPECT_FALSE(motion_from_world_poses({"a", "b"}, {kNoParent, 0}, 0.1, two, one).ok());
+  auto positions_only = motion_from_world_poses({"a", "b"}, {kNoParent, 0}, 0.1, two, {});
+  ASSERT_TRUE(positions_only.ok());
+  EXPECT_EQ(positions_only->stride(), 6u);
+}
+
 TEST(Convert, SameConventionIsUnchanged) {
   const Motion post = random_motion(7);
   const Motion same = to_post_rotation(post).value();

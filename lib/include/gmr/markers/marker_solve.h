@@ -92,7 +92,10 @@ struct MarkerSolveResult {
   Warnings warnings;
 };
 
-// Builds the motion. Errors: a marker the model needs missing from the file
+// Builds the motion. `model` comes from parse_marker_model() (or
+// read_marker_model(), builtin_marker_model()): the solver relies on the
+// parser's checks (references resolved, every parent and part defined before
+// its use) and does not repeat them. Errors: a marker the model needs missing from the file
 // (all of them named), a file without frames or frame rate units that are not
 // a length, a part whose points are never all seen together, a root that is
 // not a model joint.

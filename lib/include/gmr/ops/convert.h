@@ -2,7 +2,11 @@
 // Both keep every joint's world position in every frame.
 #pragma once
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "gmr/core/error.h"
 #include "gmr/motion/motion.h"
@@ -43,5 +47,19 @@ struct BvhExportOptions {
 // root (its rows would otherwise be blank lines, which readers skip); soft
 // links are dropped. Every joint keeps its name and world position in every frame.
 Result<Motion> to_bvh_interchange(const Motion& motion, const BvhExportOptions& options = {});
+
+// World poses sampled per frame (what a subscription delivers) as a GMR
+// motion: the fully translational form, every joint a root whose position
+// channels hold its world position and whose Zrotation Xrotation Yrotation
+// channels its world orientation, so forward kinematics gives back exactly
+// the poses (to round-off). `soft_parents[j]` (an index into `names`, or
+// kNoParent) becomes joint j's soft link, so `join` and set_roots can
+// rebuild the tree; it must come before j. `positions` and (when not empty)
+// `orientations` are frame-major, names.size() per frame. Fails on sizes
+// that do not match, a soft parent that is not before its joint, a name the
+// skeleton refuses, or values that are not finite.
+Result<Motion> motion_from_world_poses(const std::vector<std::string>& names, const std::vector<int>& soft_parents,
+                                       double frame_time, std::span<const Eigen::Vector3d> positions,
+                                       std::span<const Eigen::Quaterniond> orientations);
 
 }  // namespace gmr
