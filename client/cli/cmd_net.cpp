@@ -135,8 +135,9 @@ void run_query(const QueryOptions& o) {
   if (!std::cout) throw CommandError("cannot write the positions to standard output");
 }
 
-// ---- gmr stream
-struct StreamOptions {
+// ---- what `gmr stream` and `gmr record` play
+
+struct PlayOptions {
   ServerOptions server;
   std::string motion;
   ViewOptions view;
@@ -145,15 +146,25 @@ struct StreamOptions {
   double speed = 1.0;
   std::uint64_t count = 0;
   bool loop = false;
-  bool summary = false;
   std::string joints;
   std::string frames = ":";
 };
 
-void run_stream(const StreamOptions& o) {
-  auto c = connect(o.server);
-  const Skeleton source = take(c->skeleton(o.motion));
-  const client::ViewState v = make_view(*c, o.motion, o.view);
+void add_play_options(CLI::App& cmd, PlayOptions& o) {
+  cmd.add_option("motion", o.motion, "Motion name (see gmr ls)")->required();
+  cmd.add_flag("--udp", o.udp, "Receive frames over UDP (registered with the session token)");
+  cmd.add_option("--rate", o.rate, "Rate in Hz (default: the motion's own rate times --speed)");
+  cmd.add_option("--speed", o.speed, "Playback speed")->capture_default_str();
+  cmd.add_option("--count", o.count, "Stop after N frames");
+  cmd.add_flag("--loop", o.loop, "Loop the frame range");
+  cmd.add_option("--frames", o.frames, "Half-open frame range A:B to play")->capture_default_str();
+  cmd.add_option("--joints", o.joints, "Only these joints, A,B,C");
+  add_view_options(cmd, o.view);
+  add_connect_options(cmd, o.server);
+}
+
+// The subscription PlayOptions ask for, on view v.
+client::SubscribeOptions subscribe_options(const PlayOptions& o, const client::ViewState& v) {
   const FrameRange r = clamp_frame_range(parse_frame_range(o.frames), v.frame_count);
   client::SubscribeOptions so;
   so.udp = o.udp;
@@ -164,8 +175,21 @@ void run_stream(const StreamOptions& o) {
   so.start_frame = static_cast<std::uint32_t>(r.begin);
   so.end_frame = static_cast<std::uint32_t>(r.end);
   if (!o.joints.empty()) so.joints = split_list(o.joints);
-  so.float64 = !o.summary;  // CSV prints exact numbers
   so.conventions = o.view.engine();
+  return so;
+}
+
+// ---- gmr stream
+struct StreamOptions : PlayOptions {
+  bool summary = false;
+};
+
+void run_stream(const StreamOptions& o) {
+  auto c = connect(o.server);
+  const Skeleton source = take(c->skeleton(o.motion));
+  const client::ViewState v = make_view(*c, o.motion, o.view);
+  client::SubscribeOptions so = subscribe_options(o, v);
+  so.float64 = !o.summary;  // CSV prints exact numbers
 
   struct State {
     std::mutex mutex;
@@ -273,19 +297,9 @@ void run_stream(const StreamOptions& o) {
 
 // ---- gmr record
 
-struct RecordOptions {
-  ServerOptions server;
-  std::string motion;
+struct RecordOptions : PlayOptions {
   std::string out;
-  ViewOptions view;
-  bool udp = false;
-  double rate = 0.0;
-  double speed = 1.0;
-  std::uint64_t count = 0;
   double seconds = 0.0;
-  bool loop = false;
-  std::string joints;
-  std::string frames = ":";
 };
 
 // Subscribes (float64, with orientations) and writes what arrives as a GMR
@@ -300,19 +314,9 @@ void run_record(const RecordOptions& o) {
   }
   auto c = connect(o.server);
   const client::ViewState v = make_view(*c, o.motion, o.view);
-  const FrameRange r = clamp_frame_range(parse_frame_range(o.frames), v.frame_count);
-  client::SubscribeOptions so;
-  so.udp = o.udp;
-  so.rate_hz = o.rate;
-  so.speed = o.speed;
-  so.loop = o.loop;
-  so.max_frames = o.count;
-  so.start_frame = static_cast<std::uint32_t>(r.begin);
-  so.end_frame = static_cast<std::uint32_t>(r.end);
-  if (!o.joints.empty()) so.joints = split_list(o.joints);
+  client::SubscribeOptions so = subscribe_options(o, v);
   so.float64 = true;
   so.orientations = true;
-  so.conventions = o.view.engine();
 
   struct State {
     std::mutex mutex;
@@ -423,35 +427,19 @@ void add_net_commands(CLI::App& app) {
   {
     auto o = std::make_shared<StreamOptions>();
     CLI::App* cmd = app.add_subcommand("stream", "Subscribe to a served motion and print the frames as they arrive");
-    cmd->add_option("motion", o->motion, "Motion name (see gmr ls)")->required();
-    cmd->add_flag("--udp", o->udp, "Receive frames over UDP (registered with the session token)");
-    cmd->add_option("--rate", o->rate, "Output rate in Hz (default: the motion's own rate times --speed)");
-    cmd->add_option("--speed", o->speed, "Playback speed")->capture_default_str();
-    cmd->add_option("--count", o->count, "Stop after N frames");
-    cmd->add_flag("--loop", o->loop, "Loop the frame range");
-    cmd->add_option("--frames", o->frames, "Half-open frame range A:B to play")->capture_default_str();
-    cmd->add_option("--joints", o->joints, "Only these joints, A,B,C");
+    add_play_options(*cmd, *o);
     cmd->add_flag("--summary", o->summary, "Print a live summary twice a second instead of CSV rows");
-    add_view_options(*cmd, o->view);
-    add_connect_options(*cmd, o->server);
     cmd->callback([o] { run_stream(*o); });
   }
   {
     auto o = std::make_shared<RecordOptions>();
     CLI::App* cmd = app.add_subcommand(
         "record", "Record what a subscription receives (its view, its conventions) as a motion file (atomic write)");
-    cmd->add_option("motion", o->motion, "Motion name (see gmr ls)")->required();
+    add_play_options(*cmd, *o);
     cmd->add_option("-o,--output", o->out, "Output file: .gmr, .gmrb or .bvh")->required();
     cmd->add_option("--seconds", o->seconds, "Stop after this many seconds (default: when the subscription ends)");
-    cmd->add_option("--count", o->count, "Stop after N frames");
-    cmd->add_flag("--udp", o->udp, "Receive frames over UDP (lost frames are filled with the one before)");
-    cmd->add_option("--rate", o->rate, "Rate in Hz (default: the motion's own rate times --speed)");
-    cmd->add_option("--speed", o->speed, "Playback speed")->capture_default_str();
-    cmd->add_flag("--loop", o->loop, "Loop the frame range (with --seconds or --count)");
-    cmd->add_option("--frames", o->frames, "Half-open frame range A:B to play")->capture_default_str();
-    cmd->add_option("--joints", o->joints, "Only these joints, A,B,C");
-    add_view_options(*cmd, o->view);
-    add_connect_options(*cmd, o->server);
+    cmd->footer("Over UDP, a lost frame is filled with the one before it (and counted); with --loop, stop it "
+                "with --seconds or --count.");
     cmd->callback([o] { run_record(*o); });
   }
 }
