@@ -134,6 +134,7 @@ struct PositionsOptions {
   double fps = 0.0;  // .amc input: frames per second (0: 120)
   std::string frames = ":";
   std::string orientations;  // "", "quat" or "matrix"
+  std::string model;         // marker input: the skeleton model (built-in name or file)
   ViewOptions view;  // --roots, --strip-dummies, --relative-to (cmd_ops.cpp)
 };
 
@@ -148,14 +149,22 @@ Motion transform_for_positions(Motion m, const PositionsOptions& o) {
 
 void run_positions(const PositionsOptions& given) {
   PositionsOptions o = given;
-  if (o.view.metres_per_unit == 0.0) {  // the file's own unit, as gmr-server takes it
-    LoadOptions lo;
-    lo.asf = o.asf;
-    o.view.metres_per_unit = declared_metres_per_unit(o.file, lo);
-  }
   const FrameRange requested = parse_frame_range(o.frames);
   Warnings warnings;
-  const Motion m = transform_for_positions(load(o.file, o.asf, o.fps, warnings), o);
+  double file_metres_per_unit = 0.0;
+  Motion loaded;
+  if (is_marker_file(o.file)) {  // markers through a skeleton model: cmd_markers.cpp
+    loaded = marker_motion(o.file, o.model, file_metres_per_unit, warnings);
+  } else {
+    if (!o.model.empty()) throw CommandError("--model applies to marker files (.c3d, .trc), not to " + o.file);
+    LoadOptions lo;
+    lo.asf = o.asf;
+    file_metres_per_unit = declared_metres_per_unit(o.file, lo);
+    loaded = load(o.file, o.asf, o.fps, warnings);
+  }
+  // The file's own unit, as gmr-server takes it, unless given.
+  if (o.view.metres_per_unit == 0.0) o.view.metres_per_unit = file_metres_per_unit;
+  const Motion m = transform_for_positions(std::move(loaded), o);
   if (o.view.any() && !o.orientations.empty())
     throw CommandError("--orientations cannot be combined with --roots, --strip-dummies or --relative-to");
   const OutputBasis basis = o.view.basis();
@@ -235,8 +244,12 @@ void add_file_commands(CLI::App& app) {
     auto o = std::make_shared<PositionsOptions>();
     CLI::App* cmd = app.add_subcommand(
         "positions", "Print every joint's world position as CSV: frame,joint,x,y,z (frames from 0, file order)");
-    cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc)")->required();
+    cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .amc), or marker file (.c3d, .trc) with --model")
+        ->required();
     cmd->add_option("--frames", o->frames, "Half-open frame range A:B (frames A to B-1; ':' = all)");
+    cmd->add_option("--model", o->model,
+                    "Marker file: the skeleton model that gives the joints (built-in name such as cmu41, or a model "
+                    "file; docs/markers.md)");
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
     add_fps_option(*cmd, o->fps);
     add_positions_transform_options(*cmd, *o);

@@ -12,9 +12,9 @@
 #include "cli_util.h"
 #include "commands.h"
 #include "gmr/core/file_util.h"
-#include "gmr/markers/c3d.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
+#include "gmr/markers/c3d.h"
 #include "gmr/markers/marker_model.h"
 #include "gmr/markers/marker_solve.h"
 #include "gmr/markers/markers.h"
@@ -104,6 +104,13 @@ std::string fit_report(const MarkerSolveResult& r, const std::string& units) {
   return out;
 }
 
+// "cmu41, ...": the built-in models, for messages.
+std::string builtin_names() {
+  std::string known;
+  for (const std::string& n : builtin_marker_model_names()) known += (known.empty() ? "" : ", ") + n;
+  return known;
+}
+
 MarkerSolveResult solve(const MarkerTrajectories& d, const std::string& model_name, const std::string& roots,
                         Warnings& warnings) {
   const MarkerModel model = take(find_marker_model(model_name));
@@ -115,6 +122,17 @@ MarkerSolveResult solve(const MarkerTrajectories& d, const std::string& model_na
 }
 
 }  // namespace
+
+Motion marker_motion(const std::string& file, const std::string& model, double& metres_per_unit, Warnings& warnings) {
+  if (model.empty()) {
+    throw CommandError(file + ": a marker file gives joint positions through a skeleton model: add --model NAME or "
+                              "--model FILE (built in: " + builtin_names() + ")");
+  }
+  const MarkerTrajectories d = take(load_markers(file, &warnings));
+  MarkerSolveResult r = solve(d, model, {}, warnings);
+  metres_per_unit = r.millimetres_per_unit / 1000;
+  return std::move(r.motion);
+}
 
 void run_marker_info(const std::string& file, const std::string& model) {
   Warnings warnings;
@@ -165,10 +183,8 @@ void run_marker_convert(const std::string& in, const std::string& out, const std
     return;
   }
   if (model.empty()) {
-    std::string known;
-    for (const std::string& n : builtin_marker_model_names()) known += (known.empty() ? "" : ", ") + n;
     throw CommandError(out + ": markers become a motion through a skeleton model: add --model NAME or --model FILE "
-                             "(built in: " + known + "), or write .trc");
+                             "(built in: " + builtin_names() + "), or write .trc");
   }
   Warnings warnings;
   const MarkerTrajectories d = take(load_markers(in, &warnings));

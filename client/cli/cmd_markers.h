@@ -4,7 +4,15 @@
 
 #include <string>
 
+#include "gmr/core/error.h"
+#include "gmr/motion/motion.h"
+
 namespace gmr::cli {
+
+// The motion a marker file and a skeleton model (a built-in name or a model
+// file) give (gmr/markers/marker_solve.h); `metres_per_unit` gets the marker
+// file's unit. Reader and solver warnings are appended to `warnings`.
+Motion marker_motion(const std::string& file, const std::string& model, double& metres_per_unit, Warnings& warnings);
 
 // Prints the marker summary of a .c3d or .trc file (markers, frames, rate,
 // units, first frame, missing points, analog channels skipped) and, with a

@@ -122,6 +122,11 @@ TEST_F(CliMarkers, ConvertWithAModelWritesAMotionAndInfoReportsTheFit) {
   ASSERT_EQ(pos.status, 0) << pos.err;
   EXPECT_THAT(pos.out, HasSubstr("\n100,lfemur,"));
   EXPECT_EQ(lines(pos.out), 1 + 21u);  // the 21 joints of cmu41
+  // gmr positions solves the markers itself: the same rows as the file it wrote.
+  const auto direct = gmr("positions " + c3d + " --model cmu41 --frames 100:101");
+  ASSERT_EQ(direct.status, 0) << direct.err;
+  EXPECT_EQ(direct.out, pos.out);
+  expect_one_line_error("positions " + c3d, "a marker file gives joint positions through a skeleton model");
 
   // Another set of roots: the same positions, to print precision.
   const auto rooted = gmr("convert " + c3d + " " + path("walk2.gmr") + " --model cmu41 --roots lfemur,head");

@@ -213,6 +213,35 @@ TEST(MarkerSolve, BallJointsAreFoundExactlyFromTheMotionAlone) {
   EXPECT_DOUBLE_EQ(r->motion.frame_time, 0.01);
 }
 
+// Units: the same take in metres gives the same motion in metres (lengths
+// in the model, outliers and spreads are millimetres, converted).
+TEST(MarkerSolve, MarkersInMetresGiveTheSameMotionInMetres) {
+  const Synthetic s = make_synthetic(false, 400);
+  MarkerTrajectories metres = s.markers;
+  metres.units = "m";
+  for (double& v : metres.positions) v /= 1000;
+  auto model = parse_marker_model(kChainModel, "chain");
+  ASSERT_TRUE(model.ok());
+  auto mm = solve_markers(s.markers, *model);
+  auto m = solve_markers(metres, *model);
+  ASSERT_TRUE(mm.ok() && m.ok());
+  EXPECT_EQ(m->millimetres_per_unit, 1000);
+  const auto a = compute_positions(mm->motion);
+  const auto b = compute_positions(m->motion);
+  ASSERT_EQ(a.size(), b.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) worst = std::max(worst, (a[i] / 1000 - b[i]).norm());
+  EXPECT_LT(worst, 1e-9);
+  for (std::size_t j = 0; j < mm->joints.size(); ++j) EXPECT_EQ(mm->joints[j].determined, m->joints[j].determined);
+  // A file without units is taken as millimetres, with a warning.
+  MarkerTrajectories none = s.markers;
+  none.units.clear();
+  auto n = solve_markers(none, *model);
+  ASSERT_TRUE(n.ok());
+  ASSERT_EQ(n->warnings.size(), 1u);
+  EXPECT_NE(n->warnings[0].message.find("millimetres assumed"), std::string::npos);
+}
+
 TEST(MarkerSolve, AHingeCentreIsTheAxisPointNearestThePrior) {
   const Synthetic s = make_synthetic(true, 600);
   auto model = parse_marker_model(kChainModel, "chain");
