@@ -135,8 +135,12 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
 
   std::atomic<bool> open{false};
   std::atomic<std::uint64_t> next_request{1};
+  // A reply, or nullopt when the connection failed first (close_reason says
+  // why). Not an exception: an exception object shared by two threads is
+  // freed by whichever releases it last, which ThreadSanitizer cannot see
+  // through the uninstrumented libstdc++ and reports as a race.
   struct Pending {
-    std::promise<pb::ServerMessage> promise;
+    std::promise<std::optional<pb::ServerMessage>> promise;
     std::function<void(const pb::ServerMessage&)> on_reply;  // runs on the I/O thread before the promise is set
   };
   mutable std::mutex mutex;
@@ -362,7 +366,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
       orphans.swap(pending);
       udp_cv.notify_all();
     }
-    for (auto& [id, p] : orphans) p.promise.set_exception(std::make_exception_ptr(std::runtime_error(close_reason)));
+    for (auto& [id, p] : orphans) p.promise.set_value(std::nullopt);
   }
 
   Result<pb::ServerMessage> call(pb::ClientMessage m, std::function<void(const pb::ServerMessage&)> on_reply = {}) {
@@ -370,7 +374,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     m.set_request_id(id);
     auto framed = wire::frame_message(m, 1u << 30);
     if (!framed.ok()) return framed.error();
-    std::future<pb::ServerMessage> future;
+    std::future<std::optional<pb::ServerMessage>> future;
     {
       std::lock_guard lock(mutex);
       if (!open) return make_error("not connected: " + close_reason);
@@ -392,11 +396,10 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
       pending.erase(id);
       return make_error("no reply from the server within " + std::to_string(options.timeout.count()) + " ms");
     }
-    try {
-      return future.get();
-    } catch (const std::exception& e) {
-      return make_error(std::string("connection lost: ") + e.what());
-    }
+    std::optional<pb::ServerMessage> reply = future.get();
+    if (reply) return std::move(*reply);
+    std::lock_guard lock(mutex);
+    return make_error("connection lost: " + close_reason);
   }
 
   // The TLS handshake on the connected socket, within options.timeout: the
