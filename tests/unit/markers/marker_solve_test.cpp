@@ -10,7 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <random>
+#include <limits>
 #include <string>
 #include <vector>
 
