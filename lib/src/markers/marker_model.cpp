@@ -5,6 +5,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <optional>
 #include <set>
 
 #include "gmr/core/file_util.h"
@@ -136,6 +137,14 @@ class Parser {
 
   Result<std::string> word(std::string_view what);
   Result<double> number(std::string_view what);
+  // The name a `part` or `joint` statement defines; `taken`: the model has
+  // one of that kind and name already.
+  Result<std::string> new_name(const std::string& kind, bool taken) {
+    const int column = tokens_[0].column;
+    auto n = word("the " + kind + "'s name");
+    if (n && taken) return error_at(column, kind + " '" + *n + "' is defined twice");
+    return n;
+  }
   // A length: NUMBER with mm, cm or m (absolute, returned in mm), or a bare
   // NUMBER (relative) when relative_ok.
   Status length(double& value, bool& absolute, bool relative_ok, std::string_view what);
@@ -195,14 +204,21 @@ Result<std::string> Parser::word(std::string_view what) {
   return std::string(next().text);
 }
 
+// A number token's value and what follows the digits (a unit); nullopt when
+// it does not start with a finite number. A leading '+' is allowed.
+std::optional<std::string_view> read_number(std::string_view s, double& v) {
+  if (!s.empty() && s[0] == '+') s.remove_prefix(1);
+  auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (ec != std::errc() || !std::isfinite(v)) return std::nullopt;
+  return s.substr(static_cast<std::size_t>(p - s.data()));
+}
+
 Result<double> Parser::number(std::string_view what) {
   if (peek().kind != Token::kNumber) return error_here("expected " + std::string(what));
   const Token t = next();
-  std::string_view s = t.text;
-  if (!s.empty() && s[0] == '+') s.remove_prefix(1);
   double v = 0;
-  auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-  if (ec != std::errc() || p != s.data() + s.size() || !std::isfinite(v)) {
+  const auto rest = read_number(t.text, v);
+  if (!rest || !rest->empty()) {
     return error_at(t.column, "'" + std::string(t.text) + "' is not a number (" + std::string(what) + ")");
   }
   return v;
@@ -211,14 +227,10 @@ Result<double> Parser::number(std::string_view what) {
 Status Parser::length(double& value, bool& absolute, bool relative_ok, std::string_view what) {
   if (peek().kind != Token::kNumber) return error_here("expected " + std::string(what));
   const Token t = next();
-  std::string_view s = t.text;
-  if (!s.empty() && s[0] == '+') s.remove_prefix(1);
   double v = 0;
-  auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-  const std::string_view unit = s.substr(static_cast<std::size_t>(p - s.data()));
-  if (ec != std::errc() || !std::isfinite(v)) {
-    return error_at(t.column, "'" + std::string(t.text) + "' is not a length (" + std::string(what) + ")");
-  }
+  const auto rest = read_number(t.text, v);
+  if (!rest) return error_at(t.column, "'" + std::string(t.text) + "' is not a length (" + std::string(what) + ")");
+  const std::string_view unit = *rest;
   absolute = true;
   if (unit == "mm") {
     value = v;
@@ -305,10 +317,9 @@ Status Parser::statement(MarkerModel& model) {
   } else if (*key == "part") {
     ModelPart p;
     p.line = line_no_;
-    auto n = word("the part's name");
+    auto n = new_name("part", model.find_part(peek().text) >= 0);
     if (!n) return n.error();
     p.name = *n;
-    if (model.find_part(p.name) >= 0) return error_at(first.column, "part '" + p.name + "' is defined twice");
     while (!at_end()) {
       auto point = word("a marker or joint name");
       if (!point) return point.error();
@@ -330,10 +341,9 @@ Status Parser::statement(MarkerModel& model) {
   } else if (*key == "joint") {
     ModelJoint j;
     j.line = line_no_;
-    auto n = word("the joint's name");
+    auto n = new_name("joint", model.find_joint(peek().text) >= 0);
     if (!n) return n.error();
     j.name = *n;
-    if (model.find_joint(j.name) >= 0) return error_at(first.column, "joint '" + j.name + "' is defined twice");
     auto k = word("'parent' or 'in'");
     if (!k) return k.error();
     if (*k == "parent") {
