@@ -118,12 +118,13 @@ int main(int argc, char** argv) {
   app.add_option("--load-threads", threads, "Threads loading the library (0: one per core)");
   std::string auth_file, anonymous;
   app.add_option("--auth-file", auth_file,
-                 "Tokens and their roles, one 'read TOKEN' or 'control TOKEN' per line (docs/security.md)")
+                 "Tokens and their roles, one 'read TOKEN', 'control TOKEN' or 'publish TOKEN' per line "
+                 "(docs/security.md)")
       ->check(CLI::ExistingFile);
   app.add_option("--anonymous", anonymous,
-                 "What clients without a token may do: none, read or control (default: read with --auth-file, "
-                 "control without)")
-      ->check(CLI::IsMember({"none", "read", "control"}));
+                 "What clients without a token may do: none, read, control or publish (default: read with "
+                 "--auth-file, control without; publishing live sources needs a 'publish' token or this)")
+      ->check(CLI::IsMember({"none", "read", "control", "publish"}));
   app.add_option("--tls-cert", cfg.tls_certificate_file, "PEM certificate chain: the TCP port then speaks only TLS")
       ->check(CLI::ExistingFile);
   app.add_option("--tls-key", cfg.tls_key_file, "PEM private key of --tls-cert")->check(CLI::ExistingFile);

@@ -1,4 +1,4 @@
-// Server commands: ls, skeleton, query, stream, record (a running gmr-server).
+// Server commands: ls, skeleton, query, stream, record, publish (a running gmr-server).
 // Built only with GMR_BUILD_NET (GMR_WITH_NET); otherwise add_net_commands adds nothing.
 #include "commands.h"
 
@@ -13,6 +13,7 @@
 #include <memory>
 #include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "cli_util.h"
 #include "cmd_ops.h"
@@ -397,6 +398,54 @@ void run_record(const RecordOptions& o) {
                               : "");
 }
 
+// ---- gmr publish
+struct PublishCommand {
+  ServerOptions server;
+  std::string file;
+  std::string name;  // default: the file's stem
+  std::string asf;
+  double rate = 0.0;  // 0: the file's own
+  bool loop = false;
+  std::uint64_t count = 0;  // frames to publish; 0: the file once (or forever with --loop)
+};
+
+// Plays a motion file as a live source: the skeleton (pre-rotation), then one
+// frame per period on a drift-free clock, then Unpublish.
+void run_publish(const PublishCommand& o) {
+  LoadOptions lo;
+  lo.asf = o.asf;
+  Warnings warnings;
+  Motion m = take(load_motion(o.file, lo, &warnings));
+  print_warnings(warnings);
+  if (m.convention != Convention::kPreRotation) m = take(to_pre_rotation(m));
+  if (m.frame_count == 0) throw CommandError(o.file + ": no frames to publish");
+  const double frame_time = o.rate > 0 ? 1.0 / o.rate : m.frame_time > 0 ? m.frame_time : 1.0 / 120.0;
+  client::PublishOptions po;
+  po.name = o.name.empty() ? std::filesystem::path(o.file).stem().string() : o.name;
+  po.frame_time = frame_time;
+  po.metres_per_unit = declared_metres_per_unit(o.file, lo);
+  auto c = connect(o.server);
+  const std::uint32_t id = take(c->publish(m.skeleton, po));
+  std::fprintf(stderr, "publishing %s as live '%s': %zu joints, %zu channels, %.2f Hz%s\n", o.file.c_str(),
+               po.name.c_str(), m.skeleton.size(), m.stride(), 1.0 / frame_time, o.loop ? ", looping" : "");
+  const std::uint64_t total = o.count != 0 ? o.count : o.loop ? 0 : m.frame_count;
+  const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(frame_time));
+  const auto start = std::chrono::steady_clock::now();
+  std::uint64_t sent = 0;
+  for (; total == 0 || sent < total; ++sent) {
+    std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(sent));
+    if (!c->connected()) throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
+    if (auto s = c->publish_frame(id, m.frame(sent % m.frame_count)); !s.ok()) {
+      std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent), s.error().message.c_str());
+    }
+    for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
+  }
+  check(c->unpublish(id));
+  for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
+  std::fprintf(stderr, "published %llu frames of '%s'\n", static_cast<unsigned long long>(sent), po.name.c_str());
+}
+
 }  // namespace
 
 void add_net_commands(CLI::App& app) {
@@ -441,6 +490,21 @@ void add_net_commands(CLI::App& app) {
     cmd->footer("Over UDP, a lost frame is filled with the one before it (and counted); with --loop, stop it "
                 "with --seconds or --count.");
     cmd->callback([o] { run_record(*o); });
+  }
+  {
+    auto o = std::make_shared<PublishCommand>();
+    CLI::App* cmd = app.add_subcommand(
+        "publish", "Play a motion file (BVH, ASF/AMC, .gmr, .gmrb) to a gmr-server as a live source");
+    cmd->add_option("file", o->file, "Motion file")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--name", o->name, "The live motion's name on the server (default: the file's stem)");
+    cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
+    cmd->add_option("--rate", o->rate, "Frames per second (default: the file's own)")->check(CLI::PositiveNumber);
+    cmd->add_flag("--loop", o->loop, "Start over at the end, until stopped (or --count)");
+    cmd->add_option("--count", o->count, "Publish this many frames, then end");
+    add_connect_options(*cmd, o->server);
+    cmd->footer("The server needs a 'publish' token (--token or GMR_TOKEN; docs/security.md). Subscribers see it "
+                "in gmr ls as source 'live', and stream it with every view option.");
+    cmd->callback([o] { run_publish(*o); });
   }
 }
 

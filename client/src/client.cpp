@@ -58,7 +58,10 @@ ServerHello hello_of(const pb::HelloReply& h) {
   s.max_message_bytes = h.max_message_bytes();
   s.heartbeat_interval_ms = h.heartbeat_interval_ms();
   s.idle_timeout_ms = h.idle_timeout_ms();
-  s.role = h.role() == pb::ROLE_CONTROL ? Role::kControl : h.role() == pb::ROLE_READ ? Role::kRead : Role::kUnknown;
+  s.role = h.role() == pb::ROLE_PUBLISH   ? Role::kPublish
+           : h.role() == pb::ROLE_CONTROL ? Role::kControl
+           : h.role() == pb::ROLE_READ    ? Role::kRead
+                                          : Role::kUnknown;
   return s;
 }
 
@@ -161,6 +164,8 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   bool udp_registered = false;
   std::condition_variable udp_cv;
   ClientCounters counters;
+  std::deque<std::string> async_errors;  // for requests that get no reply
+  static constexpr std::size_t kMaxAsyncErrors = 64;
 
   // I/O-thread state
   std::deque<std::string> write_queue;
@@ -306,7 +311,13 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
       {
         std::lock_guard lock(mutex);
         auto it = pending.find(m.request_id());
-        if (it == pending.end()) return;
+        if (it == pending.end()) {
+          if (m.has_error()) {
+            if (async_errors.size() == kMaxAsyncErrors) async_errors.pop_front();
+            async_errors.push_back(std::string(wire::error_code_name(m.error().code())) + ": " + m.error().message());
+          }
+          return;
+        }
         p = std::move(it->second);
         pending.erase(it);
       }
@@ -884,7 +895,53 @@ Result<ServerCounters> Client::stats() {
   c.committed_frames_per_second = s.committed_frames_per_second();
   c.send_budget = s.send_budget();
   c.subscriptions_refused = s.subscriptions_refused();
+  c.live_sources = s.live_sources();
+  c.live_frames_received = s.live_frames_received();
+  c.live_frames_refused = s.live_frames_refused();
   return c;
+}
+
+Result<std::uint32_t> Client::publish(const Skeleton& skeleton, const PublishOptions& options) {
+  pb::ClientMessage m;
+  auto* p = m.mutable_publish();
+  p->set_name(options.name);
+  wire::to_proto(skeleton, *p->mutable_skeleton());
+  p->set_frame_time(options.frame_time);
+  p->set_metres_per_unit(options.metres_per_unit);
+  auto r = impl_->expect(m, pb::ServerMessage::kPublished);
+  if (!r.ok()) return r.error();
+  return r->published().publication_id();
+}
+
+Status Client::publish_frame(std::uint32_t publication, std::span<const double> values) {
+  pb::ClientMessage m;
+  m.set_request_id(impl_->next_request++);  // an Error for it names this id
+  auto* f = m.mutable_publish_frame();
+  f->set_publication_id(publication);
+  f->mutable_values()->Add(values.begin(), values.end());
+  auto framed = wire::frame_message(m, impl_->hello.max_message_bytes != 0 ? impl_->hello.max_message_bytes : 1u << 30);
+  if (!framed.ok()) return framed.error();
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (!impl_->open) return make_error("not connected: " + impl_->close_reason);
+  }
+  if (!impl_->send(std::move(framed).value())) {
+    return make_error(ErrorKind::kResourceExhausted, "write queue full: the server is not reading this client's frames");
+  }
+  return Ok{};
+}
+
+Status Client::unpublish(std::uint32_t publication) {
+  pb::ClientMessage m;
+  m.mutable_unpublish()->set_publication_id(publication);
+  return to_status(impl_->expect(m, pb::ServerMessage::kAck));
+}
+
+std::vector<std::string> Client::take_errors() {
+  std::lock_guard lock(impl_->mutex);
+  std::vector<std::string> out(impl_->async_errors.begin(), impl_->async_errors.end());
+  impl_->async_errors.clear();
+  return out;
 }
 
 }  // namespace gmr::client

@@ -36,6 +36,7 @@ const char* role_name(Role role) {
     case Role::kNone: return "none";
     case Role::kRead: return "read";
     case Role::kControl: return "control";
+    case Role::kPublish: return "publish";
   }
   return "none";
 }
@@ -44,7 +45,8 @@ Result<Role> parse_role(std::string_view name) {
   if (name == "none") return Role::kNone;
   if (name == "read") return Role::kRead;
   if (name == "control") return Role::kControl;
-  return make_error("unknown role '" + std::string(name) + "' (expected none, read or control)");
+  if (name == "publish") return Role::kPublish;
+  return make_error("unknown role '" + std::string(name) + "' (expected none, read, control or publish)");
 }
 
 Result<Credentials> Credentials::parse(std::string_view text, const std::string& source) {
@@ -68,7 +70,7 @@ Result<Credentials> Credentials::parse(std::string_view text, const std::string&
     if (role_word.empty() || role_word.front() == '#') continue;
     auto role = parse_role(role_word);
     if (!role.ok() || *role == Role::kNone) {
-      return fail("unknown role '" + std::string(role_word).substr(0, 32) + "': a line is 'read TOKEN' or 'control TOKEN'");
+      return fail("unknown role '" + std::string(role_word).substr(0, 32) + "': a line is 'read TOKEN', 'control TOKEN' or 'publish TOKEN'");
     }
     const std::string_view token = next_word(line, pos);
     if (token.empty() || token.front() == '#') return fail("a '" + std::string(role_word) + "' line without its token");

@@ -57,6 +57,7 @@ void RequestHandler::on_stop() {
   subs_.clear();
   for (const auto& [id, v] : views_) forget_view(*v);
   views_.clear();
+  while (!publications_.empty()) end_publication(publications_.begin()->first, "the live source disconnected");
   server_.udp.remove_session(token_);
 }
 
@@ -111,8 +112,11 @@ void RequestHandler::on_message(const std::string& body) {
     return;
   }
   auto& m = std::get<pb::ServerMessage>(reply);
-  m.set_request_id(req.request_id());
-  send(m);
+  // A request that is answered only when refused (PublishFrame) gives an empty message.
+  if (m.body_case() != pb::ServerMessage::BODY_NOT_SET) {
+    m.set_request_id(req.request_id());
+    send(m);
+  }
   server_.metrics.request(request_kind(req), Clock::now() - began, pb::ERROR_CODE_UNSPECIFIED);
 }
 
@@ -130,7 +134,7 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req) {
                                                        std::to_string(wire::kProtocolVersion) + ")"};
   }
   if (!handshaked_) return Refusal{pb::ERROR_CODE_HANDSHAKE_REQUIRED, "send Hello first"};
-  if (role_ != Role::kControl && needs_control(req.body_case())) {
+  if (role_ < Role::kControl && needs_control(req.body_case())) {
     return Refusal{pb::ERROR_CODE_PERMISSION_DENIED,
                    "this connection's role is '" + std::string(role_name(role_)) +
                        "': structural view edits and statistics need a 'control' token (docs/security.md)"};
@@ -173,6 +177,9 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req) {
     case C::kResume: return resume(req.resume());
     case C::kSeek: return seek(req.seek());
     case C::kGetStats: return stats();
+    case C::kPublish: return publish(req.publish());
+    case C::kPublishFrame: return publish_frame(req.publish_frame());
+    case C::kUnpublish: return unpublish(req.unpublish());
     default: return Refusal{pb::ERROR_CODE_UNKNOWN_REQUEST, "unknown request"};
   }
 }
@@ -233,7 +240,9 @@ Reply RequestHandler::hello(const pb::Hello& h) {
   r->set_max_message_bytes(cfg.max_message_bytes);
   r->set_heartbeat_interval_ms(static_cast<std::uint32_t>(cfg.heartbeat_interval.count()));
   r->set_idle_timeout_ms(static_cast<std::uint32_t>(cfg.idle_timeout.count()));
-  r->set_role(role_ == Role::kControl ? pb::ROLE_CONTROL : pb::ROLE_READ);
+  r->set_role(role_ == Role::kPublish   ? pb::ROLE_PUBLISH
+              : role_ == Role::kControl ? pb::ROLE_CONTROL
+                                        : pb::ROLE_READ);
   r->set_server_time_ns(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
   return out;
@@ -251,10 +260,28 @@ Reply RequestHandler::list_motions() const {
     m->set_source(e.source);
     m->set_metres_per_unit(e.metres_per_unit);
   }
+  for (const auto& [name, source] : server_.live) {
+    auto* m = list->add_motions();
+    m->set_name(name);
+    m->set_joint_count(static_cast<std::uint32_t>(source->latest()->skeleton.size()));
+    m->set_frame_count(source->frames());
+    m->set_frame_time(source->frame_time());
+    m->set_source("live");
+    m->set_metres_per_unit(source->metres_per_unit());
+    m->set_live(true);
+  }
   return out;
 }
 
 Reply RequestHandler::get_skeleton(const pb::GetSkeleton& r) const {
+  if (auto source = find_live(r.motion())) {
+    const auto basis = output_basis_of(r.conventions(), source->metres_per_unit());
+    if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
+    pb::ServerMessage out;
+    out.mutable_skeleton()->set_motion(source->name());
+    wire::to_proto(*source->latest(), *basis, *out.mutable_skeleton()->mutable_skeleton());
+    return out;
+  }
   auto it = server_.by_name.find(r.motion());
   if (it == server_.by_name.end()) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
   const LibraryEntry& e = server_.library[it->second];
@@ -268,13 +295,18 @@ Reply RequestHandler::get_skeleton(const pb::GetSkeleton& r) const {
 
 Reply RequestHandler::create_view(const pb::CreateView& r) {
   auto it = server_.by_name.find(r.motion());
-  if (it == server_.by_name.end()) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
+  auto source = it == server_.by_name.end() ? find_live(r.motion()) : nullptr;
+  if (it == server_.by_name.end() && !source) {
+    return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
+  }
   if (views_.size() >= server_.cfg.max_views_per_connection) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
                    "at most " + std::to_string(server_.cfg.max_views_per_connection) + " views per connection"};
   }
   const std::uint32_t id = next_view_++;
-  auto v = std::make_unique<View>(id, it->first, server_.library[it->second].motion, server_.compiled_form(it->second));
+  auto v = source ? std::make_unique<View>(id, source)
+                  : std::make_unique<View>(id, it->first, server_.library[it->second].motion,
+                                           server_.compiled_form(it->second));
   pb::ServerMessage out;
   *out.mutable_view() = view_info(*v);
   views_.emplace(id, std::move(v));
@@ -334,7 +366,15 @@ Reply RequestHandler::edit_view(std::uint32_t view_id, Edit&& edit) {
 Reply RequestHandler::query(const pb::QueryFrames& r) const {
   const View* v = find_view(r.view_id());
   if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
-  const Motion& m = v->motion();
+  // A live view's one frame is its source's newest (the last it had, once
+  // the source ended).
+  std::shared_ptr<const Motion> newest = v->content()->motion;
+  if (auto source = v->live_source(); source && !source->ended()) {
+    auto now = source->view_motion(*v->content());
+    if (!now.ok()) return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, now.error().to_string()};
+    newest = std::move(now).value();
+  }
+  const Motion& m = *newest;
   const std::uint64_t begin = r.begin();
   const std::uint64_t end = r.end() == 0 ? begin + 1 : r.end();
   if (!(begin < end && end <= m.frame_count)) {
@@ -419,10 +459,14 @@ Reply RequestHandler::stats() {
   st->set_committed_frames_per_second(static_cast<double>(server_.committed_mhz) / 1000.0);
   st->set_send_budget(server_.cfg.send_budget);
   st->set_subscriptions_refused(server_.subscriptions_refused);
+  st->set_live_sources(static_cast<std::uint32_t>(server_.live.size()));
+  st->set_live_frames_received(server_.live_frames_received);
+  st->set_live_frames_refused(server_.live_frames_refused);
   return out;
 }
 
 std::uint64_t RequestHandler::owned_bytes(const View& v) const {
+  if (v.live()) return 0;  // one frame, the size of a reply
   auto it = server_.by_name.find(v.motion_name());
   const Motion* own = &v.motion();
   if (it != server_.by_name.end() && server_.library[it->second].motion.get() == own) return 0;
@@ -469,6 +513,10 @@ pb::ViewInfo RequestHandler::view_info(const View& v) const {
 }
 
 double RequestHandler::motion_unit(const View& v) const {
+  if (v.live()) {
+    const auto source = v.live_source();
+    return source ? source->metres_per_unit() : 0.0;
+  }
   const auto it = server_.by_name.find(v.motion_name());
   return it == server_.by_name.end() ? 0.0 : server_.library[it->second].metres_per_unit;
 }

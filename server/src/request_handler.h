@@ -76,6 +76,14 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   Reply edit_view(std::uint32_t view_id, Edit&& edit);
   Reply query(const pb::QueryFrames& r) const;
   Reply stats();
+
+  // live.cpp's sources, published by this connection.
+  Reply publish(const pb::Publish& r);
+  Reply publish_frame(const pb::PublishFrame& r);
+  Reply unpublish(const pb::Unpublish& r);
+  void end_publication(std::uint32_t id, const std::string& reason);
+  // The live source named `name` that has not ended, or null.
+  std::shared_ptr<LiveSource> find_live(std::string_view name) const;
   // Bytes of motion view `v` owns beyond the library's (docs/protocol.md).
   std::uint64_t owned_bytes(const View& v) const;
   void forget_view(const View& v);
@@ -116,6 +124,8 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   std::uint32_t next_view_ = 1;
   std::map<std::uint32_t, Subscription> subs_;
   std::uint32_t next_sub_ = 1;
+  std::map<std::uint32_t, std::shared_ptr<LiveSource>> publications_;
+  std::uint32_t next_publication_ = 1;
 
   friend class SubscriptionTarget;
 };

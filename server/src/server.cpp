@@ -267,7 +267,7 @@ void Server::start() {
   d.udp.open(address, udp_port);
   if (d.cfg.http_port >= 0) d.http.open(address, static_cast<std::uint16_t>(d.cfg.http_port));
   if (!address.is_loopback()) {
-    if (!d.cfg.credentials || d.cfg.anonymous == Role::kControl) {
+    if (!d.cfg.credentials || d.cfg.anonymous >= Role::kControl) {
       spdlog::warn("listening on {} without tokens: any host that can reach it may edit views and read "
                    "statistics; give --auth-file (docs/security.md), or --bind 127.0.0.1 (the default)",
                    d.cfg.bind_address);

@@ -19,6 +19,7 @@
 
 #include "connection.h"
 #include "http_server.h"
+#include "live.h"
 #include "metrics.h"
 #include "gmr/server/server.h"
 #include "gmr/server/view.h"
@@ -45,6 +46,12 @@ struct Server::Impl {
   bool ready = false;
   Metrics metrics;
   std::map<std::string, std::size_t, std::less<>> by_name;
+  // Live sources being published (docs/protocol.md, "Live sources"), by
+  // name; a source leaves when its publication ends.
+  std::map<std::string, std::shared_ptr<LiveSource>, std::less<>> live;
+  std::uint64_t next_live_serial = 1;
+  std::uint64_t live_frames_received = 0;  // frames published and accepted, all sources
+  std::uint64_t live_frames_refused = 0;   // PublishFrame refused (wrong size, not finite)
 
   // Declared before io: connections that io's handlers still hold at
   // destruction give their bytes back to it.

@@ -9,6 +9,7 @@
 #include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
 #include "gmr/wire/frames.h"
+#include "live.h"
 #include "prometheus/histogram.h"
 
 namespace gmr::server {
@@ -47,6 +48,7 @@ Clock::time_point Stream::due(std::uint64_t tick) const {
 }
 
 void Stream::arm() {
+  if (live_) return;  // its source's frames drive it
   timer_.expires_at(due(tick_));
   timer_.async_wait([weak = weak_from_this()](const boost::system::error_code& ec) {
     if (ec) return;
@@ -55,6 +57,15 @@ void Stream::arm() {
 }
 
 void Stream::start() {
+  if (live_) {
+    live_->attach(shared_from_this());
+    // A subscriber joining a running source starts at its newest frame
+    // (after the reply to its Subscribe, which is being written).
+    if (live_->frames() > 0) net::post(io_, [weak = weak_from_this()] {
+        if (auto self = weak.lock()) self->send_latest();
+      });
+    return;
+  }
   rebase(Clock::now(), 0.0);
   arm();
 }
@@ -69,6 +80,7 @@ void Stream::pause() {
 void Stream::resume() {
   if (!paused_) return;
   paused_ = false;
+  if (live_) return;
   rebase(Clock::now(), pause_pos_);
   arm();
 }
@@ -95,6 +107,8 @@ void Stream::set_content(std::shared_ptr<const ViewContent> content, std::vector
 std::shared_ptr<Stream> Stream::split_off(std::uint64_t id, const Target* target) {
   auto s = std::make_shared<Stream>(io_, id, content_, settings_, counters_);
   s->sequence_ = sequence_;  // the subscriber sees no gap or restart
+  s->live_ = live_;
+  if (live_) live_->attach(s);
   s->last_frame_ = last_frame_;
   s->paused_ = paused_;
   const double pos = paused_ ? pause_pos_ : position(tick_);
@@ -155,7 +169,7 @@ void encode_locals(const Skeleton& skeleton, std::span<const int> own_frames, st
 
 }  // namespace
 
-std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
+std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame, std::uint64_t index) {
   Scratch& w = scratch();
   const Motion& m = *content_->motion;
   const std::size_t n = m.skeleton.size();
@@ -163,8 +177,8 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame) {
   const std::vector<int>& joints = settings_.joints;
   wire::FrameContent c;
   c.skeleton_version = content_->skeleton_version;
-  c.frame_index = frame;
-  c.motion_time = static_cast<double>(frame) * m.frame_time;
+  c.frame_index = index;
+  c.motion_time = static_cast<double>(index) * m.frame_time;
   c.sequence = sequence_++;
   c.float64 = settings_.float64;
 
@@ -296,7 +310,7 @@ void Stream::on_tick() {
       std::uint64_t ticks = 1;  // this one, and when nobody takes frames the skipped ones after it
       if (anyone) {
         last_frame_ = static_cast<std::int64_t>(frame);
-        const auto body = encode(frame);
+        const auto body = encode(frame, frame);
         // The fan-out starts one target further each tick: waiting behind
         // the others' sends is shared by all of a shared stream's
         // subscribers rather than always borne by the last ones.
@@ -362,6 +376,77 @@ void Stream::on_tick() {
   }
   std::erase_if(targets_, [](const Entry& e) { return !e.target->alive(); });
   if (!targets_.empty() && !finished) arm();
+}
+
+void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_t index) {
+  content_ = std::move(content);
+  if (paused_ || targets_.empty()) return;
+  // Copy the targets first: a target may end a subscription re-entrantly.
+  const auto targets = targets_;
+  ready_.assign(targets.size(), 0);
+  bool anyone = false;
+  for (std::size_t i = 0; i < targets.size(); ++i) {
+    ready_[i] = targets[i].target->alive() && !targets[i].target->congested();
+    anyone = anyone || ready_[i];
+  }
+  if (anyone) {
+    const auto body = encode(0, index);
+    const std::size_t n = targets.size();
+    const std::size_t first = fan_out_start_++ % n;
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::size_t i = first + k < n ? first + k : first + k - n;
+      if (ready_[i]) {
+        targets[i].target->deliver(id_, body);
+      } else if (targets[i].target->alive()) {
+        targets[i].target->skipped(1);
+      }
+    }
+  } else {
+    ++sequence_;
+    for (const auto& e : targets) {
+      if (e.target->alive()) e.target->skipped(1);
+    }
+  }
+  std::vector<std::pair<std::shared_ptr<Target>, std::uint64_t>> ended;
+  for (auto& e : targets_) {
+    ++e.sent;
+    if (e.max_frames != 0 && e.sent >= e.max_frames) ended.emplace_back(e.target, e.sent);
+  }
+  auto self = shared_from_this();  // ending targets may drop the last reference below
+  for (auto& [target, sent] : ended) {
+    remove(target.get());
+    if (target->alive()) target->ended(sent, "max_frames reached");
+  }
+  std::erase_if(targets_, [](const Entry& e) { return !e.target->alive(); });
+}
+
+void Stream::live_skipped() {
+  if (paused_ || targets_.empty()) return;
+  ++sequence_;
+  for (auto& e : targets_) {
+    if (!e.target->alive()) continue;
+    e.target->late(1);
+    ++counters_.frames_skipped;
+  }
+}
+
+void Stream::send_latest() {
+  if (!live_ || live_->ended() || live_->frames() == 0 || paused_ || targets_.empty()) return;
+  auto motion = live_->view_motion(*content_);
+  if (!motion.ok()) return;  // the next frame will tell (LiveSource::push logs it)
+  auto next = std::make_shared<ViewContent>(*content_);
+  next->motion = std::move(motion).value();
+  next->compiled = nullptr;
+  live_frame(std::move(next), live_->frames() - 1);
+}
+
+void Stream::live_ended(const std::string& reason) {
+  auto self = shared_from_this();  // ending targets may drop the last reference below
+  const auto targets = std::move(targets_);
+  targets_.clear();
+  for (const auto& e : targets) {
+    if (e.target->alive()) e.target->ended(e.sent, reason);
+  }
 }
 
 }  // namespace gmr::server

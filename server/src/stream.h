@@ -7,6 +7,10 @@
 //
 // Frame k of the schedule is due at base_time + k / rate (drift-free).
 //
+// A live stream (set_live) has no timer and no schedule: its source hands it
+// each published frame (live_frame), with the content its view shows at that
+// frame, and ends it when the source ends.
+//
 // A slow client costs no computation: a tick whose targets are all congested
 // (their clients stopped reading) computes nothing, and the stream then skips
 // the ticks of the next kCongestedBackoff at once (each one a drop for each
@@ -59,6 +63,8 @@ struct StreamCounters {
   prometheus::Histogram* tick_lateness = nullptr;
 };
 
+class LiveSource;
+
 class Stream : public std::enable_shared_from_this<Stream> {
  public:
   struct Schedule {
@@ -103,6 +109,17 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void seek(std::uint32_t frame);
   void stop() { timer_.cancel(); }
   void set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints);
+  const std::shared_ptr<const ViewContent>& content() const { return content_; }
+
+  // Live: frames come from `source` (from start() on) instead of a timer.
+  void set_live(std::shared_ptr<LiveSource> source) { live_ = std::move(source); }
+  bool live() const { return live_ != nullptr; }
+  // The source's frame `index`, as `content` (this stream's view at that frame).
+  void live_frame(std::shared_ptr<const ViewContent> content, std::uint64_t index);
+  // A frame this stream's view could not be computed for: a gap for its subscribers.
+  void live_skipped();
+  // The source ended: every target ends with `reason`.
+  void live_ended(const std::string& reason);
   // A copy of this stream (content, settings, position, sequence) that takes
   // `target` over from it, so the target sees no gap or restart.
   std::shared_ptr<Stream> split_off(std::uint64_t id, const Target* target);
@@ -123,8 +140,11 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void on_tick();
   // Ticks to skip after one that no target could take.
   std::uint64_t congested_ticks() const;
-  // Computes and encodes frame `frame` (the shared body).
-  std::shared_ptr<const std::string> encode(std::uint64_t frame);
+  // Computes and encodes frame `frame` of the content's motion (the shared
+  // body), which clients are told is frame `index`.
+  std::shared_ptr<const std::string> encode(std::uint64_t frame, std::uint64_t index);
+  // Sends the newest frame of the live source (a subscriber joining late).
+  void send_latest();
 
   net::io_context& io_;
   std::uint64_t id_;
@@ -145,6 +165,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   std::int64_t last_frame_ = -1;
   std::uint64_t sequence_ = 0;
 
+  std::shared_ptr<LiveSource> live_;
   std::uint32_t fan_out_start_ = 0;  // rotates: each tick the fan-out starts one target further
   std::vector<char> ready_;  // per target, this tick: alive and not congested
 };

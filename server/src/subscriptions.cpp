@@ -38,8 +38,17 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   }
   Stream::Settings settings;
   Stream::Schedule& s = settings.schedule;
-  s.start = r.start_frame();
-  s.end = r.end_frame() == 0 ? static_cast<std::uint32_t>(m.frame_count) : r.end_frame();
+  // A live view plays its source's frames as they come: no range, loop,
+  // speed or rate of its own (docs/protocol.md, "Live sources").
+  std::shared_ptr<LiveSource> source;
+  if (v->live()) {
+    source = v->live_source();
+    if (!source || source->ended()) {
+      return Refusal{pb::ERROR_CODE_NOT_FOUND, "the live source '" + v->motion_name() + "' has ended"};
+    }
+  }
+  s.start = source ? 0 : r.start_frame();
+  s.end = source ? 1 : r.end_frame() == 0 ? static_cast<std::uint32_t>(m.frame_count) : r.end_frame();
   if (!(s.start < s.end && s.end <= m.frame_count)) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "frames [" + std::to_string(s.start) + ", " + std::to_string(s.end) +
                                                    ") are not within the motion's " + std::to_string(m.frame_count) +
@@ -51,7 +60,11 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "speed " + std::to_string(r.speed()) + " is not within [" +
                                                    std::to_string(kMinSpeed) + ", " + std::to_string(kMaxSpeed) + "]"};
   }
-  s.rate = r.rate_hz() == 0.0 ? s.speed / m.frame_time : r.rate_hz();
+  s.rate = source ? 1.0 / source->frame_time() : r.rate_hz() == 0.0 ? s.speed / m.frame_time : r.rate_hz();
+  if (source) {
+    s.loop = false;
+    s.speed = 1.0;
+  }
   if (!(std::isfinite(s.rate) && s.rate >= kMinRateHz && s.rate <= kMaxRateHz)) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST,
                    "output rate " + std::to_string(s.rate) + " Hz" +
@@ -99,10 +112,15 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
 
   // Streams with the same content and schedule can share one FK and one
   // encoding per tick.
-  const std::string key = r.shared() ? StreamRegistry::share_key(v->motion_name(), *v->content(), settings) : "";
+  // A live source's serial keeps a later source of the same name apart.
+  const std::string shown = source ? v->motion_name() + "#live" + std::to_string(source->serial()) : v->motion_name();
+  const std::string key = r.shared() ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
   std::shared_ptr<Stream> stream = key.empty() ? nullptr : server_.streams.find_running(key);
   const bool joined = stream != nullptr;
-  if (!stream) stream = server_.streams.create(v->content(), settings, key);
+  if (!stream) {
+    stream = server_.streams.create(v->content(), settings, key);
+    stream->set_live(source);
+  }
 
   const std::uint32_t id = next_sub_++;
   std::shared_ptr<SubscriptionTarget> target;
@@ -157,6 +175,10 @@ Reply RequestHandler::resume(const pb::Resume& r) {
 Reply RequestHandler::seek(const pb::Seek& r) {
   Subscription* s = find_subscription(r.subscription_id());
   if (!s) return unknown_subscription(r.subscription_id());
+  if (s->stream->live()) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "subscription " + std::to_string(r.subscription_id()) + " plays a live source: it cannot seek"};
+  }
   const auto& sched = s->stream->schedule();
   if (!(r.frame() >= sched.start && r.frame() < sched.end)) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "seek to frame " + std::to_string(r.frame()) +

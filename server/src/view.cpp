@@ -14,6 +14,7 @@
 #include "gmr/ops/shift_root.h"
 #include "gmr/ops/split_tree.h"
 #include "gmr/ops/strip_dummies.h"
+#include "live.h"
 
 namespace gmr::server {
 
@@ -49,6 +50,14 @@ const fast::CompiledMotion* CompiledForm::get() const {
     }
   });
   return compiled_.get();
+}
+
+View::View(std::uint32_t id, const std::shared_ptr<LiveSource>& source) : id_(id), motion_name_(source->name()) {
+  auto c = std::make_shared<ViewContent>();
+  c->motion = source->latest();
+  c->live_steps = std::make_shared<const std::vector<LiveStep>>();
+  content_ = std::move(c);
+  live_ = source;
 }
 
 View::View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion,
@@ -87,82 +96,115 @@ bool same_structure(const Skeleton& a, const Skeleton& b) {
 }  // namespace
 
 void View::replace(std::shared_ptr<const Motion> motion, int relative_to,
-                   std::shared_ptr<const CompiledForm> compiled) {
+                   std::shared_ptr<const CompiledForm> compiled,
+                   std::shared_ptr<const std::vector<LiveStep>> live_steps) {
   auto c = std::make_shared<ViewContent>();
-  if (!compiled || compiled->motion() != motion) compiled = std::make_shared<const CompiledForm>(motion);
+  // A live view's motion is one frame: streams compute it on the double path.
+  if (!live_steps && (!compiled || compiled->motion() != motion)) {
+    compiled = std::make_shared<const CompiledForm>(motion);
+  }
   // The version moves only when what a client sees changes: the joints, their
   // order and links, or the frame the coordinates are in. An edit that gives
   // the same structure (a shift to the root it has, stripping a motion with no
   // zero-length bone) keeps it.
   const bool same = relative_to == content_->relative_to && same_structure(motion->skeleton, content_->motion->skeleton);
   c->motion = std::move(motion);
-  c->compiled = std::move(compiled);
+  c->compiled = live_steps ? nullptr : std::move(compiled);
   c->relative_to = relative_to;
   c->skeleton_version = content_->skeleton_version + (same ? 0 : 1);
+  c->live_steps = std::move(live_steps);
   content_ = std::move(c);
+}
+
+Status View::apply(const std::string& what, LiveStep step) {
+  auto result = step(motion());
+  if (!result.ok()) return make_error(result.error().kind, what + ": " + result.error().to_string());
+  auto next = std::make_shared<const Motion>(std::move(result).value());
+  int viewer = -1;
+  if (content_->relative_to >= 0) {
+    const std::string& name = motion().skeleton.joint(content_->relative_to).name;
+    viewer = next->skeleton.find(name);
+    if (viewer < 0) return make_error(what + ": it would remove the viewer joint '" + name + "'");
+  }
+  std::shared_ptr<const std::vector<LiveStep>> steps;
+  if (content_->live_steps) {
+    auto more = std::make_shared<std::vector<LiveStep>>(*content_->live_steps);
+    more->push_back(std::move(step));
+    steps = std::move(more);
+  }
+  replace(std::move(next), viewer, {}, std::move(steps));
+  return Ok{};
 }
 
 namespace {
 
-// Applies an op's result, keeping the viewer joint (by name) when it survived.
-Status adopt(View& view, Result<Motion> result, const std::string& what,
-             const std::function<void(std::shared_ptr<const Motion>, int)>& replace) {
-  if (!result.ok()) return make_error(result.error().kind, what + ": " + result.error().to_string());
-  auto next = std::make_shared<const Motion>(std::move(result).value());
-  int viewer = -1;
-  if (view.content()->relative_to >= 0) {
-    const std::string& name = view.motion().skeleton.joint(view.content()->relative_to).name;
-    viewer = next->skeleton.find(name);
-    if (viewer < 0) return make_error(what + ": it would remove the viewer joint '" + name + "'");
-  }
-  replace(std::move(next), viewer);
-  return Ok{};
+// A step's joint, by name in the motion it is applied to (a live view's
+// frames all have the structure the edit was made on).
+Result<int> find_joint(const Motion& m, const std::string& name) {
+  const int j = m.skeleton.find(name);
+  if (j < 0) return make_error(ErrorKind::kNotFound, "no joint '" + name + "'");
+  return j;
 }
 
 }  // namespace
 
 Status View::shift_root(const std::string& joint) {
-  auto j = joint_index(joint);
-  if (!j.ok()) return j.error();
-  return adopt(*this, gmr::shift_root(motion(), *j), "shift root to '" + joint + "'",
-               [this](auto m, int v) { replace(std::move(m), v); });
+  if (auto j = joint_index(joint); !j.ok()) return j.error();
+  return apply("shift root to '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
+    auto j = find_joint(m, joint);
+    if (!j.ok()) return j.error();
+    return gmr::shift_root(m, *j);
+  });
 }
 
 Status View::split(const std::string& joint) {
   auto j = joint_index(joint);
   if (!j.ok()) return j.error();
   if (motion().skeleton.is_root(*j)) return make_error("split at '" + joint + "': it is already a root");
-  return adopt(*this, split_tree(motion(), *j), "split at '" + joint + "'",
-               [this](auto m, int v) { replace(std::move(m), v); });
+  return apply("split at '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
+    auto at = find_joint(m, joint);
+    if (!at.ok()) return at.error();
+    return split_tree(m, *at);
+  });
 }
 
 Status View::join(const std::string& root, double* out_offset_spread) {
-  auto j = joint_index(root);
-  if (!j.ok()) return j.error();
-  JoinReport report;
-  auto s = adopt(*this, join_tree(motion(), *j, &report), "join '" + root + "'",
-                 [this](auto m, int v) { replace(std::move(m), v); });
-  if (s.ok() && out_offset_spread) *out_offset_spread = report.offset_spread;
+  if (auto j = joint_index(root); !j.ok()) return j.error();
+  // The report of the last application: this edit's, read just below.
+  auto report = std::make_shared<JoinReport>();
+  auto s = apply("join '" + root + "'", [root, report](const Motion& m) -> Result<Motion> {
+    auto j = find_joint(m, root);
+    if (!j.ok()) return j.error();
+    return join_tree(m, *j, report.get());
+  });
+  if (s.ok() && out_offset_spread) *out_offset_spread = report->offset_spread;
   return s;
 }
 
 Status View::set_roots(const std::vector<std::string>& roots) {
   if (roots.empty()) return make_error("set roots: give at least one root");
-  std::vector<int> idx;
   for (const auto& r : roots) {
-    auto j = joint_index(r);
-    if (!j.ok()) return j.error();
-    idx.push_back(*j);
+    if (auto j = joint_index(r); !j.ok()) return j.error();
   }
-  return adopt(*this, gmr::set_roots(motion(), idx), "set roots", [this](auto m, int v) { replace(std::move(m), v); });
+  return apply("set roots", [roots](const Motion& m) -> Result<Motion> {
+    std::vector<int> idx;
+    for (const auto& r : roots) {
+      auto j = find_joint(m, r);
+      if (!j.ok()) return j.error();
+      idx.push_back(*j);
+    }
+    return gmr::set_roots(m, idx);
+  });
 }
 
 Status View::strip_dummies(std::vector<std::string>* out_removed) {
-  std::vector<RemovedJoint> removed;
-  auto s = adopt(*this, gmr::strip_dummies(motion(), &removed), "strip dummies",
-                 [this](auto m, int v) { replace(std::move(m), v); });
+  auto removed = std::make_shared<std::vector<RemovedJoint>>();
+  auto s = apply("strip dummies", [removed](const Motion& m) -> Result<Motion> {
+    removed->clear();
+    return gmr::strip_dummies(m, removed.get());
+  });
   if (s.ok() && out_removed) {
-    for (const auto& r : removed) out_removed->push_back(r.name);
+    for (const auto& r : *removed) out_removed->push_back(r.name);
   }
   return s;
 }
@@ -174,7 +216,7 @@ Status View::set_relative_to(const std::string& joint) {
     if (!j.ok()) return j.error();
     viewer = *j;
   }
-  replace(content_->motion, viewer, content_->compiled);  // same motion: same float form
+  replace(content_->motion, viewer, content_->compiled, content_->live_steps);  // same motion: same float form
   return Ok{};
 }
 

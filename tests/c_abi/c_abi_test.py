@@ -44,7 +44,14 @@ class Frame(ctypes.Structure):
                 ("has_local_transforms", ctypes.c_int32), ("has_orientations", ctypes.c_int32)]
 
 
+class PublishJoint(ctypes.Structure):
+    _fields_ = [("name", ctypes.c_char_p), ("parent", ctypes.c_int32), ("offset", ctypes.c_double * 3),
+                ("channel_count", ctypes.c_uint32), ("channels", ctypes.c_int * 6)]
+
+
 GMR_OK, GMR_NO_FRAME, GMR_ENDED, GMR_ERROR_NOT_FOUND = 0, 1, 2, 13
+GMR_ERROR_BAD_REQUEST = 12
+X_POSITION, Y_POSITION, Z_POSITION, Z_ROTATION = 0, 1, 2, 5
 PRESET_BLENDER = 3
 
 
@@ -65,7 +72,78 @@ def load(path):
     lib.gmr_subscription_joint.argtypes = [P, ctypes.c_size_t, ctypes.POINTER(JointInfo)]
     D = ctypes.POINTER(ctypes.c_double)
     lib.gmr_poll_frame.argtypes = [P, ctypes.POINTER(Frame), D, D, D, D, ctypes.c_size_t]
+    lib.gmr_publish.argtypes = [P, ctypes.c_char_p, ctypes.POINTER(PublishJoint), ctypes.c_size_t, ctypes.c_double,
+                                ctypes.c_double, ctypes.POINTER(ctypes.c_uint32)]
+    lib.gmr_publish_frame.argtypes = [P, ctypes.c_uint32, D, ctypes.c_size_t]
+    lib.gmr_unpublish.argtypes = [P, ctypes.c_uint32]
     return lib
+
+
+def check_publish(lib, port, failures):
+    """A two-joint live source published through the C ABI: a root with
+    position channels and a child rotating about Z (pre-rotation: its
+    rotation turns its own offset). A subscriber polls exactly the positions
+    worked out by hand; a frame with a NaN or the wrong count is refused."""
+    pub, viewer = ctypes.c_void_p(), ctypes.c_void_p()
+    assert lib.gmr_connect(b"127.0.0.1", port, None, ctypes.byref(pub)) == GMR_OK, lib.gmr_last_error()
+    assert lib.gmr_connect(b"127.0.0.1", port, None, ctypes.byref(viewer)) == GMR_OK, lib.gmr_last_error()
+    joints = (PublishJoint * 2)()
+    joints[0].name, joints[0].parent, joints[0].channel_count = b"base", -1, 3
+    joints[0].channels[:3] = [X_POSITION, Y_POSITION, Z_POSITION]
+    joints[1].name, joints[1].parent, joints[1].channel_count = b"tip", 0, 1
+    joints[1].offset[:] = [1.0, 0.0, 0.0]
+    joints[1].channels[0] = Z_ROTATION
+    pid = ctypes.c_uint32()
+    s = lib.gmr_publish(pub, b"cabi/live", joints, 2, 1 / 60, 1.0, ctypes.byref(pid))
+    if s != GMR_OK:
+        failures.append(f"gmr_publish: {s} {lib.gmr_last_error()}")
+        return
+    view = ctypes.c_uint32()
+    assert lib.gmr_create_view(viewer, b"cabi/live", ctypes.byref(view)) == GMR_OK, lib.gmr_last_error()
+    o = SubscribeOptions()
+    lib.gmr_subscribe_options_init(ctypes.byref(o))
+    o.float64 = 1
+    sub = ctypes.c_void_p()
+    assert lib.gmr_subscribe(viewer, view, ctypes.byref(o), ctypes.byref(sub)) == GMR_OK, lib.gmr_last_error()
+    positions = (ctypes.c_double * 6)()
+    frame = Frame()
+    worst, polled = 0.0, set()
+    for k in range(20):
+        values = (ctypes.c_double * 4)(float(k), 2.0, 3.0, 90.0)
+        assert lib.gmr_publish_frame(pub, pid, values, 4) == GMR_OK, lib.gmr_last_error()
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            s = lib.gmr_poll_frame(sub, ctypes.byref(frame), positions, None, None, None, 2)
+            if s == GMR_OK:
+                i = frame.frame_index
+                want = [i, 2.0, 3.0, i, 3.0, 3.0]  # tip = base + Rz(90) (1, 0, 0)
+                worst = max(worst, *(abs(positions[n] - want[n]) for n in range(6)))
+                polled.add(i)
+                if i == k:
+                    break
+            time.sleep(0.002)
+    if polled != set(range(20)) or worst > 1e-12:
+        failures.append(f"C ABI publish: polled frames {sorted(polled)}, {worst:.3g} from the hand-made positions")
+    print(f"C ABI publish: {len(polled)} live frames polled at the hand-made positions (largest difference {worst:.3g})")
+    nan = (ctypes.c_double * 4)(0.0, float("nan"), 0.0, 0.0)
+    assert lib.gmr_publish_frame(pub, pid, nan, 4) == GMR_OK  # queued; the refusal comes with the next call
+    short = (ctypes.c_double * 3)(0.0, 0.0, 0.0)
+    lib.gmr_publish_frame(pub, pid, short, 3)
+    time.sleep(0.2)
+    s = lib.gmr_publish_frame(pub, pid, (ctypes.c_double * 4)(20.0, 2.0, 3.0, 90.0), 4)
+    error = lib.gmr_last_error() or b""
+    if s != GMR_ERROR_BAD_REQUEST or b"not finite" not in error:
+        failures.append(f"C ABI publish: a NaN frame gave {s} {error!r}")
+    assert lib.gmr_unpublish(pub, pid) == GMR_OK, lib.gmr_last_error()
+    deadline = time.monotonic() + 5
+    while lib.gmr_poll_frame(sub, ctypes.byref(frame), positions, None, None, None, 2) != GMR_ENDED:
+        if time.monotonic() > deadline:
+            failures.append("C ABI publish: the subscription did not end with the source")
+            break
+        time.sleep(0.005)
+    lib.gmr_unsubscribe(sub)
+    lib.gmr_disconnect(viewer)
+    lib.gmr_disconnect(pub)
 
 
 def main():
@@ -90,7 +168,7 @@ def main():
     with tempfile.TemporaryDirectory(prefix="gmr_cabi_") as tmp:
         subprocess.run([str(bin_dir / "gmr"), "demo", tmp, "--format", "gmr"], check=True, capture_output=True)
         walk = pathlib.Path(tmp) / "walk.gmr"
-        with env.Server(bin_dir) as server:
+        with env.Server(bin_dir, "--anonymous", "publish") as server:
             # The C program.
             run = subprocess.run([args.c_test, str(server.port)], capture_output=True, text=True, timeout=120)
             if run.returncode != 0:
@@ -169,6 +247,7 @@ def main():
                 if s != GMR_ERROR_NOT_FOUND or b"nope" not in lib.gmr_last_error():
                     failures.append(f"ctypes error path: {s} {lib.gmr_last_error()}")
                 lib.gmr_disconnect(client)
+                check_publish(lib, server.port, failures)
 
     if failures:
         print("\n".join(failures), file=sys.stderr)

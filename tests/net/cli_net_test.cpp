@@ -11,6 +11,8 @@
 #include <cstdio>
 #include <sys/wait.h>
 
+#include <thread>
+
 #include "gmr/io/motion_file.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/ops/convert.h"
@@ -189,6 +191,78 @@ TEST(CliNet, RecordWritesTheViewsPositionsAndOrientations) {
   EXPECT_EQ(none.status, 1);
   EXPECT_EQ(none.out, "gmr: NOT_FOUND: unknown motion 'nope'\n");
   EXPECT_FALSE(std::filesystem::exists(dir.path / "x.gmr"));
+}
+
+TEST(CliNet, PublishPlaysAFileLiveAndRecordCapturesItsPositions) {
+  GMR_REQUIRE_DATA();
+  const std::string token = "publish-token-0123456789abcdef";
+  server::ServerConfig cfg;
+  auto auth = server::Credentials::parse("publish " + token + "\n", "auth");
+  ASSERT_TRUE(auth.ok());
+  cfg.credentials = std::make_shared<const server::Credentials>(std::move(auth).value());
+  cfg.anonymous = server::Role::kControl;
+  TestServer s(cfg);
+  TempDir dir;
+  const std::string port = " --port " + std::to_string(s.port());
+  const std::string file = cmu_file().string();
+
+  // Without a publish token: refused, one line.
+  const CommandRun refused = gmr("publish '" + file + "' --count 1" + port);
+  EXPECT_EQ(refused.status, 1);
+  EXPECT_NE(refused.out.find("PERMISSION_DENIED"), std::string::npos) << refused.out;
+
+  CommandRun published;
+  std::thread publisher([&] {
+    published = gmr("publish '" + file + "' --name take/live --rate 60 --count 240 --token " + token + port);
+  });
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  bool listed = false;
+  for (int i = 0; i < 500 && !listed; ++i) {
+    const auto motions = c->list_motions();
+    ASSERT_TRUE(motions.ok());
+    for (const auto& m : *motions) listed = listed || (m.name == "take/live" && m.frame_count > 0);
+    if (!listed) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(listed) << "the live source never appeared";
+  const CommandRun ls = gmr("ls" + port);
+  EXPECT_NE(ls.out.find("take/live"), std::string::npos);
+  EXPECT_NE(ls.out.find("live\n"), std::string::npos) << ls.out;
+
+  const std::string rec = (dir.path / "live.gmr").string();
+  const CommandRun r = gmr("record take/live -o '" + rec + "' --count 60" + port);
+  publisher.join();
+  ASSERT_EQ(r.status, 0) << r.out;
+  ASSERT_EQ(published.status, 0) << published.out;
+  EXPECT_NE(published.out.find("published 240 frames of 'take/live'"), std::string::npos) << published.out;
+
+  // The recording is frames k .. k+59 of the file (it joined at the newest
+  // frame): each recorded joint where the file has it.
+  auto recorded = load_motion(rec);
+  ASSERT_TRUE(recorded.ok()) << recorded.error().to_string();
+  ASSERT_EQ(recorded->frame_count, 60u);
+  auto pre = to_pre_rotation(load_motion(cmu_file()).value());
+  ASSERT_TRUE(pre.ok());
+  const std::size_t rn = recorded->skeleton.size(), sn = pre->skeleton.size();
+  ASSERT_EQ(rn, sn);
+  std::vector<int> map(rn);
+  for (std::size_t j = 0; j < rn; ++j) map[j] = pre->skeleton.find(recorded->skeleton.joint(static_cast<int>(j)).name);
+  std::vector<Eigen::Vector3d> rp(rn), sp(sn);
+  std::vector<Eigen::Matrix3d> ro(rn), so(sn);
+  auto error_at = [&](std::size_t rf, std::size_t sf) {
+    compute_frame(*recorded, rf, rp, ro);
+    compute_frame(*pre, sf, sp, so);
+    double worst = 0;
+    for (std::size_t j = 0; j < rn; ++j) worst = std::max(worst, (rp[j] - sp[static_cast<std::size_t>(map[j])]).norm());
+    return worst;
+  };
+  const double tolerance = 1e-9 * skeleton_size(*pre);
+  std::size_t k = 0;
+  while (k + 60 <= 240 && error_at(0, k) > tolerance) ++k;
+  ASSERT_LE(k + 60, 240u) << "the recording's first frame is none of the published ones";
+  double worst = 0;
+  for (std::size_t f = 0; f < 60; ++f) worst = std::max(worst, error_at(f, k + f));
+  EXPECT_LT(worst, tolerance) << "recorded from frame " << k;
 }
 
 TEST(CliNet, TlsAndTokensGiveTheSameRows) {

@@ -156,6 +156,40 @@ GMR_C_API gmr_status gmr_poll_frame(gmr_subscription* subscription, gmr_frame* f
 /* Frames received, and of them replaced by a newer one before a poll. */
 GMR_C_API gmr_status gmr_subscription_counts(gmr_subscription* subscription, uint64_t* received, uint64_t* replaced);
 
+/* Live sources (a 'publish' token; docs/protocol.md, "Live sources"). A
+ * publisher announces a skeleton whose channels are a pre-rotation (GMR)
+ * motion's, then pushes one frame of channel values at a time: joint by
+ * joint, each joint's channels in its listed order, rotations in degrees.
+ * An all-roots source gives every joint parent -1 and position channels. */
+typedef enum gmr_channel {
+  GMR_CHANNEL_X_POSITION = 0,
+  GMR_CHANNEL_Y_POSITION = 1,
+  GMR_CHANNEL_Z_POSITION = 2,
+  GMR_CHANNEL_X_ROTATION = 3,
+  GMR_CHANNEL_Y_ROTATION = 4,
+  GMR_CHANNEL_Z_ROTATION = 5
+} gmr_channel;
+
+typedef struct gmr_publish_joint {
+  const char* name;
+  int32_t parent;           /* index of an earlier joint; -1: a root */
+  double offset[3];         /* from the parent (a root: its position) */
+  uint32_t channel_count;   /* 0 to 6 */
+  gmr_channel channels[6];
+} gmr_publish_joint;
+
+/* Announces live motion `name`; *publication_id names it in the calls below. */
+GMR_C_API gmr_status gmr_publish(gmr_client* client, const char* name, const gmr_publish_joint* joints,
+                                 size_t joint_count, double frame_time, double metres_per_unit,
+                                 uint32_t* publication_id);
+/* Queues one frame (`count` values: the skeleton's channel count) without
+ * waiting for the server. The server answers only a frame it refuses; such
+ * an answer to an earlier frame is returned by the next call (the frame
+ * given to that call is still sent). */
+GMR_C_API gmr_status gmr_publish_frame(gmr_client* client, uint32_t publication_id, const double* values, size_t count);
+/* Ends the source: its subscribers are told. */
+GMR_C_API gmr_status gmr_unpublish(gmr_client* client, uint32_t publication_id);
+
 #ifdef __cplusplus
 }
 #endif

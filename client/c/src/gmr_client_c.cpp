@@ -430,3 +430,70 @@ gmr_status gmr_subscription_counts(gmr_subscription* s, uint64_t* received, uint
 }
 
 }  // extern "C"
+
+gmr_status gmr_publish(gmr_client* client, const char* name, const gmr_publish_joint* joints, size_t joint_count,
+                       double frame_time, double metres_per_unit, uint32_t* publication_id) {
+  return guarded([&] {
+    if (client == nullptr || name == nullptr || (joints == nullptr && joint_count > 0) || publication_id == nullptr) {
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_publish: a NULL argument");
+    }
+    std::vector<gmr::Joint> js;
+    js.reserve(joint_count);
+    for (std::size_t i = 0; i < joint_count; ++i) {
+      const gmr_publish_joint& in = joints[i];
+      const std::string where = "gmr_publish: joint " + std::to_string(i);
+      if (in.name == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": a NULL name");
+      if (in.channel_count > 6) {
+        return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": " + std::to_string(in.channel_count) + " channels (at most 6)");
+      }
+      gmr::Joint j;
+      j.name = in.name;
+      j.parent = in.parent;
+      j.offset = Eigen::Vector3d(in.offset[0], in.offset[1], in.offset[2]);
+      for (std::uint32_t c = 0; c < in.channel_count; ++c) {
+        const int type = static_cast<int>(in.channels[c]);
+        if (type < 0 || type > 5) {
+          return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": channel " + std::to_string(c) + " is not a gmr_channel");
+        }
+        j.channels.push_back(static_cast<gmr::ChannelType>(type));
+      }
+      js.push_back(std::move(j));
+    }
+    auto skeleton = gmr::Skeleton::create(std::move(js));
+    if (!skeleton.ok()) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_publish: " + skeleton.error().message);
+    gmr::client::PublishOptions o;
+    o.name = name;
+    o.frame_time = frame_time;
+    o.metres_per_unit = metres_per_unit;
+    auto id = client->client->publish(*skeleton, o);
+    if (!id.ok()) return status_of(id.error());
+    *publication_id = *id;
+    return GMR_OK;
+  });
+}
+
+gmr_status gmr_publish_frame(gmr_client* client, uint32_t publication_id, const double* values, size_t count) {
+  return guarded([&] {
+    if (client == nullptr || (values == nullptr && count > 0)) {
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_publish_frame: a NULL argument");
+    }
+    auto s = client->client->publish_frame(publication_id, std::span<const double>(values, count));
+    if (!s.ok()) {
+      return s.error().kind == gmr::ErrorKind::kResourceExhausted ? fail(GMR_ERROR_RESOURCE_EXHAUSTED, s.error().message)
+                                                                  : status_of(s.error());
+    }
+    // The server's word on an earlier frame.
+    const auto errors = client->client->take_errors();
+    if (!errors.empty()) return status_of(gmr::make_error(errors.front()));
+    return GMR_OK;
+  });
+}
+
+gmr_status gmr_unpublish(gmr_client* client, uint32_t publication_id) {
+  return guarded([&] {
+    if (client == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_unpublish: a NULL argument");
+    auto s = client->client->unpublish(publication_id);
+    if (!s.ok()) return status_of(s.error());
+    return GMR_OK;
+  });
+}

@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -87,6 +88,7 @@ enum class Role : std::uint8_t {
   kUnknown,  // a server that does not say
   kRead,     // list, skeletons, views and their viewpoint, queries, subscriptions
   kControl,  // also structural view edits and server statistics
+  kPublish,  // also live sources (publish)
 };
 
 // What the server said in its Hello reply.
@@ -218,6 +220,16 @@ struct ServerCounters {
   double committed_frames_per_second = 0;  // all subscriptions' rates together
   double send_budget = 0;                  // what the server admits (0: no limit)
   std::uint64_t subscriptions_refused = 0; // for the send budget
+  std::uint32_t live_sources = 0;          // being published now
+  std::uint64_t live_frames_received = 0;  // published frames the server accepted
+  std::uint64_t live_frames_refused = 0;   // and refused
+};
+
+// A live source this client publishes (docs/protocol.md, "Live sources").
+struct PublishOptions {
+  std::string name;               // its name in the server's list
+  double frame_time = 1.0 / 120;  // seconds per frame: the rate subscribers are told
+  double metres_per_unit = 0.0;   // the motion's unit in metres; 0: unknown
 };
 
 using FrameCallback = std::function<void(const ReceivedFrame&)>;
@@ -292,6 +304,20 @@ class Client {
   Result<ServerCounters> stats();
   // Registers the UDP endpoint now (subscribe does it when needed).
   Status register_udp();
+
+  // Live sources (a 'publish' token). publish announces `skeleton`, whose
+  // channels are a pre-rotation (GMR) motion's (to_pre_rotation converts a
+  // BVH or ASF/AMC motion), and returns the publication's id. Every frame is
+  // then `values`: skeleton.channel_count() numbers, the motion's frame
+  // layout. publish_frame queues the frame without waiting (it fails only
+  // when the write queue is full); a frame the server refuses comes back in
+  // take_errors(). unpublish ends the source; closing the client ends them all.
+  Result<std::uint32_t> publish(const Skeleton& skeleton, const PublishOptions& options);
+  Status publish_frame(std::uint32_t publication, std::span<const double> values);
+  Status unpublish(std::uint32_t publication);
+  // Errors the server sent for requests that get no reply (refused
+  // PublishFrame), oldest first, and forgets them; at most 64 are kept.
+  std::vector<std::string> take_errors();
 
   // Any request, as a serialized gmr.stream.v1.ClientMessage (its
   // request_id is set here); the reply as serialized ServerMessage bytes, as

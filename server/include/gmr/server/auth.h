@@ -4,6 +4,7 @@
 //   # role    token (at least 16 characters; `openssl rand -hex 16` makes one)
 //   control   3f6c0d1e9a2b4c5d8e7f6a5b4c3d2e1f
 //   read      0a1b2c3d4e5f60718293a4b5c6d7e8f9   # anything after the token is a comment
+//   publish   9f8e7d6c5b4a39281706f5e4d3c2b1a0   # a live source (docs/protocol.md, "Live sources")
 //
 // Tokens are kept as SHA-256 digests and compared in constant time, every
 // entry each time: how long a check takes says nothing of which token, or
@@ -22,10 +23,11 @@ namespace gmr::server {
 
 // What a connection may do. kRead: list, skeletons, views and their
 // viewpoint, queries, subscriptions. kControl: also structural view edits
-// and server statistics. kNone: nothing (refused at Hello).
-enum class Role : std::uint8_t { kNone, kRead, kControl };
+// and server statistics. kPublish: also publishes live sources. kNone:
+// nothing (refused at Hello). Each role may do what the ones before it may.
+enum class Role : std::uint8_t { kNone, kRead, kControl, kPublish };
 
-// "none", "read" or "control".
+// "none", "read", "control" or "publish".
 const char* role_name(Role role);
 Result<Role> parse_role(std::string_view name);
 

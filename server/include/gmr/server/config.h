@@ -58,6 +58,9 @@ struct ServerConfig {
   std::size_t max_connections_per_address = 64;
   std::size_t max_views_per_connection = 32;
   std::size_t max_subscriptions_per_connection = 32;
+  // Live sources one connection may publish at once, and the joints of one.
+  std::size_t max_publications_per_connection = 8;
+  std::size_t max_live_joints = 4096;
   // A connection that sends nothing (not even a heartbeat) for this long is closed.
   std::chrono::milliseconds idle_timeout{30000};
   // The server sends a heartbeat when it wrote nothing for this long.

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -19,6 +20,13 @@ class CompiledMotion;
 }
 
 namespace gmr::server {
+
+class LiveSource;
+
+// One structural edit of a view (shift, split, join, set roots, strip
+// dummies), as a function of the motion it applies to: a live view replays
+// its edits on every frame the source publishes.
+using LiveStep = std::function<Result<Motion>(const Motion&)>;
 
 // The float form of one motion (gmr::fast::CompiledMotion) for the fast
 // path, compiled on first use and shared by every content showing that
@@ -56,6 +64,10 @@ struct ViewContent {
   // The float form of `motion` (same motion), for float32 streams; null: none
   // (the double path serves).
   std::shared_ptr<const CompiledForm> compiled;
+  // A view of a live source: the edits made since the source's skeleton, in
+  // order, and `motion` is one frame (the newest when the view last changed).
+  // Null for library motions.
+  std::shared_ptr<const std::vector<LiveStep>> live_steps;
 };
 
 class View {
@@ -64,6 +76,8 @@ class View {
   // the same library motion); null: the view makes its own, compiled on first use.
   View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion,
        std::shared_ptr<const CompiledForm> compiled = {});
+  // A view of live source `source`, starting from its newest frame.
+  View(std::uint32_t id, const std::shared_ptr<LiveSource>& source);
 
   std::uint32_t id() const { return id_; }
   const std::string& motion_name() const { return motion_name_; }
@@ -71,6 +85,10 @@ class View {
   // Puts back a content this view had (an edit the server then refused).
   void restore(std::shared_ptr<const ViewContent> content) { content_ = std::move(content); }
   const Motion& motion() const { return *content_->motion; }
+  // The live source this view shows (null for a library motion, or once the
+  // source is gone).
+  std::shared_ptr<LiveSource> live_source() const { return live_.lock(); }
+  bool live() const { return content_->live_steps != nullptr; }
 
   // Each edit either applies and bumps skeleton_version, or fails and leaves
   // the view as it was. Joints by name; errors name the joint and the reason.
@@ -87,11 +105,16 @@ class View {
 
  private:
   void replace(std::shared_ptr<const Motion> motion, int relative_to,
-               std::shared_ptr<const CompiledForm> compiled = {});
+               std::shared_ptr<const CompiledForm> compiled = {},
+               std::shared_ptr<const std::vector<LiveStep>> live_steps = {});
+  // Applies `step` to the view's motion (`what` prefixes its error), keeping
+  // the viewer joint by name; a live view remembers the step.
+  Status apply(const std::string& what, LiveStep step);
 
   std::uint32_t id_;
   std::string motion_name_;
   std::shared_ptr<const ViewContent> content_;
+  std::weak_ptr<LiveSource> live_;
 };
 
 }  // namespace gmr::server

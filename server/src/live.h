@@ -1,0 +1,66 @@
+// LiveSource: a motion whose frames arrive in time from a publisher
+// (docs/protocol.md, "Live sources"). It is listed beside the library's
+// motions; views of it are ordinary views whose edits are replayed on each
+// frame (ViewContent::live_steps), and its streams are driven by its frames
+// instead of a timer: each published frame is computed once per distinct view
+// content and encoded once per stream, as a library tick is.
+//
+// Touched only on the I/O thread.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "gmr/core/error.h"
+#include "gmr/motion/motion.h"
+#include "gmr/server/view.h"
+
+namespace gmr::server {
+
+class Stream;
+
+class LiveSource {
+ public:
+  // `skeleton`: the publisher's, pre-rotation channels. `serial` tells this
+  // publication from an earlier one of the same name (share keys).
+  LiveSource(std::string name, std::uint64_t serial, Skeleton skeleton, double frame_time, double metres_per_unit);
+
+  const std::string& name() const { return name_; }
+  std::uint64_t serial() const { return serial_; }
+  double frame_time() const { return frame_time_; }
+  double metres_per_unit() const { return metres_per_unit_; }
+  // Frames published so far; the newest has index frames() - 1.
+  std::uint64_t frames() const { return frames_; }
+  // The newest frame as a one-frame pre-rotation motion; before the first,
+  // the skeleton with every channel 0.
+  const std::shared_ptr<const Motion>& latest() const { return latest_; }
+  bool ended() const { return ended_; }
+
+  // Checks one frame (its size, finite values) and sends it to every stream
+  // of this source. An error says which value and why; nothing is sent then.
+  Status push(std::span<const double> values);
+  // Ends the source: every stream's subscribers are told `reason`.
+  void end(const std::string& reason);
+
+  // A stream that shows this source from now on (Stream::set_live).
+  void attach(const std::shared_ptr<Stream>& stream);
+  // The motion a live view content shows at the newest frame: its edits
+  // replayed on it.
+  Result<std::shared_ptr<const Motion>> view_motion(const ViewContent& content) const;
+
+ private:
+  std::string name_;
+  std::uint64_t serial_;
+  double frame_time_;
+  double metres_per_unit_;
+  std::shared_ptr<const Motion> latest_;
+  std::uint64_t frames_ = 0;
+  bool ended_ = false;
+  std::vector<std::weak_ptr<Stream>> streams_;
+  std::uint64_t replay_failures_ = 0;
+};
+
+}  // namespace gmr::server

@@ -1,0 +1,526 @@
+// Live sources: a client with a 'publish' token announces a real motion's
+// skeleton and pushes its frames; subscribers with a world view, a re-rooted
+// view, an intrinsic view and a shared stream receive exactly the positions
+// `gmr positions` computes for the same frames and options. A source that
+// ends or disconnects ends its subscribers; bad skeletons and bad frames get
+// errors and never reach a subscriber.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <thread>
+
+#include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/server/auth.h"
+#include "gmr/view/view.h"
+#include "gmr/wire/convert.h"
+#include "net_test_util.h"
+#include "test_data.h"
+
+namespace gmr::test {
+namespace {
+
+using client::Client;
+using client::ReceivedFrame;
+
+const std::string kPublishToken = "publish-token-0123456789abcdef";
+const std::string kControlToken = "control-token-0123456789abcdef";
+
+server::ServerConfig live_config() {
+  server::ServerConfig cfg;
+  auto c = server::Credentials::parse("publish " + kPublishToken + "\ncontrol " + kControlToken + "\n", "auth");
+  EXPECT_TRUE(c.ok());
+  cfg.credentials = std::make_shared<const server::Credentials>(std::move(c).value());
+  cfg.anonymous = server::Role::kRead;
+  return cfg;
+}
+
+// The real motion the tests publish: CMU 02_01 with the corpus, else the
+// built-in walk.
+std::shared_ptr<const Motion> source_motion() {
+  const std::string name = have_data() ? "cmu/02_01" : "walk";
+  if (!have_data()) std::fprintf(stderr, "live test: no ../shared/data, publishing the built-in walk\n");
+  for (const auto& e : test_library()) {
+    if (e.name == name) return e.motion;
+  }
+  return nullptr;
+}
+
+std::unique_ptr<Client> connect_as(TestServer& s, const std::string& token) {
+  client::ClientOptions o;
+  o.auth_token = token;
+  return s.connect(o);
+}
+
+// Positions `gmr positions` gives frame f of `source` with `spec`, by joint name.
+struct Reference {
+  std::vector<std::map<std::string, Eigen::Vector3d>> frames;
+};
+Reference reference(const Motion& source, const ViewSpec& spec, std::size_t frames) {
+  Reference r;
+  auto view = apply_view(source, spec);
+  EXPECT_TRUE(view.ok()) << view.error().to_string();
+  if (!view.ok()) return r;
+  const auto rows = view_positions(*view, 0, frames);
+  const Skeleton names = view_names(*view);
+  r.frames.resize(frames);
+  for (std::size_t f = 0; f < frames; ++f) {
+    for (std::size_t k = 0; k < names.size(); ++k) {
+      r.frames[f][names.joint(static_cast<int>(k)).name] = rows[f * names.size() + k];
+    }
+  }
+  return r;
+}
+
+// What one subscription received, checked against its reference as it arrives.
+struct Watch {
+  std::mutex mutex;
+  Skeleton skeleton;
+  std::vector<int> joints;
+  const Reference* want = nullptr;
+  double tolerance = 0;
+  std::vector<std::uint64_t> indices, sequences;
+  std::size_t compared = 0, bad = 0;
+  double worst = 0;
+  std::string first_problem;
+  Latch<client::SubscriptionEnd> end;
+
+  void on_frame(const ReceivedFrame& f) {
+    std::lock_guard lock(mutex);
+    indices.push_back(f.frame_index);
+    sequences.push_back(f.sequence);
+    if (f.frame_index >= want->frames.size() || f.positions.size() != joints.size()) {
+      ++bad;
+      if (first_problem.empty()) first_problem = "frame " + std::to_string(f.frame_index) + " is not one published";
+      return;
+    }
+    const auto& ref = want->frames[f.frame_index];
+    for (std::size_t i = 0; i < joints.size(); ++i) {
+      const std::string& name = skeleton.joint(joints[i]).name;
+      const auto it = ref.find(name);
+      if (it == ref.end()) continue;
+      const double e = (f.positions[i] - it->second).norm();
+      worst = std::max(worst, e);
+      ++compared;
+      if (!(e <= tolerance)) {
+        ++bad;
+        if (first_problem.empty()) {
+          first_problem = "frame " + std::to_string(f.frame_index) + ", " + name + ": off by " + std::to_string(e);
+        }
+      }
+    }
+  }
+};
+
+// Subscribes `w` to every joint of view `view` of `c`.
+client::SubscriptionInfo watch(Client& c, const client::ViewState& view, client::SubscribeOptions so, Watch& w) {
+  so.max_staleness = std::chrono::milliseconds(0);
+  {
+    // A late subscriber's first frame may come before the reply is read
+    // here: its joints are the view's, all of them.
+    std::lock_guard lock(w.mutex);
+    w.skeleton = view.skeleton;
+    w.joints.clear();
+    for (int j = 0; j < static_cast<int>(view.skeleton.size()); ++j) w.joints.push_back(j);
+  }
+  auto sub = c.subscribe(
+      view.id, so, [&w](const ReceivedFrame& f) { w.on_frame(f); },
+      [&w](const client::SubscriptionEnd& e) { w.end.set(e); },
+      [&w](const client::SkeletonChange& change) {
+        std::lock_guard lock(w.mutex);
+        w.skeleton = change.skeleton;
+        w.joints = change.joints;
+      });
+  EXPECT_TRUE(sub.ok()) << sub.error().to_string();
+  if (!sub.ok()) return {};
+  std::lock_guard lock(w.mutex);
+  w.skeleton = sub->skeleton;
+  w.joints = sub->joints;
+  return *sub;
+}
+
+// Pushes frames [begin, end) of `m`, one per `period`.
+void publish_frames(Client& c, std::uint32_t id, const Motion& m, std::size_t begin, std::size_t end,
+                    std::chrono::microseconds period) {
+  const auto start = std::chrono::steady_clock::now();
+  for (std::size_t f = begin; f < end; ++f) {
+    std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(f - begin));
+    ASSERT_TRUE(c.publish_frame(id, m.frame(f)).ok());
+  }
+}
+
+std::chrono::microseconds pace() { return std::chrono::microseconds(kSlowBuild ? 8000 : 2500); }
+
+TEST(LivePublish, SubscribersOfEveryViewGetThePositionsOfThePublishedFrames) {
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const std::size_t n = std::min<std::size_t>(source->frame_count, 150);
+  const double tolerance = 1e-9 * skeleton_size(*source);
+  const Skeleton& sk = source->skeleton;
+  // A joint deep in the tree to re-root at, and another to see from.
+  const std::string root = sk.joint(static_cast<int>(sk.size()) - 2).name;
+  const std::string viewer = sk.joint(static_cast<int>(sk.size()) / 2).name;
+  const Reference world = reference(*source, {}, n);
+  const Reference rerooted = reference(*source, ViewSpec{.roots = {root}}, n);
+  const Reference intrinsic = reference(*source, ViewSpec{.relative_to = viewer}, n);
+  const Reference both = reference(*source, ViewSpec{.roots = {root}, .relative_to = viewer}, n);
+
+  TestServer s(live_config());
+  auto pub = connect_as(s, kPublishToken);
+  auto sub1 = connect_as(s, kControlToken);
+  auto sub2 = connect_as(s, kControlToken);
+  ASSERT_TRUE(pub && sub1 && sub2);
+  EXPECT_EQ(pub->hello().role, client::Role::kPublish);
+  client::PublishOptions po;
+  po.name = "studio/actor1";
+  po.frame_time = source->frame_time;
+  po.metres_per_unit = 0.01;
+  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+
+  // Listed beside the library, live, with no frames yet.
+  const auto motions = sub1->list_motions().value();
+  const auto listed = std::find_if(motions.begin(), motions.end(), [](auto& m) { return m.name == "studio/actor1"; });
+  ASSERT_NE(listed, motions.end());
+  EXPECT_EQ(listed->source, "live");
+  EXPECT_EQ(listed->frame_count, 0u);
+  EXPECT_EQ(listed->joint_count, sk.size());
+  EXPECT_DOUBLE_EQ(listed->metres_per_unit, 0.01);
+
+  struct Case {
+    std::string what;
+    Client* client;
+    const Reference* want;
+    bool udp, shared, float64;
+    std::string roots, relative_to;
+  };
+  const std::vector<Case> cases = {
+      {"world, TCP", sub1.get(), &world, false, false, true, "", ""},
+      {"re-rooted, TCP", sub1.get(), &rerooted, false, false, true, root, ""},
+      {"intrinsic, UDP", sub1.get(), &intrinsic, true, false, true, "", viewer},
+      {"re-rooted and intrinsic, TCP", sub2.get(), &both, false, false, true, root, viewer},
+      {"world, shared, TCP (1)", sub2.get(), &world, false, true, true, "", ""},
+      {"world, shared, TCP (2)", sub1.get(), &world, false, true, true, "", ""},
+      {"world, float32", sub2.get(), &world, false, false, false, "", ""},
+  };
+  std::vector<std::unique_ptr<Watch>> watches;
+  std::vector<client::SubscriptionInfo> subs;
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.what);
+    auto v = c.client->create_view("studio/actor1");
+    ASSERT_TRUE(v.ok()) << v.error().to_string();
+    if (!c.roots.empty()) {
+      v = c.client->set_roots(v->id, {c.roots});
+      ASSERT_TRUE(v.ok());
+    }
+    if (!c.relative_to.empty()) {
+      v = c.client->set_coordinates(v->id, c.relative_to);
+      ASSERT_TRUE(v.ok());
+    }
+    watches.push_back(std::make_unique<Watch>());
+    Watch& w = *watches.back();
+    w.want = c.want;
+    // float32 keeps about 7 digits of the skeleton's size.
+    w.tolerance = c.float64 ? tolerance : 1e-6 * skeleton_size(*source);
+    client::SubscribeOptions so;
+    so.udp = c.udp;
+    so.shared = c.shared;
+    so.float64 = c.float64;
+    subs.push_back(watch(*c.client, *v, so, w));
+    EXPECT_NEAR(subs.back().rate_hz, 1.0 / source->frame_time, 1e-9);
+  }
+  EXPECT_EQ(subs[4].stream_id, subs[5].stream_id) << "the two shared subscriptions share one stream";
+  EXPECT_TRUE(subs[5].joined_running);
+
+  publish_frames(*pub, id, *source, 0, n, pace());
+  ASSERT_TRUE(pub->unpublish(id).ok());
+  EXPECT_TRUE(pub->take_errors().empty());
+
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    SCOPED_TRACE(cases[i].what);
+    Watch& w = *watches[i];
+    const auto end = w.end.wait();
+    ASSERT_TRUE(end.has_value()) << "no SubscriptionEnded";
+    EXPECT_EQ(end->reason, "the live source ended");
+    EXPECT_EQ(end->frames_sent, n);
+    std::lock_guard lock(w.mutex);
+    EXPECT_EQ(w.bad, 0u) << w.first_problem;
+    EXPECT_GT(w.compared, 0u);
+    std::fprintf(stderr, "%s: %zu of %zu frames, %zu positions compared, worst %.3g\n", cases[i].what.c_str(),
+                 w.indices.size(), n, w.compared, w.worst);
+    if (cases[i].udp) {
+      EXPECT_GE(w.indices.size(), n * 9 / 10);
+    } else {
+      // TCP: every frame arrives or is counted as dropped, in order.
+      EXPECT_EQ(w.indices.size() + end->frames_dropped, n);
+      if (!kSlowBuild) {
+        EXPECT_EQ(end->frames_dropped, 0u);
+      }
+      for (std::size_t k = 1; k < w.indices.size(); ++k) {
+        EXPECT_LT(w.indices[k - 1], w.indices[k]);
+        EXPECT_EQ(w.indices[k] - w.indices[k - 1], w.sequences[k] - w.sequences[k - 1]);
+      }
+    }
+    if (!w.indices.empty()) {
+      EXPECT_EQ(w.indices.back(), n - 1);
+    }
+  }
+  // Gone from the list once ended.
+  const auto after = sub1->list_motions().value();
+  EXPECT_TRUE(std::none_of(after.begin(), after.end(), [](auto& m) { return m.name == "studio/actor1"; }));
+  const auto stats = sub1->stats().value();
+  EXPECT_EQ(stats.live_sources, 0u);
+  EXPECT_EQ(stats.live_frames_received, n);
+  EXPECT_EQ(stats.live_frames_refused, 0u);
+}
+
+TEST(LivePublish, AViewEditedMidStreamFollowsOnTheNextFrame) {
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const std::size_t n = std::min<std::size_t>(source->frame_count, 60);
+  const Reference world = reference(*source, {}, n);
+  TestServer s(live_config());
+  auto pub = connect_as(s, kPublishToken);
+  auto sub = connect_as(s, kControlToken);
+  ASSERT_TRUE(pub && sub);
+  client::PublishOptions po;
+  po.name = "edited";
+  po.frame_time = source->frame_time;
+  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  auto v = sub->create_view("edited").value();
+  Watch w;
+  w.want = &world;  // every root configuration keeps every joint's world position
+  w.tolerance = 1e-9 * skeleton_size(*source);
+  client::SubscribeOptions so;
+  so.float64 = true;
+  watch(*sub, v, so, w);
+  publish_frames(*pub, id, *source, 0, n / 2, pace());
+  const std::string root = source->skeleton.joint(static_cast<int>(source->skeleton.size()) - 2).name;
+  const auto edited = sub->set_roots(v.id, {root});
+  ASSERT_TRUE(edited.ok()) << edited.error().to_string();
+  EXPECT_EQ(edited->skeleton.roots().size(), 1u);
+  EXPECT_EQ(edited->skeleton.joint(edited->skeleton.roots()[0]).name, root);
+  publish_frames(*pub, id, *source, n / 2, n, pace());
+  ASSERT_TRUE(pub->unpublish(id).ok());
+  ASSERT_TRUE(w.end.wait().has_value());
+  std::lock_guard lock(w.mutex);
+  EXPECT_EQ(w.bad, 0u) << w.first_problem;
+  // The frames after the edit came in the re-rooted skeleton.
+  EXPECT_EQ(w.skeleton.joint(w.skeleton.roots()[0]).name, root);
+  EXPECT_GE(w.indices.size(), n * 9 / 10);
+}
+
+TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const Reference world = reference(*source, {}, 20);
+  TestServer s(live_config());
+  auto pub = connect_as(s, kPublishToken);
+  auto sub = connect_as(s, kControlToken);
+  ASSERT_TRUE(pub && sub);
+  client::PublishOptions po;
+  po.name = "late";
+  po.frame_time = source->frame_time;
+  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  publish_frames(*pub, id, *source, 0, 10, pace());
+  // The server has all ten once it answers a request from the publisher
+  // (requests on one connection are answered in order).
+  ASSERT_TRUE(pub->list_motions().ok());
+  auto v = sub->create_view("late").value();
+  Watch w;
+  w.want = &world;
+  w.tolerance = 1e-9 * skeleton_size(*source);
+  client::SubscribeOptions so;
+  so.float64 = true;
+  watch(*sub, v, so, w);
+  // Its first frame is the newest, without waiting for the next.
+  for (int i = 0; i < 200; ++i) {
+    {
+      std::lock_guard lock(w.mutex);
+      if (!w.indices.empty()) break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  publish_frames(*pub, id, *source, 10, 12, pace());
+  ASSERT_TRUE(pub->unpublish(id).ok());
+  ASSERT_TRUE(w.end.wait().has_value());
+  std::lock_guard lock(w.mutex);
+  EXPECT_EQ(w.bad, 0u) << w.first_problem;
+  ASSERT_EQ(w.indices.size(), 3u);
+  EXPECT_EQ(w.indices[0], 9u);
+  EXPECT_EQ(w.indices[1], 10u);
+  EXPECT_EQ(w.indices[2], 11u);
+}
+
+TEST(LivePublish, ASourceThatDisconnectsEndsItsSubscribersCleanly) {
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const Reference world = reference(*source, {}, 30);
+  TestServer s(live_config());
+  auto pub = connect_as(s, kPublishToken);
+  auto sub = connect_as(s, kControlToken);
+  ASSERT_TRUE(pub && sub);
+  client::PublishOptions po;
+  po.name = "dropped";
+  po.frame_time = source->frame_time;
+  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  auto v = sub->create_view("dropped").value();
+  Watch tcp, udp;
+  tcp.want = udp.want = &world;
+  tcp.tolerance = udp.tolerance = 1e-9 * skeleton_size(*source);
+  client::SubscribeOptions so;
+  so.float64 = true;
+  watch(*sub, v, so, tcp);
+  so.udp = true;
+  watch(*sub, v, so, udp);
+  publish_frames(*pub, id, *source, 0, 30, pace());
+  pub->close();  // mid-stream, without Unpublish
+  for (Watch* w : {&tcp, &udp}) {
+    const auto end = w->end.wait();
+    ASSERT_TRUE(end.has_value());
+    EXPECT_EQ(end->reason, "the live source disconnected");
+    EXPECT_EQ(end->frames_sent, 30u);
+    std::lock_guard lock(w->mutex);
+    EXPECT_EQ(w->bad, 0u) << w->first_problem;
+  }
+  // The subscriber's connection goes on; the source is gone.
+  const auto motions = sub->list_motions().value();
+  EXPECT_TRUE(std::none_of(motions.begin(), motions.end(), [](auto& m) { return m.name == "dropped"; }));
+  const auto again = sub->create_view("dropped");
+  ASSERT_FALSE(again.ok());
+  EXPECT_NE(again.error().message.find("NOT_FOUND"), std::string::npos);
+  client::SubscribeOptions so2;
+  const auto resub = sub->subscribe(v.id, so2, [](const ReceivedFrame&) {});
+  ASSERT_FALSE(resub.ok());
+  EXPECT_NE(resub.error().message.find("has ended"), std::string::npos) << resub.error().message;
+  // The name is free for a new publication.
+  auto pub2 = connect_as(s, kPublishToken);
+  ASSERT_TRUE(pub2);
+  EXPECT_TRUE(pub2->publish(source->skeleton, po).ok());
+}
+
+// A raw Publish request, for skeletons Client::publish would not build.
+std::string publish_request(const std::string& name, const pb::Skeleton& skeleton, double frame_time) {
+  pb::ClientMessage m;
+  m.mutable_publish()->set_name(name);
+  *m.mutable_publish()->mutable_skeleton() = skeleton;
+  m.mutable_publish()->set_frame_time(frame_time);
+  return m.SerializeAsString();
+}
+
+pb::ServerMessage parse(const Result<std::string>& bytes) {
+  pb::ServerMessage m;
+  EXPECT_TRUE(bytes.ok());
+  if (bytes.ok()) {
+    EXPECT_TRUE(m.ParseFromString(*bytes));
+  }
+  return m;
+}
+
+TEST(LivePublish, BadSkeletonsAndFramesGetErrorsAndNeverReachSubscribers) {
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const Reference world = reference(*source, {}, 10);
+  TestServer s(live_config());
+  auto pub = connect_as(s, kPublishToken);
+  auto control = connect_as(s, kControlToken);
+  ASSERT_TRUE(pub && control);
+  client::PublishOptions po;
+  po.name = "checked";
+  po.frame_time = source->frame_time;
+
+  // Only a 'publish' role may publish.
+  const auto denied = control->publish(source->skeleton, po);
+  ASSERT_FALSE(denied.ok());
+  EXPECT_NE(denied.error().message.find("PERMISSION_DENIED"), std::string::npos) << denied.error().message;
+
+  pb::Skeleton good;
+  wire::to_proto(source->skeleton, good);
+  struct Bad {
+    std::string what;
+    std::string name;
+    pb::Skeleton skeleton;
+    double frame_time;
+    pb::ErrorCode code;
+    std::string says;
+  };
+  std::vector<Bad> bad;
+  {
+    pb::Skeleton s2 = good;
+    s2.mutable_joints(2)->set_parent(5);  // a parent after its child
+    bad.push_back({"parent after child", "x", s2, 0.01, pb::ERROR_CODE_BAD_REQUEST, "parent"});
+  }
+  {
+    pb::Skeleton s2 = good;
+    s2.mutable_joints(3)->set_name(s2.joints(1).name());
+    bad.push_back({"duplicate name", "x", s2, 0.01, pb::ERROR_CODE_BAD_REQUEST, s2.joints(1).name()});
+  }
+  {
+    pb::Skeleton s2 = good;
+    s2.mutable_joints(1)->set_parent(1000);
+    bad.push_back({"parent out of range", "x", s2, 0.01, pb::ERROR_CODE_BAD_REQUEST, "parent"});
+  }
+  bad.push_back({"no joints", "x", pb::Skeleton{}, 0.01, pb::ERROR_CODE_BAD_REQUEST, "no joints"});
+  bad.push_back({"no name", "", good, 0.01, pb::ERROR_CODE_BAD_REQUEST, "name"});
+  bad.push_back({"a library motion's name", "walk", good, 0.01, pb::ERROR_CODE_FAILED_PRECONDITION, "already served"});
+  bad.push_back({"frame time 0", "x", good, 0.0, pb::ERROR_CODE_BAD_REQUEST, "frame time"});
+  bad.push_back({"frame time NaN", "x", good, std::nan(""), pb::ERROR_CODE_BAD_REQUEST, "frame time"});
+  for (const auto& b : bad) {
+    SCOPED_TRACE(b.what);
+    const pb::ServerMessage r = parse(pub->request_raw(publish_request(b.name, b.skeleton, b.frame_time)));
+    ASSERT_TRUE(r.has_error()) << r.DebugString();
+    EXPECT_EQ(r.error().code(), b.code);
+    EXPECT_NE(r.error().message().find(b.says), std::string::npos) << r.error().message();
+  }
+
+  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  const auto twice = pub->publish(source->skeleton, po);
+  ASSERT_FALSE(twice.ok());
+  EXPECT_NE(twice.error().message.find("already served"), std::string::npos);
+  auto v = control->create_view("checked").value();
+  Watch w;
+  w.want = &world;
+  w.tolerance = 1e-9 * skeleton_size(*source);
+  client::SubscribeOptions so;
+  so.float64 = true;
+  watch(*control, v, so, w);
+
+  const std::size_t stride = source->stride();
+  std::vector<double> short_frame(source->frame(0).begin(), source->frame(0).end() - 1);
+  std::vector<double> nan_frame(source->frame(0).begin(), source->frame(0).end());
+  nan_frame[stride - 1] = std::nan("");
+  ASSERT_TRUE(pub->publish_frame(id, source->frame(0)).ok());
+  ASSERT_TRUE(pub->publish_frame(id, short_frame).ok());  // queued: the server refuses it
+  ASSERT_TRUE(pub->publish_frame(id, nan_frame).ok());
+  ASSERT_TRUE(pub->publish_frame(id + 7, source->frame(1)).ok());
+  ASSERT_TRUE(pub->publish_frame(id, source->frame(1)).ok());
+  ASSERT_TRUE(pub->list_motions().ok());  // answered after every frame before it
+  const auto errors = pub->take_errors();
+  ASSERT_EQ(errors.size(), 3u);
+  EXPECT_NE(errors[0].find("BAD_REQUEST: live 'checked': frame 1 has " + std::to_string(stride - 1) + " values"),
+            std::string::npos)
+      << errors[0];
+  EXPECT_NE(errors[1].find("is not finite"), std::string::npos) << errors[1];
+  EXPECT_NE(errors[1].find(source->skeleton.joint(static_cast<int>(source->skeleton.size()) - 1).name),
+            std::string::npos)
+      << errors[1];
+  EXPECT_NE(errors[2].find("NOT_FOUND: unknown publication"), std::string::npos) << errors[2];
+  ASSERT_TRUE(pub->unpublish(id).ok());
+  ASSERT_TRUE(w.end.wait().has_value());
+  {
+    std::lock_guard lock(w.mutex);
+    EXPECT_EQ(w.bad, 0u) << w.first_problem;
+    // Only the two good frames, as frames 0 and 1 with their own positions.
+    ASSERT_EQ(w.indices.size(), 2u);
+    EXPECT_EQ(w.indices[0], 0u);
+    EXPECT_EQ(w.indices[1], 1u);
+    EXPECT_EQ(w.sequences[1], w.sequences[0] + 1);
+  }
+  const auto stats = control->stats().value();
+  EXPECT_EQ(stats.live_frames_received, 2u);
+  EXPECT_EQ(stats.live_frames_refused, 3u);
+  // A live subscription cannot seek, and the source's name is free again.
+  EXPECT_FALSE(control->create_view("checked").ok());
+}
+
+}  // namespace
+}  // namespace gmr::test
