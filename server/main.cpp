@@ -125,6 +125,11 @@ int main(int argc, char** argv) {
                  "What clients without a token may do: none, read, control or publish (default: read with "
                  "--auth-file, control without; publishing live sources needs a 'publish' token or this)")
       ->check(CLI::IsMember({"none", "read", "control", "publish"}));
+  app.add_option("--record-dir", cfg.record_dir,
+                 "Write live sources that ask to be recorded here, as .gmrb, when they end")
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--max-record-bytes", cfg.max_record_bytes, "Values one recording may hold; past them it stops growing")
+      ->capture_default_str();
   app.add_option("--tls-cert", cfg.tls_certificate_file, "PEM certificate chain: the TCP port then speaks only TLS")
       ->check(CLI::ExistingFile);
   app.add_option("--tls-key", cfg.tls_key_file, "PEM private key of --tls-cert")->check(CLI::ExistingFile);

@@ -407,6 +407,7 @@ struct PublishCommand {
   double rate = 0.0;  // 0: the file's own
   bool loop = false;
   std::uint64_t count = 0;  // frames to publish; 0: the file once (or forever with --loop)
+  bool record = false;
 };
 
 // Plays a motion file as a live source: the skeleton (pre-rotation), then one
@@ -425,7 +426,9 @@ void run_publish(const PublishCommand& o) {
   po.frame_time = frame_time;
   po.metres_per_unit = declared_metres_per_unit(o.file, lo);
   auto c = connect(o.server);
-  const std::uint32_t id = take(c->publish(m.skeleton, po));
+  po.record = o.record;
+  const client::Publication publication = take(c->publish(m.skeleton, po));
+  const std::uint32_t id = publication.id;
   std::fprintf(stderr, "publishing %s as live '%s': %zu joints, %zu channels, %.2f Hz%s\n", o.file.c_str(),
                po.name.c_str(), m.skeleton.size(), m.stride(), 1.0 / frame_time, o.loop ? ", looping" : "");
   const std::uint64_t total = o.count != 0 ? o.count : o.loop ? 0 : m.frame_count;
@@ -443,7 +446,8 @@ void run_publish(const PublishCommand& o) {
   }
   check(c->unpublish(id));
   for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
-  std::fprintf(stderr, "published %llu frames of '%s'\n", static_cast<unsigned long long>(sent), po.name.c_str());
+  std::fprintf(stderr, "published %llu frames of '%s'%s\n", static_cast<unsigned long long>(sent), po.name.c_str(),
+               publication.recording.empty() ? "" : ("; the server records them to " + publication.recording).c_str());
 }
 
 }  // namespace
@@ -501,6 +505,7 @@ void add_net_commands(CLI::App& app) {
     cmd->add_option("--rate", o->rate, "Frames per second (default: the file's own)")->check(CLI::PositiveNumber);
     cmd->add_flag("--loop", o->loop, "Start over at the end, until stopped (or --count)");
     cmd->add_option("--count", o->count, "Publish this many frames, then end");
+    cmd->add_flag("--record", o->record, "Ask the server to record the source (into its --record-dir) as .gmrb");
     add_connect_options(*cmd, o->server);
     cmd->footer("The server needs a 'publish' token (--token or GMR_TOKEN; docs/security.md). Subscribers see it "
                 "in gmr ls as source 'live', and stream it with every view option.");

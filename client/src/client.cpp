@@ -901,16 +901,17 @@ Result<ServerCounters> Client::stats() {
   return c;
 }
 
-Result<std::uint32_t> Client::publish(const Skeleton& skeleton, const PublishOptions& options) {
+Result<Publication> Client::publish(const Skeleton& skeleton, const PublishOptions& options) {
   pb::ClientMessage m;
   auto* p = m.mutable_publish();
   p->set_name(options.name);
   wire::to_proto(skeleton, *p->mutable_skeleton());
   p->set_frame_time(options.frame_time);
   p->set_metres_per_unit(options.metres_per_unit);
+  p->set_record(options.record);
   auto r = impl_->expect(m, pb::ServerMessage::kPublished);
   if (!r.ok()) return r.error();
-  return r->published().publication_id();
+  return Publication{r->published().publication_id(), r->published().motion(), r->published().recording()};
 }
 
 Status Client::publish_frame(std::uint32_t publication, std::span<const double> values) {

@@ -61,6 +61,16 @@ Status LiveSource::push(std::span<const double> values) {
   m->values.assign(values.begin(), values.end());
   latest_ = std::move(m);
   const std::uint64_t index = frames_++;
+  if (recording_) {
+    if ((recording_->values.size() + values.size()) * sizeof(double) <= record_max_bytes_) {
+      recording_->values.insert(recording_->values.end(), values.begin(), values.end());
+      ++recording_->frame_count;
+    } else if (!record_truncated_) {
+      record_truncated_ = true;
+      spdlog::warn("live {}: the recording stops at frame {}: {} bytes of values is the limit (--max-record-bytes)",
+                   name_, index, record_max_bytes_);
+    }
+  }
 
   // Each distinct edit list is replayed once per frame, whatever the number
   // of streams showing it.
@@ -113,6 +123,20 @@ void LiveSource::end(const std::string& reason) {
   for (const auto& w : streams) {
     if (auto s = w.lock()) s->live_ended(reason);
   }
+}
+
+void LiveSource::record(std::size_t max_bytes) {
+  recording_ = std::make_unique<Motion>();
+  recording_->skeleton = latest_->skeleton;
+  recording_->convention = Convention::kPreRotation;
+  recording_->frame_time = frame_time_;
+  record_max_bytes_ = max_bytes;
+}
+
+std::shared_ptr<const Motion> LiveSource::recording(bool* truncated) const {
+  if (!recording_ || !ended_) return nullptr;
+  if (truncated) *truncated = record_truncated_;
+  return std::make_shared<const Motion>(*recording_);
 }
 
 void LiveSource::attach(const std::shared_ptr<Stream>& stream) { streams_.push_back(stream); }

@@ -45,6 +45,12 @@ class LiveSource {
   // Ends the source: every stream's subscribers are told `reason`.
   void end(const std::string& reason);
 
+  // Keeps every accepted frame from now on, up to `max_bytes` of values.
+  void record(std::size_t max_bytes);
+  // The frames recorded (null when not recording), once the source ended;
+  // `truncated` says whether the limit cut it short.
+  std::shared_ptr<const Motion> recording(bool* truncated) const;
+
   // A stream that shows this source from now on (Stream::set_live).
   void attach(const std::shared_ptr<Stream>& stream);
   // The motion a live view content shows at the newest frame: its edits
@@ -61,6 +67,9 @@ class LiveSource {
   bool ended_ = false;
   std::vector<std::weak_ptr<Stream>> streams_;
   std::uint64_t replay_failures_ = 0;
+  std::unique_ptr<Motion> recording_;
+  std::size_t record_max_bytes_ = 0;
+  bool record_truncated_ = false;
 };
 
 }  // namespace gmr::server

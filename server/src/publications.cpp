@@ -3,7 +3,13 @@
 // its sources end when it says so or when it goes away.
 #include <spdlog/spdlog.h>
 
+#include <chrono>
 #include <cmath>
+#include <ctime>
+#include <filesystem>
+#include <future>
+
+#include "gmr/io/motion_file.h"
 
 #include "gmr/wire/convert.h"
 #include "live.h"
@@ -25,6 +31,28 @@ std::string bad_name(std::string_view name) {
     if (c < 0x20 || c == 0x7f) return "the name has a control character";
   }
   return {};
+}
+
+// A new file in `dir` for a recording of `name`: the name with anything but
+// letters, digits, '.', '-' and '_' made '_', the UTC time, .gmrb.
+std::filesystem::path recording_path(const std::string& dir, const std::string& name) {
+  std::string stem;
+  for (const char c : name) {
+    const bool plain = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
+                       c == '-' || c == '_';
+    stem += plain ? c : '_';
+  }
+  if (stem.empty() || stem.front() == '.') stem = "live" + stem;
+  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  char when[32];
+  std::strftime(when, sizeof when, "%Y%m%dT%H%M%SZ", &utc);
+  std::filesystem::path p = std::filesystem::path(dir) / (stem + "-" + when + ".gmrb");
+  for (int n = 2; std::filesystem::exists(p); ++n) {
+    p = std::filesystem::path(dir) / (stem + "-" + when + "-" + std::to_string(n) + ".gmrb");
+  }
+  return p;
 }
 
 }  // namespace
@@ -69,8 +97,20 @@ Reply RequestHandler::publish(const pb::Publish& r) {
   if (!(std::isfinite(r.metres_per_unit()) && r.metres_per_unit() >= 0.0)) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "metres per unit must be 0 (unknown) or positive"};
   }
+  std::string recording;
+  if (r.record()) {
+    if (cfg.record_dir.empty()) {
+      return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                     "this server records no live sources (start it with --record-dir DIR)"};
+    }
+    recording = recording_path(cfg.record_dir, r.name()).string();
+  }
   auto source = std::make_shared<LiveSource>(r.name(), server_.next_live_serial++, std::move(skeleton).value(), ft,
                                              r.metres_per_unit());
+  if (!recording.empty()) {
+    source->record(cfg.max_record_bytes);
+    recordings_[source.get()] = recording;
+  }
   const std::uint32_t id = next_publication_++;
   server_.live[r.name()] = source;
   publications_[id] = source;
@@ -79,6 +119,7 @@ Reply RequestHandler::publish(const pb::Publish& r) {
   pb::ServerMessage out;
   out.mutable_published()->set_publication_id(id);
   out.mutable_published()->set_motion(r.name());
+  out.mutable_published()->set_recording(recording);
   return out;
 }
 
@@ -119,6 +160,28 @@ void RequestHandler::end_publication(std::uint32_t id, const std::string& reason
   spdlog::info("conn {}: live {} ended after {} frames: {}", connection_id_, printable(source->name(), 200),
                source->frames(), reason);
   source->end(reason);
+  if (auto path = recordings_.extract(source.get())) {
+    bool truncated = false;
+    auto motion = source->recording(&truncated);
+    if (!motion || motion->frame_count == 0) {
+      spdlog::info("live {}: nothing recorded (no frames)", printable(source->name(), 200));
+      return;
+    }
+    // Written off the I/O thread (save_motion is atomic: a file appears
+    // whole or not at all); Server::wait() waits for it.
+    std::erase_if(server_.recordings, [](std::future<void>& f) {
+      return f.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+    });
+    server_.recordings.push_back(std::async(std::launch::async, [motion, file = std::move(path.mapped()),
+                                                                 name = source->name(), truncated] {
+      if (Status s = save_motion(*motion, file); !s.ok()) {
+        spdlog::error("live {}: recording not written: {}", printable(name, 200), s.error().to_string());
+        return;
+      }
+      spdlog::info("live {}: recorded {} frames to {}{}", printable(name, 200), motion->frame_count, file,
+                   truncated ? " (cut at --max-record-bytes)" : "");
+    }));
+  }
 }
 
 }  // namespace gmr::server

@@ -125,6 +125,7 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   std::map<std::uint32_t, Subscription> subs_;
   std::uint32_t next_sub_ = 1;
   std::map<std::uint32_t, std::shared_ptr<LiveSource>> publications_;
+  std::map<const LiveSource*, std::string> recordings_;  // of publications_, those recorded: the file
   std::uint32_t next_publication_ = 1;
 
   friend class SubscriptionTarget;

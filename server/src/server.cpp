@@ -322,6 +322,8 @@ void Server::wait() {
   if (!d.started) return;
   d.stopped_future.wait();
   if (d.thread.joinable()) d.thread.join();
+  for (auto& r : d.recordings) r.wait();  // the I/O thread is done: nobody adds one
+  d.recordings.clear();
 }
 
 void Server::set_credentials(std::shared_ptr<const Credentials> credentials) {

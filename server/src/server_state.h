@@ -52,6 +52,9 @@ struct Server::Impl {
   std::uint64_t next_live_serial = 1;
   std::uint64_t live_frames_received = 0;  // frames published and accepted, all sources
   std::uint64_t live_frames_refused = 0;   // PublishFrame refused (wrong size, not finite)
+  // Recordings of live sources being written (off the I/O thread); wait()
+  // waits for them.
+  std::vector<std::future<void>> recordings;
 
   // Declared before io: connections that io's handlers still hold at
   // destruction give their bytes back to it.

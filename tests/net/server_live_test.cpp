@@ -10,7 +10,9 @@
 #include <map>
 #include <thread>
 
+#include "gmr/io/motion_file.h"
 #include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/server/library.h"
 #include "gmr/server/auth.h"
 #include "gmr/view/view.h"
 #include "gmr/wire/convert.h"
@@ -175,7 +177,7 @@ TEST(LivePublish, SubscribersOfEveryViewGetThePositionsOfThePublishedFrames) {
   po.name = "studio/actor1";
   po.frame_time = source->frame_time;
   po.metres_per_unit = 0.01;
-  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
 
   // Listed beside the library, live, with no frames yet.
   const auto motions = sub1->list_motions().value();
@@ -285,7 +287,7 @@ TEST(LivePublish, AViewEditedMidStreamFollowsOnTheNextFrame) {
   client::PublishOptions po;
   po.name = "edited";
   po.frame_time = source->frame_time;
-  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
   auto v = sub->create_view("edited").value();
   Watch w;
   w.want = &world;  // every root configuration keeps every joint's world position
@@ -320,7 +322,7 @@ TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {
   client::PublishOptions po;
   po.name = "late";
   po.frame_time = source->frame_time;
-  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
   publish_frames(*pub, id, *source, 0, 10, pace());
   // The server has all ten once it answers a request from the publisher
   // (requests on one connection are answered in order).
@@ -362,7 +364,7 @@ TEST(LivePublish, ASourceThatDisconnectsEndsItsSubscribersCleanly) {
   client::PublishOptions po;
   po.name = "dropped";
   po.frame_time = source->frame_time;
-  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
   auto v = sub->create_view("dropped").value();
   Watch tcp, udp;
   tcp.want = udp.want = &world;
@@ -396,6 +398,74 @@ TEST(LivePublish, ASourceThatDisconnectsEndsItsSubscribersCleanly) {
   auto pub2 = connect_as(s, kPublishToken);
   ASSERT_TRUE(pub2);
   EXPECT_TRUE(pub2->publish(source->skeleton, po).ok());
+}
+
+TEST(LivePublish, TheServerRecordsASourceOnRequestAsAFileItsLibraryLoads) {
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const std::size_t n = std::min<std::size_t>(source->frame_count, 80);
+  TempDir dir;
+  {
+    // A server without --record-dir refuses to record.
+    TestServer plain(live_config());
+    auto pub = connect_as(plain, kPublishToken);
+    ASSERT_TRUE(pub);
+    client::PublishOptions po;
+    po.name = "rec";
+    po.record = true;
+    const auto refused = pub->publish(source->skeleton, po);
+    ASSERT_FALSE(refused.ok());
+    EXPECT_NE(refused.error().message.find("FAILED_PRECONDITION: this server records no live sources"),
+              std::string::npos)
+        << refused.error().message;
+  }
+  server::ServerConfig cfg = live_config();
+  cfg.record_dir = dir.path.string();
+  TestServer s(cfg);
+  auto pub = connect_as(s, kPublishToken);
+  ASSERT_TRUE(pub);
+  client::PublishOptions po;
+  po.name = "stage/take 1";
+  po.frame_time = source->frame_time;
+  po.record = true;
+  const auto publication = pub->publish(source->skeleton, po);
+  ASSERT_TRUE(publication.ok()) << publication.error().to_string();
+  const std::filesystem::path file = publication->recording;
+  EXPECT_EQ(file.parent_path(), dir.path);
+  EXPECT_EQ(file.extension(), ".gmrb");
+  EXPECT_EQ(file.filename().string().rfind("stage_take_1-", 0), 0u) << file;
+  for (std::size_t f = 0; f < n; ++f) ASSERT_TRUE(pub->publish_frame(publication->id, source->frame(f)).ok());
+  std::vector<double> nan(source->frame(0).begin(), source->frame(0).end());
+  nan[0] = std::nan("");
+  ASSERT_TRUE(pub->publish_frame(publication->id, nan).ok());  // refused: not recorded
+  EXPECT_FALSE(std::filesystem::exists(file)) << "written before the source ended";
+  ASSERT_TRUE(pub->unpublish(publication->id).ok());
+  for (int i = 0; i < 1000 && !std::filesystem::exists(file); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(std::filesystem::exists(file));
+
+  // Every frame as published: the same values, so the same positions.
+  auto recorded = load_motion(file);
+  ASSERT_TRUE(recorded.ok()) << recorded.error().to_string();
+  ASSERT_EQ(recorded->frame_count, n);
+  EXPECT_DOUBLE_EQ(recorded->frame_time, source->frame_time);
+  const std::size_t joints = source->skeleton.size();
+  std::vector<Eigen::Vector3d> rp(joints), sp(joints);
+  std::vector<Eigen::Matrix3d> ro(joints), so(joints);
+  double worst = 0;
+  for (std::size_t f = 0; f < n; ++f) {
+    compute_frame(*recorded, f, rp, ro);
+    compute_frame(*source, f, sp, so);
+    for (std::size_t j = 0; j < joints; ++j) worst = std::max(worst, (rp[j] - sp[j]).norm());
+  }
+  EXPECT_EQ(worst, 0.0);
+
+  // Added to a library, it is a motion like the others.
+  auto library = server::load_library(dir.path, 1);
+  ASSERT_TRUE(library.ok());
+  ASSERT_EQ(library->entries.size(), 1u);
+  EXPECT_EQ(library->entries[0].motion->frame_count, n);
 }
 
 // A raw Publish request, for skeletons Client::publish would not build.
@@ -472,7 +542,7 @@ TEST(LivePublish, BadSkeletonsAndFramesGetErrorsAndNeverReachSubscribers) {
     EXPECT_NE(r.error().message().find(b.says), std::string::npos) << r.error().message();
   }
 
-  const std::uint32_t id = pub->publish(source->skeleton, po).value();
+  const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
   const auto twice = pub->publish(source->skeleton, po);
   ASSERT_FALSE(twice.ok());
   EXPECT_NE(twice.error().message.find("already served"), std::string::npos);

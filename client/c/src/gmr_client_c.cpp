@@ -467,7 +467,7 @@ gmr_status gmr_publish(gmr_client* client, const char* name, const gmr_publish_j
     o.metres_per_unit = metres_per_unit;
     auto id = client->client->publish(*skeleton, o);
     if (!id.ok()) return status_of(id.error());
-    *publication_id = *id;
+    *publication_id = id->id;
     return GMR_OK;
   });
 }

@@ -230,6 +230,13 @@ struct PublishOptions {
   std::string name;               // its name in the server's list
   double frame_time = 1.0 / 120;  // seconds per frame: the rate subscribers are told
   double metres_per_unit = 0.0;   // the motion's unit in metres; 0: unknown
+  bool record = false;            // the server writes it to its --record-dir when it ends
+};
+
+struct Publication {
+  std::uint32_t id = 0;    // for publish_frame and unpublish
+  std::string motion;
+  std::string recording;   // with PublishOptions::record: the file the server will write
 };
 
 using FrameCallback = std::function<void(const ReceivedFrame&)>;
@@ -307,12 +314,12 @@ class Client {
 
   // Live sources (a 'publish' token). publish announces `skeleton`, whose
   // channels are a pre-rotation (GMR) motion's (to_pre_rotation converts a
-  // BVH or ASF/AMC motion), and returns the publication's id. Every frame is
+  // BVH or ASF/AMC motion), and returns the publication. Every frame is
   // then `values`: skeleton.channel_count() numbers, the motion's frame
   // layout. publish_frame queues the frame without waiting (it fails only
   // when the write queue is full); a frame the server refuses comes back in
   // take_errors(). unpublish ends the source; closing the client ends them all.
-  Result<std::uint32_t> publish(const Skeleton& skeleton, const PublishOptions& options);
+  Result<Publication> publish(const Skeleton& skeleton, const PublishOptions& options);
   Status publish_frame(std::uint32_t publication, std::span<const double> values);
   Status unpublish(std::uint32_t publication);
   // Errors the server sent for requests that get no reply (refused

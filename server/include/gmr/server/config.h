@@ -61,6 +61,11 @@ struct ServerConfig {
   // Live sources one connection may publish at once, and the joints of one.
   std::size_t max_publications_per_connection = 8;
   std::size_t max_live_joints = 4096;
+  // Where live sources that ask to be recorded (Publish.record) are written
+  // as .gmrb when they end; empty: recording is refused. A recording stops
+  // growing at max_record_bytes of values (the file keeps what came before).
+  std::string record_dir;
+  std::size_t max_record_bytes = std::size_t{256} << 20;
   // A connection that sends nothing (not even a heartbeat) for this long is closed.
   std::chrono::milliseconds idle_timeout{30000};
   // The server sends a heartbeat when it wrote nothing for this long.
