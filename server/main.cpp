@@ -130,6 +130,9 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingDirectory);
   app.add_option("--max-record-bytes", cfg.max_record_bytes, "Values one recording may hold; past them it stops growing")
       ->capture_default_str();
+  app.add_option("--nats", cfg.nats_url,
+                 "A NATS server (nats://host:4222) through which replicas share live sources (docs/operations.md)");
+  app.add_option("--nats-subject", cfg.nats_subject, "The NATS subject of live sources")->capture_default_str();
   app.add_option("--tls-cert", cfg.tls_certificate_file, "PEM certificate chain: the TCP port then speaks only TLS")
       ->check(CLI::ExistingFile);
   app.add_option("--tls-key", cfg.tls_key_file, "PEM private key of --tls-cert")->check(CLI::ExistingFile);

@@ -34,8 +34,11 @@ LiveSource::LiveSource(std::string name, std::uint64_t serial, Skeleton skeleton
   latest_ = std::move(m);
 }
 
-Status LiveSource::push(std::span<const double> values) {
+Status LiveSource::push(std::span<const double> values, std::optional<std::uint64_t> index_given) {
   if (ended_) return make_error("the live source '" + name_ + "' has ended");
+  if (index_given && *index_given < frames_) {
+    return make_error("frame " + std::to_string(*index_given) + " came after frame " + std::to_string(frames_ - 1));
+  }
   const Skeleton& sk = latest_->skeleton;
   const std::size_t stride = latest_->stride();
   if (values.size() != stride) {
@@ -60,6 +63,7 @@ Status LiveSource::push(std::span<const double> values) {
   m->frame_count = 1;
   m->values.assign(values.begin(), values.end());
   latest_ = std::move(m);
+  if (index_given) frames_ = *index_given;
   const std::uint64_t index = frames_++;
   if (recording_) {
     if ((recording_->values.size() + values.size()) * sizeof(double) <= record_max_bytes_) {

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -38,10 +39,15 @@ class LiveSource {
   // the skeleton with every channel 0.
   const std::shared_ptr<const Motion>& latest() const { return latest_; }
   bool ended() const { return ended_; }
+  // The replica this source is published on (relay.h); empty: this one.
+  const std::string& origin() const { return origin_; }
+  void set_origin(std::string origin) { origin_ = std::move(origin); }
 
   // Checks one frame (its size, finite values) and sends it to every stream
   // of this source. An error says which value and why; nothing is sent then.
-  Status push(std::span<const double> values);
+  // `index`: the frame's number when another replica numbered it (frames
+  // that never came are a gap); none: the next.
+  Status push(std::span<const double> values, std::optional<std::uint64_t> index = std::nullopt);
   // Ends the source: every stream's subscribers are told `reason`.
   void end(const std::string& reason);
 
@@ -67,6 +73,7 @@ class LiveSource {
   bool ended_ = false;
   std::vector<std::weak_ptr<Stream>> streams_;
   std::uint64_t replay_failures_ = 0;
+  std::string origin_;
   std::unique_ptr<Motion> recording_;
   std::size_t record_max_bytes_ = 0;
   bool record_truncated_ = false;

@@ -114,6 +114,7 @@ Reply RequestHandler::publish(const pb::Publish& r) {
   const std::uint32_t id = next_publication_++;
   server_.live[r.name()] = source;
   publications_[id] = source;
+  server_.relay_announce(*source);
   spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", connection_id_,
                printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(), 1.0 / ft);
   pb::ServerMessage out;
@@ -136,6 +137,7 @@ Reply RequestHandler::publish_frame(const pb::PublishFrame& r) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "live '" + source.name() + "': " + s.error().message};
   }
   ++server_.live_frames_received;
+  server_.relay_frame(source, std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
   return pb::ServerMessage{};  // no reply
 }
 
@@ -160,6 +162,7 @@ void RequestHandler::end_publication(std::uint32_t id, const std::string& reason
   spdlog::info("conn {}: live {} ended after {} frames: {}", connection_id_, printable(source->name(), 200),
                source->frames(), reason);
   source->end(reason);
+  server_.relay_end(*source, reason);
   if (auto path = recordings_.extract(source.get())) {
     bool truncated = false;
     auto motion = source->recording(&truncated);

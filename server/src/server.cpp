@@ -142,6 +142,7 @@ void Server::Impl::begin_stop() {
   http.close();
   udp.close();
   streams.stop_all();
+  if (relay_timer) relay_timer->cancel();
   auto open = connections;
   for (auto& [id, entry] : open) {
     if (auto c = entry.connection.lock()) c->finish();
@@ -284,6 +285,7 @@ void Server::start() {
                    d.http.port(), d.cfg.bind_address);
     }
   }
+  d.start_relay();
   d.started = true;
   if (d.ready) d.accept_loop();
   d.udp.start();
@@ -322,6 +324,7 @@ void Server::wait() {
   if (!d.started) return;
   d.stopped_future.wait();
   if (d.thread.joinable()) d.thread.join();
+  if (d.relay) d.relay->stop();
   for (auto& r : d.recordings) r.wait();  // the I/O thread is done: nobody adds one
   d.recordings.clear();
 }

@@ -20,6 +20,7 @@
 #include "connection.h"
 #include "http_server.h"
 #include "live.h"
+#include "relay.h"
 #include "metrics.h"
 #include "gmr/server/server.h"
 #include "gmr/server/view.h"
@@ -55,6 +56,22 @@ struct Server::Impl {
   // Recordings of live sources being written (off the I/O thread); wait()
   // waits for them.
   std::vector<std::future<void>> recordings;
+  // Replicas: the NATS relay (cfg.nats_url), and the live sources other
+  // replicas publish, by origin and serial (replicas.cpp).
+  std::unique_ptr<NatsRelay> relay;
+  struct RemoteSource {
+    std::shared_ptr<LiveSource> source;  // null: ignored (its name is taken here)
+    Clock::time_point heard;
+  };
+  std::map<std::string, RemoteSource> remote_sources;
+  std::unique_ptr<net::steady_timer> relay_timer;
+  void start_relay();
+  void relay_tick();
+  void on_relay(relay_pb::LiveRelay m);
+  // A source published here: tell the other replicas.
+  void relay_announce(const LiveSource& source);
+  void relay_frame(const LiveSource& source, std::span<const double> values);
+  void relay_end(const LiveSource& source, const std::string& reason);
 
   // Declared before io: connections that io's handlers still hold at
   // destruction give their bytes back to it.

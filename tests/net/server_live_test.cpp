@@ -6,7 +6,16 @@
 // errors and never reach a subscriber.
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <fstream>
 #include <map>
 #include <thread>
 
@@ -591,6 +600,235 @@ TEST(LivePublish, BadSkeletonsAndFramesGetErrorsAndNeverReachSubscribers) {
   // A live subscription cannot seek, and the source's name is free again.
   EXPECT_FALSE(control->create_view("checked").ok());
 }
+
+// ---- Replicas sharing live sources through NATS
+
+#ifdef GMR_SERVER_PATH
+
+// A child process (nats-server, a gmr-server replica) with its output in a
+// log file; killed (SIGKILL) and reaped when it goes.
+struct Child {
+  pid_t pid = -1;
+  std::filesystem::path log;
+  Child(const std::vector<std::string>& argv, std::filesystem::path log_file) : log(std::move(log_file)) {
+    std::vector<char*> args;
+    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+    args.push_back(nullptr);
+    pid = ::fork();
+    if (pid == 0) {
+      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+      if (fd >= 0) {
+        ::dup2(fd, 1);
+        ::dup2(fd, 2);
+      }
+      ::execv(args[0], args.data());
+      std::_Exit(127);
+    }
+  }
+  void kill() {
+    if (pid <= 0) return;
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, nullptr, 0);
+    pid = -1;
+  }
+  ~Child() { kill(); }
+  std::string output() const {
+    std::ifstream in(log);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  }
+};
+
+std::uint16_t free_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t n = sizeof a;
+  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+bool accepts(std::uint16_t port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(port);
+  const bool ok = ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+  ::close(fd);
+  return ok;
+}
+
+// nats-server on a free loopback port, or why not.
+std::string nats_server_binary() {
+  for (const char* p : {"/usr/sbin/nats-server", "/usr/bin/nats-server"}) {
+    if (::access(p, X_OK) == 0) return p;
+  }
+  return {};
+}
+
+#define GMR_REQUIRE_NATS(binary)                                                                              \
+  const std::string binary = nats_server_binary();                                                            \
+  if (binary.empty()) {                                                                                       \
+    const char* ci = std::getenv("CI");                                                                       \
+    if (ci != nullptr && std::string(ci) == "true") FAIL() << "nats-server is not installed (install-deps.sh)"; \
+    GTEST_SKIP() << "nats-server is not installed: scripts/install-deps.sh installs it";                      \
+  }
+
+std::unique_ptr<Child> start_nats(const std::string& binary, std::uint16_t port, const TempDir& dir) {
+  auto nats = std::make_unique<Child>(
+      std::vector<std::string>{binary, "-a", "127.0.0.1", "-p", std::to_string(port)},
+      dir.path / ("nats-" + std::to_string(port) + ".log"));
+  for (int i = 0; i < 500 && !accepts(port); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_TRUE(accepts(port)) << nats->output();
+  return nats;
+}
+
+// Waits until `c`'s server lists `motion` (or no longer does, with `listed` false).
+bool wait_listed(Client& c, const std::string& motion, bool listed = true) {
+  for (int i = 0; i < 1000; ++i) {
+    const auto motions = c.list_motions();
+    if (motions.ok() &&
+        std::any_of(motions->begin(), motions->end(), [&](auto& m) { return m.name == motion; }) == listed) {
+      return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return false;
+}
+
+TEST(LiveReplicas, ASourcePublishedOnOneReplicaStreamsFromAnotherAndEndsWhenItsReplicaIsKilled) {
+  GMR_REQUIRE_NATS(nats_binary);
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const std::size_t n = std::min<std::size_t>(source->frame_count, 120);
+  const Skeleton& sk = source->skeleton;
+  const std::string root = sk.joint(static_cast<int>(sk.size()) - 2).name;
+  const std::string viewer = sk.joint(static_cast<int>(sk.size()) / 2).name;
+  const Reference world = reference(*source, {}, n);
+  const Reference both = reference(*source, ViewSpec{.roots = {root}, .relative_to = viewer}, n);
+  TempDir dir;
+  const std::uint16_t nats_port = free_port();
+  auto nats = start_nats(nats_binary, nats_port, dir);
+  const std::string url = "nats://127.0.0.1:" + std::to_string(nats_port);
+
+  // Replica A: a process of its own (it is killed below), B: in this process.
+  {
+    std::ofstream auth(dir.path / "auth.txt");
+    auth << "publish " << kPublishToken << "\ncontrol " << kControlToken << "\n";
+  }
+  std::filesystem::permissions(dir.path / "auth.txt", std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+  Child a({GMR_SERVER_PATH, "--port", "0", "--port-file", (dir.path / "port_a").string(), "--http-port", "-1",
+           "--auth-file", (dir.path / "auth.txt").string(), "--nats", url, "--log-level", "info"},
+          dir.path / "replica_a.log");
+  std::uint16_t port_a = 0;
+  for (int i = 0; i < 1000 && port_a == 0; ++i) {
+    std::ifstream in(dir.path / "port_a");
+    if (!(in >> port_a)) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_NE(port_a, 0) << a.output();
+  server::ServerConfig cfg = live_config();
+  cfg.nats_url = url;
+  cfg.relay_timeout = std::chrono::milliseconds(1500);
+  TestServer b(cfg);
+
+  client::ClientOptions to_a;
+  to_a.host = "127.0.0.1";
+  to_a.port = port_a;
+  to_a.auth_token = kPublishToken;
+  auto pub = Client::connect(to_a);
+  ASSERT_TRUE(pub.ok()) << pub.error().to_string();
+  auto sub = connect_as(b, kControlToken);
+  ASSERT_TRUE(sub);
+  client::PublishOptions po;
+  po.name = "replicated";
+  po.frame_time = source->frame_time;
+  const std::uint32_t id = (*pub)->publish(source->skeleton, po).value().id;
+  ASSERT_TRUE(wait_listed(*sub, "replicated")) << "replica B never heard of the source";
+
+  // Two views on B: the world, and re-rooted seen from a joint.
+  Watch w1, w2;
+  w1.want = &world;
+  w2.want = &both;
+  w1.tolerance = w2.tolerance = 1e-9 * skeleton_size(*source);
+  client::SubscribeOptions so;
+  so.float64 = true;
+  watch(*sub, sub->create_view("replicated").value(), so, w1);
+  auto v2 = sub->create_view("replicated").value();
+  v2 = sub->set_roots(v2.id, {root}).value();
+  v2 = sub->set_coordinates(v2.id, viewer).value();
+  watch(*sub, v2, so, w2);
+  publish_frames(**pub, id, *source, 0, n, pace());
+  for (Watch* w : {&w1, &w2}) {
+    for (int i = 0; i < 500; ++i) {
+      {
+        std::lock_guard lock(w->mutex);
+        if (!w->indices.empty() && w->indices.back() == n - 1) break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    std::lock_guard lock(w->mutex);
+    EXPECT_EQ(w->bad, 0u) << w->first_problem;
+    EXPECT_GE(w->indices.size(), n * 9 / 10);
+    ASSERT_FALSE(w->indices.empty());
+    EXPECT_EQ(w->indices.back(), n - 1);
+    std::fprintf(stderr, "replica B: %zu of %zu frames, %zu positions compared, worst %.3g\n", w->indices.size(), n,
+                 w->compared, w->worst);
+  }
+
+  // Replica A dies without a word: B ends its subscribers, and goes on.
+  a.kill();
+  for (Watch* w : {&w1, &w2}) {
+    const auto end = w->end.wait(std::chrono::seconds(10));
+    ASSERT_TRUE(end.has_value()) << "B's subscriber was not ended";
+    EXPECT_EQ(end->reason, "the replica publishing the live source went away");
+  }
+  EXPECT_TRUE(wait_listed(*sub, "replicated", false));
+  EXPECT_TRUE(sub->list_motions().ok());
+}
+
+TEST(LiveReplicas, NatsGoingAwayIsLoggedRetriedAndSurvived) {
+  GMR_REQUIRE_NATS(nats_binary);
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  TempDir dir;
+  const std::uint16_t nats_port = free_port();
+  auto nats = start_nats(nats_binary, nats_port, dir);
+  server::ServerConfig cfg = live_config();
+  cfg.nats_url = "nats://127.0.0.1:" + std::to_string(nats_port);
+  TestServer a(cfg), b(cfg);
+  auto pub = connect_as(a, kPublishToken);
+  auto sub = connect_as(b, kControlToken);
+  ASSERT_TRUE(pub && sub);
+  client::PublishOptions po;
+  po.name = "first";
+  po.frame_time = source->frame_time;
+  const std::uint32_t first = pub->publish(source->skeleton, po).value().id;
+  ASSERT_TRUE(wait_listed(*sub, "first"));
+
+  nats->kill();
+  // Both replicas go on: frames are accepted on A (not relayed), B streams its library.
+  for (std::size_t f = 0; f < 10; ++f) ASSERT_TRUE(pub->publish_frame(first, source->frame(f)).ok());
+  ASSERT_TRUE(pub->list_motions().ok());
+  EXPECT_TRUE(pub->take_errors().empty());
+  auto walk = sub->create_view("walk");
+  ASSERT_TRUE(walk.ok());
+  Latch<std::uint64_t> got;
+  client::SubscribeOptions so;
+  so.max_frames = 5;
+  ASSERT_TRUE(sub->subscribe(walk->id, so, [&](const ReceivedFrame& f) { got.set(f.frame_index); }).ok());
+  EXPECT_TRUE(got.wait(std::chrono::seconds(5)).has_value());
+
+  // NATS back on the same port: both reconnect, and a new source reaches B.
+  nats = start_nats(nats_binary, nats_port, dir);
+  po.name = "second";
+  ASSERT_TRUE(pub->publish(source->skeleton, po).ok());
+  EXPECT_TRUE(wait_listed(*sub, "second")) << "B did not hear of a source published after NATS came back";
+}
+
+#endif  // GMR_SERVER_PATH
 
 }  // namespace
 }  // namespace gmr::test

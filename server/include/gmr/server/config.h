@@ -66,6 +66,14 @@ struct ServerConfig {
   // growing at max_record_bytes of values (the file keeps what came before).
   std::string record_dir;
   std::size_t max_record_bytes = std::size_t{256} << 20;
+  // Replicas (docs/operations.md, "Several replicas"): live sources are
+  // shared through this NATS server (nats://host:port); empty: none. Every
+  // replica on the same subject serves every replica's live sources.
+  std::string nats_url;
+  std::string nats_subject = "gmr.live";
+  // A source of another replica not heard of for this long has ended (its
+  // replica went away without saying so).
+  std::chrono::milliseconds relay_timeout{3000};
   // A connection that sends nothing (not even a heartbeat) for this long is closed.
   std::chrono::milliseconds idle_timeout{30000};
   // The server sends a heartbeat when it wrote nothing for this long.
