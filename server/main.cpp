@@ -133,6 +133,11 @@ int main(int argc, char** argv) {
   app.add_option("--nats", cfg.nats_url,
                  "A NATS server (nats://host:4222) through which replicas share live sources (docs/operations.md)");
   app.add_option("--nats-subject", cfg.nats_subject, "The NATS subject of live sources")->capture_default_str();
+  int relay_timeout_ms = static_cast<int>(cfg.relay_timeout.count());
+  app.add_option("--relay-timeout-ms", relay_timeout_ms,
+                 "End another replica's live source after this long without word from it")
+      ->capture_default_str()
+      ->check(CLI::Range(100, 3600000));
   app.add_option("--tls-cert", cfg.tls_certificate_file, "PEM certificate chain: the TCP port then speaks only TLS")
       ->check(CLI::ExistingFile);
   app.add_option("--tls-key", cfg.tls_key_file, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
@@ -173,6 +178,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   cfg.idle_timeout = std::chrono::milliseconds(idle_ms);
+  cfg.relay_timeout = std::chrono::milliseconds(relay_timeout_ms);
   cfg.heartbeat_interval = std::chrono::milliseconds(heartbeat_ms);
   cfg.write_timeout = std::chrono::milliseconds(write_ms);
   cfg.handshake_timeout = std::chrono::milliseconds(handshake_ms);

@@ -66,7 +66,7 @@ struct ServerConfig {
   // growing at max_record_bytes of values (the file keeps what came before).
   std::string record_dir;
   std::size_t max_record_bytes = std::size_t{256} << 20;
-  // Replicas (docs/operations.md, "Several replicas"): live sources are
+  // Replicas (docs/scaling.md): live sources are
   // shared through this NATS server (nats://host:port); empty: none. Every
   // replica on the same subject serves every replica's live sources.
   std::string nats_url;

@@ -1,0 +1,8 @@
+# NATS for gmr-server replicas (docs/scaling.md), from Debian's package:
+#   docker build -f docker/nats.Dockerfile -t gmr-nats docker
+FROM debian:12-slim
+RUN apt-get update -qq && apt-get install -y -qq --no-install-recommends nats-server \
+ && rm -rf /var/lib/apt/lists/*
+USER nobody
+EXPOSE 4222
+ENTRYPOINT ["nats-server", "-a", "0.0.0.0", "-p", "4222"]
