@@ -14,6 +14,7 @@ packages=(
   libspdlog-dev libfmt-dev  # logging outside lib/
   libboost-dev libboost-system-dev # Boost.Asio for the server and client; Boost.Beast for HTTP and WebSocket
   prometheus-cpp-dev        # /metrics in the Prometheus text format
+  iproute2 util-linux       # the multicast test runs in a network namespace of its own (ip, unshare)
   libnats-dev nats-server   # replicas share live sources through NATS (the replica test starts nats-server)
   libjs-three               # three.js for the browser viewer, served by gmr-server (no CDN)
   libssl-dev                # OpenSSL: TLS (Asio's SSL), token digests, the tests' certificates

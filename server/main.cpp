@@ -130,6 +130,12 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingDirectory);
   app.add_option("--max-record-bytes", cfg.max_record_bytes, "Values one recording may hold; past them it stops growing")
       ->capture_default_str();
+  app.add_option("--multicast-group", cfg.multicast_group,
+                 "IPv4 multicast group (239.255.74.1) for shared streams subscribed over multicast (default: none)");
+  app.add_option("--multicast-port", cfg.multicast_port, "Port of the multicast group")->capture_default_str();
+  app.add_option("--multicast-ttl", cfg.multicast_ttl, "Hops multicast frames may take (1: this network segment)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 255));
   app.add_option("--nats", cfg.nats_url,
                  "A NATS server (nats://host:4222) through which replicas share live sources (docs/operations.md)");
   app.add_option("--nats-subject", cfg.nats_subject, "The NATS subject of live sources")->capture_default_str();

@@ -143,6 +143,7 @@ struct PlayOptions {
   std::string motion;
   ViewOptions view;
   bool udp = false;
+  bool multicast = false;
   double rate = 0.0;
   double speed = 1.0;
   std::uint64_t count = 0;
@@ -154,6 +155,8 @@ struct PlayOptions {
 void add_play_options(CLI::App& cmd, PlayOptions& o) {
   cmd.add_option("motion", o.motion, "Motion name (see gmr ls)")->required();
   cmd.add_flag("--udp", o.udp, "Receive frames over UDP (registered with the session token)");
+  cmd.add_flag("--multicast", o.multicast,
+               "Receive a shared stream from the server's multicast group (gmr-server --multicast-group)");
   cmd.add_option("--rate", o.rate, "Rate in Hz (default: the motion's own rate times --speed)");
   cmd.add_option("--speed", o.speed, "Playback speed")->capture_default_str();
   cmd.add_option("--count", o.count, "Stop after N frames");
@@ -169,6 +172,7 @@ client::SubscribeOptions subscribe_options(const PlayOptions& o, const client::V
   const FrameRange r = clamp_frame_range(parse_frame_range(o.frames), v.frame_count);
   client::SubscribeOptions so;
   so.udp = o.udp;
+  so.multicast = o.multicast;
   so.rate_hz = o.rate;
   so.speed = o.speed;
   so.loop = o.loop;

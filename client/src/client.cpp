@@ -153,7 +153,14 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     EndCallback on_end;
     SkeletonCallback on_skeleton;
     std::int64_t max_age_ns = 0;  // 0: no staleness bound
+    std::uint64_t stream_id = 0;  // multicast: frames carry the stream's id, not the subscription's
+    bool multicast = false;
   };
+  // The multicast group's socket (the first multicast subscription opens it).
+  std::optional<udp::socket> multicast_socket;
+  udp::endpoint multicast_sender;
+  std::array<char, 2048> multicast_buffer{};
+  wire::Reassembler multicast_reassembler;
   std::map<std::uint32_t, std::shared_ptr<Sub>> subs;
   // A UDP frame can overtake the TCP reply to its Subscribe: frames for an
   // unknown subscription wait here (bounded) while a Subscribe is in flight.
@@ -254,6 +261,57 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
                                     }
                                     self->read_udp();
                                   });
+  }
+  // Joins `group` (address:port) on the interface of the TCP connection; on the strand.
+  Status join_multicast(const std::string& group) {
+    const auto colon = group.rfind(':');
+    boost::system::error_code ec;
+    const auto address = net::ip::make_address_v4(group.substr(0, colon == std::string::npos ? 0 : colon), ec);
+    if (ec || colon == std::string::npos) return make_error("the server named a bad multicast group '" + group + "'");
+    const auto port = static_cast<std::uint16_t>(std::stoul(group.substr(colon + 1)));
+    if (multicast_socket) return Ok{};  // one group per server
+    const auto local = socket.tcp().local_endpoint(ec).address();
+    udp::socket s(strand);
+    s.open(udp::v4(), ec);
+    if (!ec) s.set_option(net::socket_base::reuse_address(true), ec);
+    if (!ec) s.bind(udp::endpoint(net::ip::address_v4::any(), port), ec);
+    if (!ec) s.set_option(net::socket_base::receive_buffer_size(4 << 20), ec);
+    if (!ec) {
+      s.set_option(local.is_v4() ? net::ip::multicast::join_group(address, local.to_v4())
+                                 : net::ip::multicast::join_group(address),
+                   ec);
+    }
+    if (ec) return make_error("cannot join multicast " + group + ": " + ec.message());
+    multicast_socket.emplace(std::move(s));
+    read_multicast();
+    return Ok{};
+  }
+  void read_multicast() {
+    multicast_socket->async_receive_from(
+        net::buffer(multicast_buffer), multicast_sender,
+        [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
+          if (ec == net::error::operation_aborted || !self->open) return;
+          // Only the server's UDP socket sends the group's frames.
+          if (!ec && self->multicast_sender == self->server_udp) {
+            if (auto msg = self->multicast_reassembler.add(std::string_view(self->multicast_buffer.data(), n))) {
+              pb::ServerMessage m;
+              if (m.ParseFromString(*msg) && m.has_frame()) {
+                std::vector<std::uint32_t> ids;
+                {
+                  std::lock_guard lock(self->mutex);
+                  for (const auto& [id, sub] : self->subs) {
+                    if (sub->multicast && sub->stream_id == m.frame().stream_id()) ids.push_back(id);
+                  }
+                }
+                for (const std::uint32_t id : ids) {
+                  m.mutable_frame()->set_subscription_id(id);
+                  self->on_message(m, true);
+                }
+              }
+            }
+          }
+          self->read_multicast();
+        });
   }
   void arm_heartbeat() {
     const auto interval = std::chrono::milliseconds(
@@ -369,6 +427,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     boost::system::error_code ec;
     socket.tcp().close(ec);
     udp_socket.close(ec);
+    if (multicast_socket) multicast_socket->close(ec);
     heartbeat.cancel();
     std::map<std::uint64_t, Pending> orphans;
     {
@@ -778,7 +837,7 @@ Status Client::register_udp() {
 
 Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOptions& o, FrameCallback on_frame,
                                            EndCallback on_end, SkeletonCallback on_skeleton) {
-  if (o.udp) {
+  if (o.udp && !o.multicast) {
     if (auto s = register_udp(); !s.ok()) return s.error();
   }
   pb::ClientMessage m;
@@ -793,7 +852,7 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   s->set_orientations(o.orientations);
   s->set_local_transforms(o.local_transforms);
   for (const auto& j : o.joints) s->add_joints(j);
-  s->set_transport(o.udp ? pb::TRANSPORT_UDP : pb::TRANSPORT_TCP);
+  s->set_transport(o.multicast ? pb::TRANSPORT_MULTICAST : o.udp ? pb::TRANSPORT_UDP : pb::TRANSPORT_TCP);
   s->set_precision(o.float64 ? pb::PRECISION_FLOAT64 : pb::PRECISION_FLOAT32);
   s->set_shared(o.shared);
   to_proto(o.conventions, *s->mutable_conventions());
@@ -817,7 +876,11 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
       std::lock_guard lock(impl->mutex);
       *replied = true;
       --impl->subscribes_in_flight;
-      if (reply.has_subscribed()) impl->subs[reply.subscribed().subscription_id()] = sub;
+      if (reply.has_subscribed()) {
+        sub->stream_id = reply.subscribed().stream_id();
+        sub->multicast = !reply.subscribed().multicast_group().empty();
+        impl->subs[reply.subscribed().subscription_id()] = sub;
+      }
       if (impl->subscribes_in_flight == 0) replay.swap(impl->early_frames);
     }
     for (auto& [frame, via_udp] : replay) impl->on_message(frame, via_udp);
@@ -843,6 +906,19 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
     info.rest = wire::rest_from_proto(sr.skeleton());
   }
   info.relative_to = sr.relative_to();
+  info.multicast_group = sr.multicast_group();
+  if (!info.multicast_group.empty()) {
+    // Joined on the strand, as every socket of this client is used.
+    auto joined = std::make_shared<std::promise<Status>>();
+    auto done = joined->get_future();
+    net::post(impl_->strand, [impl = impl_, joined, group = info.multicast_group] {
+      joined->set_value(impl->join_multicast(group));
+    });
+    if (Status joined_status = done.get(); !joined_status.ok()) {
+      (void)unsubscribe(info.id);
+      return joined_status.error();
+    }
+  }
   return info;
 }
 
@@ -898,6 +974,7 @@ Result<ServerCounters> Client::stats() {
   c.live_sources = s.live_sources();
   c.live_frames_received = s.live_frames_received();
   c.live_frames_refused = s.live_frames_refused();
+  c.multicast_frames_sent = s.multicast_frames_sent();
   return c;
 }
 

@@ -462,6 +462,7 @@ Reply RequestHandler::stats() {
   st->set_live_sources(static_cast<std::uint32_t>(server_.live.size()));
   st->set_live_frames_received(server_.live_frames_received);
   st->set_live_frames_refused(server_.live_frames_refused);
+  st->set_multicast_frames_sent(server_.multicast_frames_sent);
   return out;
 }
 

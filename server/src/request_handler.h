@@ -59,6 +59,7 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
     std::uint64_t rate_mhz = 0;            // committed against the send budget
     std::uint32_t skeleton_version = 0;    // of the frames it last got word of
     OutputBasis basis;                     // its conventions (of the rest pose it is sent)
+    bool multicast = false;                // frames go to the group with its stream's (pause, seek refused)
   };
 
   void send(const pb::ServerMessage& m);

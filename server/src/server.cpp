@@ -266,6 +266,11 @@ void Server::start() {
                                  : d.cfg.port == 0   ? std::uint16_t{0}
                                                      : d.tcp_port;
   d.udp.open(address, udp_port);
+  if (!d.cfg.multicast_group.empty()) {
+    d.multicast = d.udp.open_multicast(d.cfg.multicast_group, d.cfg.multicast_port, d.cfg.multicast_ttl);
+    spdlog::info("shared streams may go to multicast {}:{} (TTL {})", d.cfg.multicast_group, d.cfg.multicast_port,
+                 d.cfg.multicast_ttl);
+  }
   if (d.cfg.http_port >= 0) d.http.open(address, static_cast<std::uint16_t>(d.cfg.http_port));
   if (!address.is_loopback()) {
     if (!d.cfg.credentials || d.cfg.anonymous >= Role::kControl) {

@@ -21,6 +21,7 @@
 #include "http_server.h"
 #include "live.h"
 #include "relay.h"
+#include "targets.h"
 #include "metrics.h"
 #include "gmr/server/server.h"
 #include "gmr/server/view.h"
@@ -58,6 +59,11 @@ struct Server::Impl {
   std::vector<std::future<void>> recordings;
   // Replicas: the NATS relay (cfg.nats_url), and the live sources other
   // replicas publish, by origin and serial (replicas.cpp).
+  // Multicast (cfg.multicast_group): the group's registration, and each
+  // shared stream's channel to it, by stream id.
+  std::shared_ptr<UdpPublisher::Registration> multicast;
+  std::map<std::uint64_t, std::weak_ptr<MulticastChannel>> multicast_channels;
+  std::uint64_t multicast_frames_sent = 0;
   std::unique_ptr<NatsRelay> relay;
   struct RemoteSource {
     std::shared_ptr<LiveSource> source;  // null: ignored (its name is taken here)

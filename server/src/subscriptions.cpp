@@ -80,6 +80,11 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
                                                    std::to_string(wire::kProtocolVersion) + ")"};
   }
   const bool use_udp = r.transport() == pb::TRANSPORT_UDP;
+  const bool use_multicast = r.transport() == pb::TRANSPORT_MULTICAST;
+  if (use_multicast && !server_.multicast) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "this server sends no multicast (gmr-server --multicast-group): subscribe over TCP or UDP"};
+  }
   if (use_udp && !udp_->endpoint) {
     return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
                    "UDP transport: register this connection's UDP endpoint first (send the session token to UDP port " +
@@ -114,7 +119,9 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   // encoding per tick.
   // A live source's serial keeps a later source of the same name apart.
   const std::string shown = source ? v->motion_name() + "#live" + std::to_string(source->serial()) : v->motion_name();
-  const std::string key = r.shared() ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
+  // Multicast is for shared streams: one send per frame for all their subscribers.
+  const std::string key =
+      r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
   std::shared_ptr<Stream> stream = key.empty() ? nullptr : server_.streams.find_running(key);
   const bool joined = stream != nullptr;
   if (!stream) {
@@ -124,7 +131,18 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
 
   const std::uint32_t id = next_sub_++;
   std::shared_ptr<SubscriptionTarget> target;
-  if (use_udp) {
+  if (use_multicast) {
+    auto& slot = server_.multicast_channels[stream->id()];
+    auto channel = slot.lock();
+    if (!channel) {
+      channel = std::make_shared<MulticastChannel>();
+      channel->group = server_.multicast;
+      channel->total_sent = &server_.multicast_frames_sent;
+      slot = channel;
+    }
+    std::erase_if(server_.multicast_channels, [](const auto& e) { return e.second.expired(); });
+    target = std::make_shared<MulticastTarget>(weak_from_this(), connection_, id, v->id(), server_.udp, channel);
+  } else if (use_udp) {
     target = std::make_shared<UdpTarget>(weak_from_this(), connection_, id, v->id(), server_.udp, udp_);
   } else {
     target = std::make_shared<TcpTarget>(weak_from_this(), connection_, id, v->id());
@@ -132,7 +150,8 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
                                                 : std::chrono::milliseconds(r.max_staleness_ms()));
   stream->add(target, r.max_frames());
-  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version, settings.basis};
+  subs_[id] = Subscription{v->id(), stream,         target,         names, rate_mhz, v->content()->skeleton_version,
+                           settings.basis, use_multicast};
   server_.committed_mhz += rate_mhz;
   if (!joined) stream->start();
 
@@ -147,6 +166,10 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   sub->set_joined_running(joined);
   wire::to_proto(v->motion(), settings.basis, *sub->mutable_skeleton());
   if (v->content()->relative_to >= 0) sub->set_relative_to(v->motion().skeleton.joint(v->content()->relative_to).name);
+  if (use_multicast) {
+    const auto& group = *server_.multicast->endpoint;
+    sub->set_multicast_group(group.address().to_string() + ":" + std::to_string(group.port()));
+  }
   spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", connection_id_, id, v->id(),
                 stream->id(), use_udp ? "UDP" : "TCP", s.rate);
   return out;
@@ -158,9 +181,19 @@ Reply RequestHandler::unsubscribe(const pb::Unsubscribe& r) {
   return ack();
 }
 
+namespace {
+Refusal follows_its_stream(std::uint32_t id) {
+  return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                 "subscription " + std::to_string(id) +
+                     " is multicast: it follows its shared stream (unsubscribe, and subscribe over TCP or UDP to "
+                     "play on your own)"};
+}
+}  // namespace
+
 Reply RequestHandler::pause(const pb::Pause& r) {
   Subscription* s = find_subscription(r.subscription_id());
   if (!s) return unknown_subscription(r.subscription_id());
+  if (s->multicast) return follows_its_stream(r.subscription_id());
   detach(*s)->pause();
   return ack();
 }
@@ -175,6 +208,7 @@ Reply RequestHandler::resume(const pb::Resume& r) {
 Reply RequestHandler::seek(const pb::Seek& r) {
   Subscription* s = find_subscription(r.subscription_id());
   if (!s) return unknown_subscription(r.subscription_id());
+  if (s->multicast) return follows_its_stream(r.subscription_id());
   if (s->stream->live()) {
     return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
                    "subscription " + std::to_string(r.subscription_id()) + " plays a live source: it cannot seek"};
@@ -217,6 +251,10 @@ void RequestHandler::view_changed(const View& v) {
     auto joints = resolve_joints(v, sub.joint_names);
     if (!joints.ok()) {
       ended.emplace_back(id, "the view changed: " + joints.error().message);
+      continue;
+    }
+    if (sub.multicast) {  // its stream's content is shared by others: it cannot follow alone
+      ended.emplace_back(id, "the view changed: a multicast subscription follows its shared stream (subscribe again)");
       continue;
     }
     // The new skeleton goes out before any frame of its version: replies

@@ -51,4 +51,20 @@ void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std
   c->count_udp_frame_sent();
 }
 
+void MulticastTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
+  auto c = connection_.lock();
+  if (!c || c->closing()) return;
+  MulticastChannel& ch = *channel_;
+  // Another subscriber of the stream already sent this one.
+  if (!ch.last.owner_before(body) && !body.owner_before(ch.last)) return;
+  ch.last = body;
+  if (!publisher_.send(ch.group, wire::frame_message_for(0, 0, stream_id, *body))) {
+    ++dropped_;
+    ++ch.dropped;
+    return;
+  }
+  ++ch.sent;
+  if (ch.total_sent != nullptr) ++*ch.total_sent;
+}
+
 }  // namespace gmr::server

@@ -64,4 +64,30 @@ class UdpTarget final : public SubscriptionTarget {
   std::shared_ptr<UdpPublisher::Registration> endpoint_;
 };
 
+// One shared stream's frames to the multicast group: once per frame, however
+// many of its subscribers chose multicast (docs/protocol.md, "Multicast").
+struct MulticastChannel {
+  std::shared_ptr<UdpPublisher::Registration> group;
+  std::weak_ptr<const std::string> last;  // the body sent last (owner-compared: never a reused address)
+  std::uint64_t sent = 0, dropped = 0;
+  std::uint64_t* total_sent = nullptr;  // the server's count, all channels
+};
+
+// A subscriber of a shared stream over multicast: its frames are the
+// channel's; its end, skips and drops are its own, told over its connection.
+class MulticastTarget final : public SubscriptionTarget {
+ public:
+  MulticastTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Outbox> connection, std::uint32_t subscription,
+                  std::uint32_t view, UdpPublisher& publisher, std::shared_ptr<MulticastChannel> channel)
+      : SubscriptionTarget(std::move(handler), std::move(connection), subscription, view),
+        publisher_(publisher),
+        channel_(std::move(channel)) {}
+  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  const std::shared_ptr<MulticastChannel>& channel() const { return channel_; }
+
+ private:
+  UdpPublisher& publisher_;
+  std::shared_ptr<MulticastChannel> channel_;
+};
+
 }  // namespace gmr::server

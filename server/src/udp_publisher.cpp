@@ -34,6 +34,31 @@ void UdpPublisher::open(const net::ip::address& address, std::uint16_t port) {
   socket_.non_blocking(true, ec);
 }
 
+std::shared_ptr<UdpPublisher::Registration> UdpPublisher::open_multicast(const std::string& group, std::uint16_t port,
+                                                                        int ttl) {
+  boost::system::error_code ec;
+  const auto address = net::ip::make_address_v4(group, ec);
+  if (ec || !address.is_multicast()) {
+    throw std::runtime_error("--multicast-group " + group + " is not an IPv4 multicast address (224.0.0.0/4)");
+  }
+  if (ttl < 0 || ttl > 255) throw std::runtime_error("--multicast-ttl must be within [0, 255]");
+  const auto local = socket_.local_endpoint(ec).address();
+  if (local.is_v4()) {
+    socket_.set_option(net::ip::multicast::hops(ttl), ec);
+    if (!ec && !local.is_unspecified()) socket_.set_option(net::ip::multicast::outbound_interface(local.to_v4()), ec);
+    if (!ec) socket_.set_option(net::ip::multicast::enable_loopback(true), ec);
+  } else {
+    ec = net::error::address_family_not_supported;
+  }
+  if (ec) {
+    throw std::runtime_error("cannot send multicast to " + group + " from the UDP socket (" + local.to_string() +
+                             "): " + ec.message());
+  }
+  auto r = std::make_shared<Registration>();
+  r->endpoint = udp::endpoint(address, port);
+  return r;
+}
+
 void UdpPublisher::start() { receive(); }
 
 void UdpPublisher::close() {

@@ -43,6 +43,11 @@ class UdpPublisher {
   // naming the address when it cannot.
   void open(const net::ip::address& address, std::uint16_t port);
   std::uint16_t port() const { return port_; }
+  // Lets the socket send to IPv4 multicast `group`:`port` with `ttl`, out of
+  // the interface of the bound address (unless it is any). Throws
+  // std::runtime_error saying why not. Returns the group's registration, the
+  // destination of every multicast frame.
+  std::shared_ptr<Registration> open_multicast(const std::string& group, std::uint16_t port, int ttl);
   // Starts taking registrations.
   void start();
   void close();

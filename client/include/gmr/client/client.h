@@ -162,6 +162,10 @@ struct SubscribeOptions {
   bool udp = false;
   bool float64 = false;
   bool shared = false;           // join a running stream with the same content and schedule
+  // Frames from the server's multicast group (a shared stream sent once to
+  // every subscriber on the network; the server must have --multicast-group).
+  // The client joins the group on the interface it reaches the server by.
+  bool multicast = false;
   std::uint64_t max_frames = 0;  // 0: no limit
   // Frames older than this are never delivered: the server drops those that
   // waited longer in its queue, this client those that arrive older (after a
@@ -190,6 +194,7 @@ struct SubscriptionInfo {
   Skeleton skeleton;        // the view's, as the frames' values follow it
   RestPose rest;            // in the subscription's conventions
   std::string relative_to;  // empty: world coordinates
+  std::string multicast_group;  // multicast subscriptions: "group:port" the frames come from
 };
 
 // The server ended a subscription (end of motion, max_frames, a view change
@@ -223,6 +228,7 @@ struct ServerCounters {
   std::uint32_t live_sources = 0;          // being published now
   std::uint64_t live_frames_received = 0;  // published frames the server accepted
   std::uint64_t live_frames_refused = 0;   // and refused
+  std::uint64_t multicast_frames_sent = 0; // to the multicast group, once each
 };
 
 // A live source this client publishes (docs/protocol.md, "Live sources").

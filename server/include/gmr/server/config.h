@@ -66,6 +66,14 @@ struct ServerConfig {
   // growing at max_record_bytes of values (the file keeps what came before).
   std::string record_dir;
   std::size_t max_record_bytes = std::size_t{256} << 20;
+  // Multicast (docs/protocol.md, "Multicast"): shared streams a subscriber
+  // asks for over TRANSPORT_MULTICAST go once per frame to this IPv4 group
+  // and port, from the UDP socket; empty: multicast is refused. TTL 1 keeps
+  // them on the local network segment.
+  std::string multicast_group;
+  std::uint16_t multicast_port = 7500;
+  int multicast_ttl = 1;
+
   // Replicas (docs/scaling.md): live sources are
   // shared through this NATS server (nats://host:port); empty: none. Every
   // replica on the same subject serves every replica's live sources.

@@ -1,0 +1,163 @@
+// Multicast: subscribers of a shared stream over TRANSPORT_MULTICAST all get
+// its frames, with the positions `gmr positions` gives, from one send per
+// frame to the group. Multicast datagrams are not loopback traffic: the test
+// runs itself again inside a network namespace it makes (`unshare -n`, the
+// loopback interface up, a multicast route on it), so nothing can leave the
+// machine. Where a namespace cannot be made it skips, and fails under CI=true.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+#include <sys/wait.h>
+
+#include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/view/view.h"
+#include "net_test_util.h"
+#include "test_data.h"
+
+namespace gmr::test {
+namespace {
+
+bool in_namespace() {
+  const char* v = std::getenv("GMR_IN_NETNS");
+  return v != nullptr && std::string(v) == "1";
+}
+
+// Runs this test binary's `test` again in a new network namespace; its
+// output, and whether it passed.
+void run_in_namespace(const std::string& test) {
+  const bool ci = std::getenv("CI") != nullptr && std::string(std::getenv("CI")) == "true";
+  if (std::system("unshare -n true >/dev/null 2>&1") != 0) {
+    const std::string why = "cannot make a network namespace here (unshare -n needs root or CAP_SYS_ADMIN)";
+    if (ci) FAIL() << why << ": CI must run the multicast test";
+    GTEST_SKIP() << why;
+  }
+  const std::string cmd = "unshare -n sh -c 'ip link set lo up && ip route add 224.0.0.0/4 dev lo && "
+                          "GMR_IN_NETNS=1 exec /proc/" +
+                          std::to_string(::getpid()) + "/exe --gtest_filter=" + test + "' 2>&1";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string out;
+  std::array<char, 4096> buf{};
+  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.append(buf.data(), n);
+  const int status = ::pclose(p);
+  std::fprintf(stderr, "%s", out.c_str());
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "in the namespace:\n" << out;
+  EXPECT_NE(out.find("[  PASSED  ] 1 test"), std::string::npos) << out;
+}
+
+struct Received {
+  std::mutex mutex;
+  std::size_t frames = 0, bad = 0;
+  double worst = 0;
+  Latch<client::SubscriptionEnd> end;
+};
+
+TEST(Multicast, OneSendPerFrameReachesEverySubscriberWithExactPositions) {
+  if (!in_namespace()) return run_in_namespace("Multicast.OneSendPerFrameReachesEverySubscriberWithExactPositions");
+
+  const std::string motion = have_data() ? "cmu/02_01" : "walk";
+  std::shared_ptr<const Motion> source;
+  for (const auto& e : test_library()) {
+    if (e.name == motion) source = e.motion;
+  }
+  ASSERT_NE(source, nullptr);
+  auto view = apply_view(*source, ViewSpec{});
+  ASSERT_TRUE(view.ok());
+  const std::vector<Eigen::Vector3d> want = view_positions(*view, 0, view->motion.frame_count);
+  const std::size_t joints = view->motion.skeleton.size();
+  const double tolerance = 1e-9 * skeleton_size(*source);
+
+  server::ServerConfig cfg;
+  cfg.multicast_group = "239.255.74.1";
+  cfg.multicast_port = 17500;
+  TestServer s(cfg);
+  constexpr std::uint64_t kFrames = 60;
+  constexpr int kSubscribers = 3;
+  std::vector<std::unique_ptr<client::Client>> clients;
+  std::vector<std::unique_ptr<Received>> got;
+  std::uint64_t stream_id = 0;
+  for (int i = 0; i < kSubscribers; ++i) {
+    clients.push_back(s.connect());
+    ASSERT_NE(clients.back(), nullptr);
+    auto v = clients.back()->create_view(motion);
+    ASSERT_TRUE(v.ok());
+    got.push_back(std::make_unique<Received>());
+    Received* r = got.back().get();
+    client::SubscribeOptions so;
+    so.multicast = true;
+    so.float64 = true;
+    so.loop = true;
+    so.rate_hz = kSlowBuild ? 60 : 120;
+    so.max_frames = kFrames;
+    so.max_staleness = std::chrono::milliseconds(0);
+    auto sub = clients.back()->subscribe(
+        v->id, so,
+        [r, &want, joints, tolerance](const client::ReceivedFrame& f) {
+          std::lock_guard lock(r->mutex);
+          ++r->frames;
+          if (!f.udp || f.positions.size() != joints) {
+            ++r->bad;
+            return;
+          }
+          for (std::size_t j = 0; j < joints; ++j) {
+            const double e = (f.positions[j] - want[f.frame_index * joints + j]).norm();
+            r->worst = std::max(r->worst, e);
+            if (!(e <= tolerance)) ++r->bad;
+          }
+        },
+        [r](const client::SubscriptionEnd& e) { r->end.set(e); });
+    ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+    EXPECT_EQ(sub->multicast_group, "239.255.74.1:17500");
+    if (i == 0) stream_id = sub->stream_id;
+    EXPECT_EQ(sub->stream_id, stream_id) << "multicast subscribers share one stream";
+  }
+  for (int i = 0; i < kSubscribers; ++i) {
+    Received& r = *got[static_cast<std::size_t>(i)];
+    ASSERT_TRUE(r.end.wait().has_value());
+    std::lock_guard lock(r.mutex);
+    EXPECT_EQ(r.bad, 0u);
+    // The later subscribers joined a running stream: they end with it.
+    EXPECT_GE(r.frames, kFrames * 8 / 10 - 10) << "subscriber " << i;
+    std::fprintf(stderr, "multicast subscriber %d: %zu frames, worst %.3g\n", i, r.frames, r.worst);
+  }
+  const auto stats = clients[0]->stats();
+  ASSERT_TRUE(stats.ok());
+  // One datagram train per frame for all three subscribers, not three (the
+  // stream runs on until the last to join has had its kFrames).
+  EXPECT_LT(stats->multicast_frames_sent, 2 * kFrames);
+  EXPECT_GE(stats->multicast_frames_sent, kFrames * 8 / 10);
+  std::fprintf(stderr, "multicast: %llu frames sent for %d subscribers\n",
+               static_cast<unsigned long long>(stats->multicast_frames_sent), kSubscribers);
+
+  // Multicast follows its shared stream: it cannot pause on its own.
+  auto v = clients[0]->create_view(motion);
+  client::SubscribeOptions so;
+  so.multicast = true;
+  so.loop = true;
+  auto sub = clients[0]->subscribe(v->id, so, [](const client::ReceivedFrame&) {});
+  ASSERT_TRUE(sub.ok());
+  const auto paused = clients[0]->pause(sub->id);
+  ASSERT_FALSE(paused.ok());
+  EXPECT_NE(paused.error().message.find("multicast"), std::string::npos);
+}
+
+TEST(Multicast, AServerWithoutAGroupRefusesMulticast) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  client::SubscribeOptions so;
+  so.multicast = true;
+  const auto sub = c->subscribe(v->id, so, [](const client::ReceivedFrame&) {});
+  ASSERT_FALSE(sub.ok());
+  EXPECT_NE(sub.error().message.find("FAILED_PRECONDITION: this server sends no multicast"), std::string::npos)
+      << sub.error().message;
+}
+
+}  // namespace
+}  // namespace gmr::test
