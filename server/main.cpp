@@ -136,6 +136,10 @@ int main(int argc, char** argv) {
   app.add_option("--multicast-ttl", cfg.multicast_ttl, "Hops multicast frames may take (1: this network segment)")
       ->capture_default_str()
       ->check(CLI::Range(0, 255));
+  app.add_option("--discovery-group", cfg.discovery_group,
+                 "Send a discovery beacon (gmr discover) to this IPv4 multicast group every second (default: none; "
+                 "239.255.74.2 is gmr discover's)");
+  app.add_option("--discovery-port", cfg.discovery_port, "Port of the discovery group")->capture_default_str();
   app.add_option("--nats", cfg.nats_url,
                  "A NATS server (nats://host:4222) through which replicas share live sources (docs/operations.md)");
   app.add_option("--nats-subject", cfg.nats_subject, "The NATS subject of live sources")->capture_default_str();

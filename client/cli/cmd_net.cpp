@@ -1,17 +1,27 @@
-// Server commands: ls, skeleton, query, stream, record, publish (a running gmr-server).
+// Server commands: ls, skeleton, query, stream, record, publish (a running
+// gmr-server), and discover (the servers on this network).
 // Built only with GMR_BUILD_NET (GMR_WITH_NET); otherwise add_net_commands adds nothing.
 #include "commands.h"
 
 #ifdef GMR_WITH_NET
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <iostream>
 #include <memory>
 #include <mutex>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -23,6 +33,7 @@
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
 #include "gmr/ops/convert.h"
+#include "gmr/stream/v1/stream.pb.h"
 
 namespace gmr::cli {
 namespace {
@@ -454,6 +465,73 @@ void run_publish(const PublishCommand& o) {
                publication.recording.empty() ? "" : ("; the server records them to " + publication.recording).c_str());
 }
 
+// ---- gmr discover
+struct DiscoverOptions {
+  std::string group = "239.255.74.2";
+  std::uint16_t port = 7501;
+  double seconds = 2.0;
+};
+
+// Listens to the discovery group for beacons (docs/protocol.md, "Discovery")
+// and prints each server heard once, in the order heard.
+void run_discover(const DiscoverOptions& o) {
+  in_addr group{};
+  if (::inet_pton(AF_INET, o.group.c_str(), &group) != 1 || (ntohl(group.s_addr) >> 28) != 0xE) {
+    throw CommandError("--group " + o.group + " is not an IPv4 multicast address (224.0.0.0/4)");
+  }
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) throw CommandError(std::string("cannot open a UDP socket: ") + std::strerror(errno));
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  const int yes = 1;
+  ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+  sockaddr_in any{};
+  any.sin_family = AF_INET;
+  any.sin_addr.s_addr = htonl(INADDR_ANY);
+  any.sin_port = htons(o.port);
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&any), sizeof any) != 0) {
+    throw CommandError("cannot listen on UDP port " + std::to_string(o.port) + ": " + std::strerror(errno));
+  }
+  ip_mreq join{};
+  join.imr_multiaddr = group;
+  join.imr_interface.s_addr = htonl(INADDR_ANY);
+  if (::setsockopt(fd, IPPROTO_IP, IP_ADD_MEMBERSHIP, &join, sizeof join) != 0) {
+    throw CommandError("cannot join " + o.group + ": " + std::strerror(errno) + " (is there a multicast route?)");
+  }
+  std::map<std::string, bool> seen;
+  std::printf("%-22s %-24s %5s %5s %5s %7s %4s  %s\n", "address", "server", "udp", "http", "proto", "motions", "live",
+              "notes");
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.seconds);
+  std::array<char, 2048> buf{};
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) break;
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) continue;
+    sockaddr_in from{};
+    socklen_t len = sizeof from;
+    const ssize_t n = ::recvfrom(fd, buf.data(), buf.size(), 0, reinterpret_cast<sockaddr*>(&from), &len);
+    if (n < 4 || std::string_view(buf.data(), 4) != "GMRB") continue;
+    gmr::stream::v1::Beacon b;
+    if (!b.ParseFromArray(buf.data() + 4, static_cast<int>(n - 4))) continue;
+    char address[INET_ADDRSTRLEN] = {};
+    ::inet_ntop(AF_INET, &from.sin_addr, address, sizeof address);
+    const std::string where = std::string(address) + ":" + std::to_string(b.tcp_port());
+    if (seen[where]) continue;
+    seen[where] = true;
+    std::string notes;
+    if (b.tls()) notes += "tls ";
+    if (!b.multicast_group().empty()) notes += "multicast " + b.multicast_group();
+    std::printf("%-22s %-24s %5u %5u %5u %7u %4u  %s\n", where.c_str(), b.server_name().substr(0, 24).c_str(),
+                b.udp_port(), b.http_port(), b.protocol_version(), b.motions(), b.live_sources(), notes.c_str());
+    std::fflush(stdout);
+  }
+  std::fprintf(stderr, "%zu server%s heard on %s:%u in %.1f s\n", seen.size(), seen.size() == 1 ? "" : "s",
+               o.group.c_str(), o.port, o.seconds);
+}
+
 }  // namespace
 
 void add_net_commands(CLI::App& app) {
@@ -498,6 +576,17 @@ void add_net_commands(CLI::App& app) {
     cmd->footer("Over UDP, a lost frame is filled with the one before it (and counted); with --loop, stop it "
                 "with --seconds or --count.");
     cmd->callback([o] { run_record(*o); });
+  }
+  {
+    auto o = std::make_shared<DiscoverOptions>();
+    CLI::App* cmd = app.add_subcommand("discover", "List the gmr-servers that announce themselves on this network");
+    cmd->add_option("--group", o->group, "The discovery multicast group (gmr-server --discovery-group)")
+        ->capture_default_str();
+    cmd->add_option("--port", o->port, "Its port (gmr-server --discovery-port)")->capture_default_str();
+    cmd->add_option("--seconds", o->seconds, "How long to listen (servers announce every second)")
+        ->capture_default_str()
+        ->check(CLI::PositiveNumber);
+    cmd->callback([o] { run_discover(*o); });
   }
   {
     auto o = std::make_shared<PublishCommand>();

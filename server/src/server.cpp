@@ -143,6 +143,7 @@ void Server::Impl::begin_stop() {
   udp.close();
   streams.stop_all();
   if (relay_timer) relay_timer->cancel();
+  if (beacon_timer) beacon_timer->cancel();
   auto open = connections;
   for (auto& [id, entry] : open) {
     if (auto c = entry.connection.lock()) c->finish();
@@ -291,6 +292,7 @@ void Server::start() {
     }
   }
   d.start_relay();
+  d.start_beacon(address);
   d.started = true;
   if (d.ready) d.accept_loop();
   d.udp.start();

@@ -57,20 +57,25 @@ struct Server::Impl {
   // Recordings of live sources being written (off the I/O thread); wait()
   // waits for them.
   std::vector<std::future<void>> recordings;
-  // Replicas: the NATS relay (cfg.nats_url), and the live sources other
-  // replicas publish, by origin and serial (replicas.cpp).
   // Multicast (cfg.multicast_group): the group's registration, and each
   // shared stream's channel to it, by stream id.
   std::shared_ptr<UdpPublisher::Registration> multicast;
   std::map<std::uint64_t, std::weak_ptr<MulticastChannel>> multicast_channels;
   std::uint64_t multicast_frames_sent = 0;
+  // Discovery beacons (cfg.discovery_group; discovery.cpp); the socket and
+  // timer are declared after io.
+  net::ip::udp::endpoint beacon_group;
+  void start_beacon(const net::ip::address& bound);
+  void send_beacon();
+  // Replicas: the NATS relay (cfg.nats_url), and the live sources other
+  // replicas publish, by origin and serial (replicas.cpp). The relay posts
+  // to io only until Server::wait() stops it.
   std::unique_ptr<NatsRelay> relay;
   struct RemoteSource {
     std::shared_ptr<LiveSource> source;  // null: ignored (its name is taken here)
     Clock::time_point heard;
   };
   std::map<std::string, RemoteSource> remote_sources;
-  std::unique_ptr<net::steady_timer> relay_timer;
   void start_relay();
   void relay_tick();
   void on_relay(relay_pb::LiveRelay m);
@@ -94,6 +99,10 @@ struct Server::Impl {
   UdpPublisher udp{io, cfg.max_udp_datagrams_in_flight};
   StreamCounters counters{.tick_lateness = &metrics.tick_lateness()};
   StreamRegistry streams{io, counters};
+  // After io: destroyed before it.
+  std::unique_ptr<net::ip::udp::socket> beacon_socket;
+  std::unique_ptr<net::steady_timer> beacon_timer;
+  std::unique_ptr<net::steady_timer> relay_timer;
   std::thread thread;
   std::uint16_t tcp_port = 0;
   bool started = false;

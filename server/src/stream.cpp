@@ -61,9 +61,11 @@ void Stream::start() {
     live_->attach(shared_from_this());
     // A subscriber joining a running source starts at its newest frame
     // (after the reply to its Subscribe, which is being written).
-    if (live_->frames() > 0) net::post(io_, [weak = weak_from_this()] {
+    if (live_->frames() > 0) {
+      net::post(io_, [weak = weak_from_this()] {
         if (auto self = weak.lock()) self->send_latest();
       });
+    }
     return;
   }
   rebase(Clock::now(), 0.0);

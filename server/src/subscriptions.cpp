@@ -150,8 +150,8 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
                                                 : std::chrono::milliseconds(r.max_staleness_ms()));
   stream->add(target, r.max_frames());
-  subs_[id] = Subscription{v->id(), stream,         target,         names, rate_mhz, v->content()->skeleton_version,
-                           settings.basis, use_multicast};
+  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version, settings.basis,
+                           use_multicast};
   server_.committed_mhz += rate_mhz;
   if (!joined) stream->start();
 
@@ -171,7 +171,7 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
     sub->set_multicast_group(group.address().to_string() + ":" + std::to_string(group.port()));
   }
   spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", connection_id_, id, v->id(),
-                stream->id(), use_udp ? "UDP" : "TCP", s.rate);
+                stream->id(), use_multicast ? "multicast" : use_udp ? "UDP" : "TCP", s.rate);
   return out;
 }
 

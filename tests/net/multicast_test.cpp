@@ -145,6 +145,45 @@ TEST(Multicast, OneSendPerFrameReachesEverySubscriberWithExactPositions) {
   EXPECT_NE(paused.error().message.find("multicast"), std::string::npos);
 }
 
+#ifdef GMR_CLI_PATH
+TEST(Multicast, GmrDiscoverListsTheServersThatSendBeacons) {
+  if (!in_namespace()) return run_in_namespace("Multicast.GmrDiscoverListsTheServersThatSendBeacons");
+  server::ServerConfig cfg;
+  cfg.discovery_group = "239.255.74.2";
+  cfg.discovery_port = 17501;
+  cfg.discovery_interval = std::chrono::milliseconds(200);
+  cfg.server_name = "stage-left";
+  cfg.multicast_group = "239.255.74.1";
+  cfg.multicast_port = 17500;
+  TestServer a(cfg);
+  cfg.server_name = "stage-right";
+  cfg.multicast_group.clear();
+  TestServer b(cfg);
+  TestServer silent;  // no --discovery-group: never listed
+  const std::string cmd = std::string(GMR_CLI_PATH) + " discover --port 17501 --seconds 1 2>&1";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string out;
+  std::array<char, 4096> buf{};
+  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.append(buf.data(), n);
+  ASSERT_EQ(::pclose(p), 0) << out;
+  std::fprintf(stderr, "%s", out.c_str());
+  for (const auto* s : {&a, &b}) {
+    const std::string where = "127.0.0.1:" + std::to_string(s->port());
+    const auto line = out.find(where);
+    ASSERT_NE(line, std::string::npos) << out;
+    const std::string row = out.substr(line, out.find('\n', line) - line);
+    EXPECT_NE(row.find(s == &a ? "stage-left" : "stage-right"), std::string::npos) << row;
+    EXPECT_NE(row.find(std::to_string(s->server.udp_port())), std::string::npos) << row;
+    if (s == &a) {
+      EXPECT_NE(row.find("multicast 239.255.74.1:17500"), std::string::npos) << row;
+    }
+  }
+  EXPECT_EQ(out.find("127.0.0.1:" + std::to_string(silent.port())), std::string::npos) << out;
+  EXPECT_NE(out.find("2 servers heard on 239.255.74.2:17501"), std::string::npos) << out;
+}
+#endif
+
 TEST(Multicast, AServerWithoutAGroupRefusesMulticast) {
   TestServer s;
   auto c = s.connect();

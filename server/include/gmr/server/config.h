@@ -74,6 +74,13 @@ struct ServerConfig {
   std::uint16_t multicast_port = 7500;
   int multicast_ttl = 1;
 
+  // Discovery (docs/protocol.md, "Discovery"): a beacon every
+  // discovery_interval to this IPv4 multicast group and port, which `gmr
+  // discover` listens to; empty: none. TTL multicast_ttl.
+  std::string discovery_group;
+  std::uint16_t discovery_port = 7501;
+  std::chrono::milliseconds discovery_interval{1000};
+
   // Replicas (docs/scaling.md): live sources are
   // shared through this NATS server (nats://host:port); empty: none. Every
   // replica on the same subject serves every replica's live sources.
