@@ -431,7 +431,17 @@ void run_publish(const PublishCommand& o) {
   LoadOptions lo;
   lo.asf = o.asf;
   Warnings warnings;
-  Motion m = take(load_motion(o.file, lo, &warnings));
+  Motion m;
+  if (lower_extension(o.file) == ".csv") {
+    // `gmr positions` output: an all-roots source, every joint a root
+    // holding its world position (and orientation, with those columns). The
+    // CSV holds no rate: --rate, or 120 Hz.
+    const PositionsTable t = take(read_positions_csv(o.file));
+    m = take(motion_from_world_poses(t.joints, std::vector<int>(t.joints.size(), kNoParent),
+                                     o.rate > 0 ? 1.0 / o.rate : 1.0 / 120.0, t.positions, t.orientations));
+  } else {
+    m = take(load_motion(o.file, lo, &warnings));
+  }
   print_warnings(warnings);
   if (m.convention != Convention::kPreRotation) m = take(to_pre_rotation(m));
   if (m.frame_count == 0) throw CommandError(o.file + ": no frames to publish");
@@ -591,11 +601,13 @@ void add_net_commands(CLI::App& app) {
   {
     auto o = std::make_shared<PublishCommand>();
     CLI::App* cmd = app.add_subcommand(
-        "publish", "Play a motion file (BVH, ASF/AMC, .gmr, .gmrb) to a gmr-server as a live source");
+        "publish",
+        "Play a motion file (BVH, ASF/AMC, .gmr, .gmrb, or the CSV of gmr positions) to a gmr-server as a live source");
     cmd->add_option("file", o->file, "Motion file")->required()->check(CLI::ExistingFile);
     cmd->add_option("--name", o->name, "The live motion's name on the server (default: the file's stem)");
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
-    cmd->add_option("--rate", o->rate, "Frames per second (default: the file's own)")->check(CLI::PositiveNumber);
+    cmd->add_option("--rate", o->rate, "Frames per second (default: the file's own; 120 for a CSV)")
+        ->check(CLI::PositiveNumber);
     cmd->add_flag("--loop", o->loop, "Start over at the end, until stopped (or --count)");
     cmd->add_option("--count", o->count, "Publish this many frames, then end");
     cmd->add_flag("--record", o->record, "Ask the server to record the source (into its --record-dir) as .gmrb");

@@ -11,9 +11,11 @@
 #include <cstdio>
 #include <sys/wait.h>
 
+#include <mutex>
 #include <thread>
 
 #include "gmr/io/motion_file.h"
+#include "gmr/io/positions_csv.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/ops/convert.h"
 #include "net_test_util.h"
@@ -263,6 +265,77 @@ TEST(CliNet, PublishPlaysAFileLiveAndRecordCapturesItsPositions) {
   double worst = 0;
   for (std::size_t f = 0; f < 60; ++f) worst = std::max(worst, error_at(f, k + f));
   EXPECT_LT(worst, tolerance) << "recorded from frame " << k;
+}
+
+TEST(CliNet, PublishPlaysThePositionsCsvAsAnAllRootsSource) {
+  GMR_REQUIRE_DATA();
+  const std::string token = "publish-token-0123456789abcdef";
+  server::ServerConfig cfg;
+  auto auth = server::Credentials::parse("publish " + token + "\n", "auth");
+  ASSERT_TRUE(auth.ok());
+  cfg.credentials = std::make_shared<const server::Credentials>(std::move(auth).value());
+  cfg.anonymous = server::Role::kControl;
+  TestServer s(cfg);
+  TempDir dir;
+  const std::string port = " --port " + std::to_string(s.port());
+  const std::string csv = (dir.path / "p.csv").string();
+  const CommandRun p = gmr("positions '" + cmu_file().string() + "' --frames 0:40 > '" + csv + "'");
+  ASSERT_EQ(p.status, 0) << p.out;
+  const auto table = read_positions_csv(csv);
+  ASSERT_TRUE(table.ok()) << table.error().to_string();
+  ASSERT_EQ(table->frames, 40u);
+
+  CommandRun published;
+  std::thread publisher([&] {
+    published = gmr("publish '" + csv + "' --name csv/live --rate 100 --loop --count 300 --token " + token + port);
+  });
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  bool listed = false;
+  for (int i = 0; i < 500 && !listed; ++i) {
+    const auto motions = c->list_motions();
+    ASSERT_TRUE(motions.ok());
+    for (const auto& m : *motions) listed = listed || (m.name == "csv/live" && m.frame_count > 0);
+    if (!listed) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(listed);
+  auto v = c->create_view("csv/live");
+  ASSERT_TRUE(v.ok());
+  EXPECT_EQ(v->skeleton.roots().size(), table->joints.size());  // every joint a root
+  struct Got {
+    std::mutex mutex;
+    std::size_t frames = 0, compared = 0;
+    double worst = 0;
+  } got;
+  Latch<bool> ended;
+  client::SubscribeOptions so;
+  so.float64 = true;
+  so.max_frames = 30;
+  const Skeleton sk = v->skeleton;
+  auto sub = c->subscribe(
+      v->id, so,
+      [&](const client::ReceivedFrame& f) {
+        std::lock_guard lock(got.mutex);
+        ++got.frames;
+        const std::size_t row = (f.frame_index % 40) * table->joints.size();
+        for (std::size_t j = 0; j < f.positions.size(); ++j) {
+          const auto k = std::find(table->joints.begin(), table->joints.end(), sk.joint(static_cast<int>(j)).name);
+          if (k == table->joints.end()) continue;
+          const auto& want = table->positions[row + static_cast<std::size_t>(k - table->joints.begin())];
+          got.worst = std::max(got.worst, (f.positions[j] - want).norm());
+          ++got.compared;
+        }
+      },
+      [&](const client::SubscriptionEnd&) { ended.set(true); });
+  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  EXPECT_TRUE(ended.wait().has_value());
+  publisher.join();
+  ASSERT_EQ(published.status, 0) << published.out;
+  EXPECT_NE(published.out.find("38 joints, 114 channels, 100.00 Hz"), std::string::npos) << published.out;
+  std::lock_guard lock(got.mutex);
+  EXPECT_GE(got.frames, 25u);
+  EXPECT_EQ(got.compared, got.frames * table->joints.size());
+  EXPECT_LT(got.worst, 1e-9 * 100);  // the CSV's positions, to round-off of a few metres
 }
 
 TEST(CliNet, TlsAndTokensGiveTheSameRows) {

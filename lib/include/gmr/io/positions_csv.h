@@ -9,11 +9,13 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <filesystem>
 #include <ostream>
 #include <span>
 #include <string>
 #include <string_view>
 
+#include "gmr/core/error.h"
 #include "gmr/skeleton/skeleton.h"
 
 namespace gmr {
@@ -38,5 +40,21 @@ std::string csv_field(std::string_view name);
 // frame is numbered `first_frame`.
 void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
                               std::size_t first_frame);
+
+// What a positions CSV (or a poses CSV, with quaternion or matrix columns)
+// holds, read back: `gmr publish x.csv` plays it as an all-roots source.
+struct PositionsTable {
+  std::vector<std::string> joints;  // the first frame's rows, in order
+  std::size_t first_frame = 0;      // the first row's frame number
+  std::size_t frames = 0;
+  std::vector<Eigen::Vector3d> positions;        // frame-major, joints.size() per frame
+  std::vector<Eigen::Quaterniond> orientations;  // the same, when the file has orientation columns; else empty
+};
+// Parses one of the three headers above and its rows. Every frame has the
+// first frame's joints in the same order, frames are numbered one after the
+// other, numbers are finite and orientations are rotations; anything else is
+// an error naming `source`, the line and the column.
+Result<PositionsTable> parse_positions_csv(std::string_view text, const std::string& source);
+Result<PositionsTable> read_positions_csv(const std::filesystem::path& path);
 
 }  // namespace gmr
