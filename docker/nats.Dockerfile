@@ -1,4 +1,4 @@
-# NATS for gmr-server replicas (docs/scaling.md), from Debian's package:
+# NATS for gmr-server replicas (docs/deployment.md), from Debian's package:
 #   docker build -f docker/nats.Dockerfile -t gmr-nats docker
 FROM debian:12-slim
 RUN apt-get update -qq && apt-get install -y -qq --no-install-recommends nats-server \

@@ -42,12 +42,19 @@ if command -v node >/dev/null && command -v npm >/dev/null; then
   missing=("${kept[@]}")
 fi
 
-# The npm packages of the JS-side tests, pinned by tests/interop/package-lock.json.
+# The npm packages of the JS-side tests, pinned by tests/interop/package-lock.json
+# and tests/deploy/package-lock.json (the Kubernetes manifests' schema check).
 npm_packages() {
-  local dir
-  dir="$(cd "$(dirname "$0")/.." && pwd)/tests/interop"
+  local root dir
+  root="$(cd "$(dirname "$0")/.." && pwd)"
+  dir="$root/tests/interop"
   if [ ! -f "$dir/node_modules/three/package.json" ]; then
     echo "install-deps: npm ci in tests/interop"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+  fi
+  dir="$root/tests/deploy"
+  if [ ! -f "$dir/node_modules/kubernetes-models/package.json" ] || [ ! -f "$dir/node_modules/yaml/package.json" ]; then
+    echo "install-deps: npm ci in tests/deploy"
     (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
   fi
 }

@@ -1,5 +1,5 @@
 // Several gmr-server replicas share their live sources through NATS
-// (relay.h; docs/scaling.md). A source published on
+// (relay.h; docs/deployment.md). A source published on
 // one replica is announced on the subject, its frames follow, and every
 // other replica serves it as a live source of its own list, to its own
 // clients, through their own views. Announces repeat every second: a

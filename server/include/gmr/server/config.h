@@ -81,7 +81,7 @@ struct ServerConfig {
   std::uint16_t discovery_port = 7501;
   std::chrono::milliseconds discovery_interval{1000};
 
-  // Replicas (docs/scaling.md): live sources are
+  // Replicas (docs/deployment.md): live sources are
   // shared through this NATS server (nats://host:port); empty: none. Every
   // replica on the same subject serves every replica's live sources.
   std::string nats_url;
