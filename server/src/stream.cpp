@@ -278,6 +278,32 @@ std::uint64_t Stream::congested_ticks() const {
   return n;
 }
 
+bool Stream::mark_ready(const std::vector<Entry>& targets) {
+  ready_.assign(targets.size(), 0);
+  bool anyone = false;
+  for (std::size_t i = 0; i < targets.size(); ++i) {
+    ready_[i] = targets[i].target->alive() && !targets[i].target->congested();
+    anyone = anyone || ready_[i];
+  }
+  return anyone;
+}
+
+void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<const std::string>& body) {
+  // The fan-out starts one target further each tick: waiting behind the
+  // others' sends is shared by all of a shared stream's subscribers rather
+  // than always borne by the last ones.
+  const std::size_t n = targets.size();
+  const std::size_t first = fan_out_start_++ % n;
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t i = first + k < n ? first + k : first + k - n;
+    if (ready_[i]) {
+      targets[i].target->deliver(id_, body);
+    } else if (targets[i].target->alive()) {
+      targets[i].target->skipped(1);
+    }
+  }
+}
+
 void Stream::on_tick() {
   if (paused_ || targets_.empty()) return;
   if (counters_.tick_lateness != nullptr) {
@@ -302,30 +328,10 @@ void Stream::on_tick() {
     if (!(sched.skip_repeats && static_cast<std::int64_t>(frame) == last_frame_)) {
       // Copy the targets first: a target may end a subscription re-entrantly.
       const auto targets = targets_;
-      auto& ready = ready_;
-      ready.assign(targets.size(), 0);
-      bool anyone = false;
-      for (std::size_t i = 0; i < targets.size(); ++i) {
-        ready[i] = targets[i].target->alive() && !targets[i].target->congested();
-        anyone = anyone || ready[i];
-      }
       std::uint64_t ticks = 1;  // this one, and when nobody takes frames the skipped ones after it
-      if (anyone) {
+      if (mark_ready(targets)) {
         last_frame_ = static_cast<std::int64_t>(frame);
-        const auto body = encode(frame, frame);
-        // The fan-out starts one target further each tick: waiting behind
-        // the others' sends is shared by all of a shared stream's
-        // subscribers rather than always borne by the last ones.
-        const std::size_t n = targets.size();
-        const std::size_t first = fan_out_start_++ % n;
-        for (std::size_t k = 0; k < n; ++k) {
-          const std::size_t i = first + k < n ? first + k : first + k - n;
-          if (ready[i]) {
-            targets[i].target->deliver(id_, body);
-          } else if (targets[i].target->alive()) {
-            targets[i].target->skipped(1);
-          }
-        }
+        fan_out(targets, encode(frame, frame));
       } else {
         ticks += congested_ticks();
         sequence_ += ticks;
@@ -385,24 +391,8 @@ void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_
   if (paused_ || targets_.empty()) return;
   // Copy the targets first: a target may end a subscription re-entrantly.
   const auto targets = targets_;
-  ready_.assign(targets.size(), 0);
-  bool anyone = false;
-  for (std::size_t i = 0; i < targets.size(); ++i) {
-    ready_[i] = targets[i].target->alive() && !targets[i].target->congested();
-    anyone = anyone || ready_[i];
-  }
-  if (anyone) {
-    const auto body = encode(0, index);
-    const std::size_t n = targets.size();
-    const std::size_t first = fan_out_start_++ % n;
-    for (std::size_t k = 0; k < n; ++k) {
-      const std::size_t i = first + k < n ? first + k : first + k - n;
-      if (ready_[i]) {
-        targets[i].target->deliver(id_, body);
-      } else if (targets[i].target->alive()) {
-        targets[i].target->skipped(1);
-      }
-    }
+  if (mark_ready(targets)) {
+    fan_out(targets, encode(0, index));
   } else {
     ++sequence_;
     for (const auto& e : targets) {

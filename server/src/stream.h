@@ -145,6 +145,11 @@ class Stream : public std::enable_shared_from_this<Stream> {
   std::shared_ptr<const std::string> encode(std::uint64_t frame, std::uint64_t index);
   // Sends the newest frame of the live source (a subscriber joining late).
   void send_latest();
+  // ready_[i]: target i is alive and takes a frame now; true when any does.
+  bool mark_ready(const std::vector<Entry>& targets);
+  // `body` to the ready targets (the others that are alive count a skip),
+  // starting one further each time.
+  void fan_out(const std::vector<Entry>& targets, const std::shared_ptr<const std::string>& body);
 
   net::io_context& io_;
   std::uint64_t id_;

@@ -195,15 +195,35 @@ TEST(CliNet, RecordWritesTheViewsPositionsAndOrientations) {
   EXPECT_FALSE(std::filesystem::exists(dir.path / "x.gmr"));
 }
 
-TEST(CliNet, PublishPlaysAFileLiveAndRecordCapturesItsPositions) {
-  GMR_REQUIRE_DATA();
-  const std::string token = "publish-token-0123456789abcdef";
+const std::string kPublishToken = "publish-token-0123456789abcdef";
+
+// A server on which kPublishToken may publish; anonymous clients control.
+server::ServerConfig publish_config() {
   server::ServerConfig cfg;
-  auto auth = server::Credentials::parse("publish " + token + "\n", "auth");
-  ASSERT_TRUE(auth.ok());
+  auto auth = server::Credentials::parse("publish " + kPublishToken + "\n", "auth");
+  EXPECT_TRUE(auth.ok());
   cfg.credentials = std::make_shared<const server::Credentials>(std::move(auth).value());
   cfg.anonymous = server::Role::kControl;
-  TestServer s(cfg);
+  return cfg;
+}
+
+// Waits (5 s at most) until `motion` is listed with a frame published.
+bool wait_for_frames(client::Client& c, const std::string& motion) {
+  for (int i = 0; i < 500; ++i) {
+    const auto motions = c.list_motions();
+    if (!motions.ok()) return false;
+    for (const auto& m : *motions) {
+      if (m.name == motion && m.frame_count > 0) return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return false;
+}
+
+TEST(CliNet, PublishPlaysAFileLiveAndRecordCapturesItsPositions) {
+  GMR_REQUIRE_DATA();
+  const std::string token = kPublishToken;
+  TestServer s(publish_config());
   TempDir dir;
   const std::string port = " --port " + std::to_string(s.port());
   const std::string file = cmu_file().string();
@@ -219,14 +239,7 @@ TEST(CliNet, PublishPlaysAFileLiveAndRecordCapturesItsPositions) {
   });
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
-  bool listed = false;
-  for (int i = 0; i < 500 && !listed; ++i) {
-    const auto motions = c->list_motions();
-    ASSERT_TRUE(motions.ok());
-    for (const auto& m : *motions) listed = listed || (m.name == "take/live" && m.frame_count > 0);
-    if (!listed) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  ASSERT_TRUE(listed) << "the live source never appeared";
+  ASSERT_TRUE(wait_for_frames(*c, "take/live")) << "the live source never appeared";
   const CommandRun ls = gmr("ls" + port);
   EXPECT_NE(ls.out.find("take/live"), std::string::npos);
   EXPECT_NE(ls.out.find("live\n"), std::string::npos) << ls.out;
@@ -269,13 +282,8 @@ TEST(CliNet, PublishPlaysAFileLiveAndRecordCapturesItsPositions) {
 
 TEST(CliNet, PublishPlaysThePositionsCsvAsAnAllRootsSource) {
   GMR_REQUIRE_DATA();
-  const std::string token = "publish-token-0123456789abcdef";
-  server::ServerConfig cfg;
-  auto auth = server::Credentials::parse("publish " + token + "\n", "auth");
-  ASSERT_TRUE(auth.ok());
-  cfg.credentials = std::make_shared<const server::Credentials>(std::move(auth).value());
-  cfg.anonymous = server::Role::kControl;
-  TestServer s(cfg);
+  const std::string token = kPublishToken;
+  TestServer s(publish_config());
   TempDir dir;
   const std::string port = " --port " + std::to_string(s.port());
   const std::string csv = (dir.path / "p.csv").string();
@@ -291,14 +299,7 @@ TEST(CliNet, PublishPlaysThePositionsCsvAsAnAllRootsSource) {
   });
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
-  bool listed = false;
-  for (int i = 0; i < 500 && !listed; ++i) {
-    const auto motions = c->list_motions();
-    ASSERT_TRUE(motions.ok());
-    for (const auto& m : *motions) listed = listed || (m.name == "csv/live" && m.frame_count > 0);
-    if (!listed) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  ASSERT_TRUE(listed);
+  ASSERT_TRUE(wait_for_frames(*c, "csv/live")) << "the live source never appeared";
   auto v = c->create_view("csv/live");
   ASSERT_TRUE(v.ok());
   EXPECT_EQ(v->skeleton.roots().size(), table->joints.size());  // every joint a root

@@ -162,6 +162,20 @@ void publish_frames(Client& c, std::uint32_t id, const Motion& m, std::size_t be
 
 std::chrono::microseconds pace() { return std::chrono::microseconds(kSlowBuild ? 8000 : 2500); }
 
+// A server with tokens, a publishing client and a subscribing ('control') one.
+struct LiveRig {
+  TestServer server{live_config()};
+  std::unique_ptr<Client> pub = connect_as(server, kPublishToken);
+  std::unique_ptr<Client> sub = connect_as(server, kControlToken);
+};
+
+client::PublishOptions live_options(const Motion& m, const std::string& name) {
+  client::PublishOptions po;
+  po.name = name;
+  po.frame_time = m.frame_time;
+  return po;
+}
+
 TEST(LivePublish, SubscribersOfEveryViewGetThePositionsOfThePublishedFrames) {
   const auto source = source_motion();
   ASSERT_NE(source, nullptr);
@@ -289,13 +303,11 @@ TEST(LivePublish, AViewEditedMidStreamFollowsOnTheNextFrame) {
   ASSERT_NE(source, nullptr);
   const std::size_t n = std::min<std::size_t>(source->frame_count, 60);
   const Reference world = reference(*source, {}, n);
-  TestServer s(live_config());
-  auto pub = connect_as(s, kPublishToken);
-  auto sub = connect_as(s, kControlToken);
-  ASSERT_TRUE(pub && sub);
-  client::PublishOptions po;
-  po.name = "edited";
-  po.frame_time = source->frame_time;
+  LiveRig rig;
+  ASSERT_TRUE(rig.pub && rig.sub);
+  auto& pub = rig.pub;
+  auto& sub = rig.sub;
+  const client::PublishOptions po = live_options(*source, "edited");
   const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
   auto v = sub->create_view("edited").value();
   Watch w;
@@ -324,13 +336,11 @@ TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {
   const auto source = source_motion();
   ASSERT_NE(source, nullptr);
   const Reference world = reference(*source, {}, 20);
-  TestServer s(live_config());
-  auto pub = connect_as(s, kPublishToken);
-  auto sub = connect_as(s, kControlToken);
-  ASSERT_TRUE(pub && sub);
-  client::PublishOptions po;
-  po.name = "late";
-  po.frame_time = source->frame_time;
+  LiveRig rig;
+  ASSERT_TRUE(rig.pub && rig.sub);
+  auto& pub = rig.pub;
+  auto& sub = rig.sub;
+  const client::PublishOptions po = live_options(*source, "late");
   const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
   publish_frames(*pub, id, *source, 0, 10, pace());
   // The server has all ten once it answers a request from the publisher
@@ -366,13 +376,11 @@ TEST(LivePublish, ASourceThatDisconnectsEndsItsSubscribersCleanly) {
   const auto source = source_motion();
   ASSERT_NE(source, nullptr);
   const Reference world = reference(*source, {}, 30);
-  TestServer s(live_config());
-  auto pub = connect_as(s, kPublishToken);
-  auto sub = connect_as(s, kControlToken);
-  ASSERT_TRUE(pub && sub);
-  client::PublishOptions po;
-  po.name = "dropped";
-  po.frame_time = source->frame_time;
+  LiveRig rig;
+  ASSERT_TRUE(rig.pub && rig.sub);
+  auto& pub = rig.pub;
+  auto& sub = rig.sub;
+  const client::PublishOptions po = live_options(*source, "dropped");
   const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
   auto v = sub->create_view("dropped").value();
   Watch tcp, udp;
@@ -404,7 +412,7 @@ TEST(LivePublish, ASourceThatDisconnectsEndsItsSubscribersCleanly) {
   ASSERT_FALSE(resub.ok());
   EXPECT_NE(resub.error().message.find("has ended"), std::string::npos) << resub.error().message;
   // The name is free for a new publication.
-  auto pub2 = connect_as(s, kPublishToken);
+  auto pub2 = connect_as(rig.server, kPublishToken);
   ASSERT_TRUE(pub2);
   EXPECT_TRUE(pub2->publish(source->skeleton, po).ok());
 }
