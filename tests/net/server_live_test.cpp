@@ -779,7 +779,11 @@ TEST(LiveReplicas, ASourcePublishedOnOneReplicaStreamsFromAnotherAndEndsWhenItsR
     }
     std::lock_guard lock(w->mutex);
     EXPECT_EQ(w->bad, 0u) << w->first_problem;
-    EXPECT_GE(w->indices.size(), n * 9 / 10);
+    // A slow (sanitizer) build may drop frames for a subscriber it cannot
+    // keep up with; those are counted below, at the end.
+    if (!kSlowBuild) {
+      EXPECT_GE(w->indices.size(), n * 9 / 10);
+    }
     ASSERT_FALSE(w->indices.empty());
     EXPECT_EQ(w->indices.back(), n - 1);
     std::fprintf(stderr, "replica B: %zu of %zu frames, %zu positions compared, worst %.3g\n", w->indices.size(), n,
@@ -792,6 +796,10 @@ TEST(LiveReplicas, ASourcePublishedOnOneReplicaStreamsFromAnotherAndEndsWhenItsR
     const auto end = w->end.wait(std::chrono::seconds(10));
     ASSERT_TRUE(end.has_value()) << "B's subscriber was not ended";
     EXPECT_EQ(end->reason, "the replica publishing the live source went away");
+    // Every relayed frame was delivered, or counted as dropped (TCP, in order).
+    EXPECT_EQ(end->frames_sent, n);
+    std::lock_guard lock(w->mutex);
+    EXPECT_EQ(w->indices.size() + end->frames_dropped, n);
   }
   EXPECT_TRUE(wait_listed(*sub, "replicated", false));
   EXPECT_TRUE(sub->list_motions().ok());
