@@ -183,9 +183,9 @@ GMR_C_API gmr_status gmr_publish(gmr_client* client, const char* name, const gmr
                                  size_t joint_count, double frame_time, double metres_per_unit,
                                  uint32_t* publication_id);
 /* Queues one frame (`count` values: the skeleton's channel count) without
- * waiting for the server. The server answers only a frame it refuses; such
- * an answer to an earlier frame is returned by the next call (the frame
- * given to that call is still sent). */
+ * waiting for the server. The server answers only a frame it refuses; that
+ * answer is returned by the first call after it arrived (which may be the
+ * refused frame's own call; the frame given to a later call is still sent). */
 GMR_C_API gmr_status gmr_publish_frame(gmr_client* client, uint32_t publication_id, const double* values, size_t count);
 /* Ends the source: its subscribers are told. */
 GMR_C_API gmr_status gmr_unpublish(gmr_client* client, uint32_t publication_id);
