@@ -1,6 +1,7 @@
 #include "gmr/client/client.h"
 
 #include <algorithm>
+#include <charconv>
 #include <atomic>
 #include <boost/asio.hpp>
 #include <condition_variable>
@@ -264,17 +265,24 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   }
   // Joins `group` (address:port) on the interface of the TCP connection; on the strand.
   Status join_multicast(const std::string& group) {
+    // From the server: checked, never trusted to parse (a throw here would
+    // leave the strand).
     const auto colon = group.rfind(':');
     boost::system::error_code ec;
     const auto address = net::ip::make_address_v4(group.substr(0, colon == std::string::npos ? 0 : colon), ec);
-    if (ec || colon == std::string::npos) return make_error("the server named a bad multicast group '" + group + "'");
-    const auto port = static_cast<std::uint16_t>(std::stoul(group.substr(colon + 1)));
+    unsigned port = 0;
+    const char* digits = group.data() + (colon == std::string::npos ? group.size() : colon + 1);
+    const auto parsed = std::from_chars(digits, group.data() + group.size(), port);
+    if (ec || colon == std::string::npos || !address.is_multicast() || parsed.ec != std::errc() ||
+        parsed.ptr != group.data() + group.size() || port == 0 || port > 65535) {
+      return make_error("the server named a bad multicast group '" + group.substr(0, 64) + "'");
+    }
     if (multicast_socket) return Ok{};  // one group per server
     const auto local = socket.tcp().local_endpoint(ec).address();
     udp::socket s(strand);
     s.open(udp::v4(), ec);
     if (!ec) s.set_option(net::socket_base::reuse_address(true), ec);
-    if (!ec) s.bind(udp::endpoint(net::ip::address_v4::any(), port), ec);
+    if (!ec) s.bind(udp::endpoint(net::ip::address_v4::any(), static_cast<std::uint16_t>(port)), ec);
     if (!ec) s.set_option(net::socket_base::receive_buffer_size(4 << 20), ec);
     if (!ec) {
       s.set_option(local.is_v4() ? net::ip::multicast::join_group(address, local.to_v4())
