@@ -66,8 +66,16 @@ void Connection::account() {
   if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + body_.size());
 }
 
+void Connection::hold_reading(bool hold) {
+  reads_held_ = hold;
+  if (!hold && read_paused_ && may_read()) {
+    read_paused_ = false;
+    read_prefix();
+  }
+}
+
 bool Connection::may_read() const {
-  return reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
+  return !reads_held_ && reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
          (budget_ == nullptr || budget_->allows_reading(accounted_));
 }
 

@@ -135,6 +135,7 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   void send_frames_now(std::uint32_t key) override;
   void close_after_reply() override;
   void established() override { established_ = true; }
+  void hold_reading(bool hold) override;
   const std::string& peer_address() const { return peer_address_; }
   // Observes, per write that carried frames, how long its oldest frame
   // waited from push_frame to the write's completion (seconds).
@@ -170,6 +171,7 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   bool stopped_ = false;
   bool close_after_flush_ = false;
   bool read_paused_ = false;
+  bool reads_held_ = false;  // hold_reading
   BufferBudget* budget_;
   std::uint64_t accounted_ = 0;  // what this connection added to budget_->held
   std::array<std::uint8_t, 4> prefix_{};

@@ -67,6 +67,9 @@ class Outbox {
   virtual void send_frames_now(std::uint32_t key) = 0;
   // The client completed its handshake (the handshake deadline no longer applies).
   virtual void established() {}
+  // While held, no more requests are read (those sent wait in the kernel);
+  // releasing resumes reading. For a request answered from another thread.
+  virtual void hold_reading(bool hold) { (void)hold; }
   // Closes once the next reply (queued after this call) is out.
   virtual void close_after_reply() = 0;
   // Ends the connection now (idempotent), or gracefully: waiting frames are

@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <new>
+#include <utility>
 
 #include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
@@ -95,29 +96,35 @@ void RequestHandler::on_message(const std::string& body) {
   const Clock::time_point began = Clock::now();
   Reply reply;
   try {
-    reply = dispatch(req);
+    reply = dispatch(req, began);
   } catch (const std::bad_alloc&) {
     // The budgets (docs/protocol.md) make this rare; the server goes on.
     spdlog::error("conn {}: out of memory answering request {}", connection_id_, req.request_id());
     reply = Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "the server ran out of memory answering this request"};
   }
+  // A view edit computed off the I/O thread answers when it is done.
+  if (std::exchange(edit_deferred_, false)) return;
+  answer(req.request_id(), request_kind(req), began, std::move(reply));
+}
+
+void RequestHandler::answer(std::uint64_t request_id, std::string_view kind, Clock::time_point began, Reply reply) {
   if (auto* refused = std::get_if<Refusal>(&reply)) {
     if (std::uint64_t suppressed = 0; spdlog::should_log(spdlog::level::debug) && log_limit_.allow(suppressed)) {
-      spdlog::debug("conn {}: request {} refused: {}{}", connection_id_, req.request_id(),
+      spdlog::debug("conn {}: request {} refused: {}{}", connection_id_, request_id,
                     printable(refused->message, 200),
                     suppressed ? " (" + std::to_string(suppressed) + " more lines suppressed)" : std::string());
     }
-    server_.metrics.request(request_kind(req), Clock::now() - began, refused->code);
-    send(error_message(req.request_id(), refused->code, std::move(refused->message)));
+    server_.metrics.request(kind, Clock::now() - began, refused->code);
+    send(error_message(request_id, refused->code, std::move(refused->message)));
     return;
   }
   auto& m = std::get<pb::ServerMessage>(reply);
   // A request that is answered only when refused (PublishFrame) gives an empty message.
   if (m.body_case() != pb::ServerMessage::BODY_NOT_SET) {
-    m.set_request_id(req.request_id());
+    m.set_request_id(request_id);
     send(m);
   }
-  server_.metrics.request(request_kind(req), Clock::now() - began, pb::ERROR_CODE_UNSPECIFIED);
+  server_.metrics.request(kind, Clock::now() - began, pb::ERROR_CODE_UNSPECIFIED);
 }
 
 std::pair<std::size_t, std::size_t> RequestHandler::subscription_count() const {
@@ -126,7 +133,7 @@ std::pair<std::size_t, std::size_t> RequestHandler::subscription_count() const {
   return {subs_.size() - udp, udp};
 }
 
-Reply RequestHandler::dispatch(const pb::ClientMessage& req) {
+Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point began) {
   using C = pb::ClientMessage;
   if (req.body_case() == C::kHello) return hello(req.hello());
   if (req.body_case() == C::BODY_NOT_SET) {
@@ -144,32 +151,30 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req) {
     case C::kGetSkeleton: return get_skeleton(req.get_skeleton());
     case C::kCreateView: return create_view(req.create_view());
     case C::kCloseView: return close_view(req.close_view());
-    case C::kShiftRoot:
-      return edit_view(req.shift_root().view_id(), [&](View& v) { return v.shift_root(req.shift_root().joint()); });
-    case C::kSplit:
-      return edit_view(req.split().view_id(), [&](View& v) { return v.split(req.split().joint()); });
+    case C::kShiftRoot: {
+      const auto& r = req.shift_root();
+      return edit_view(req, began, r.view_id(), [&r](const View& v) { return v.edit_shift_root(r.joint()); });
+    }
+    case C::kSplit: {
+      const auto& r = req.split();
+      return edit_view(req, began, r.view_id(), [&r](const View& v) { return v.edit_split(r.joint()); });
+    }
     case C::kJoin: {
-      double spread = 0.0;
-      Reply r = edit_view(req.join().view_id(), [&](View& v) { return v.join(req.join().root(), &spread); });
-      if (auto* m = std::get_if<pb::ServerMessage>(&r)) m->mutable_view()->set_join_offset_spread(spread);
-      return r;
+      const auto& r = req.join();
+      return edit_view(req, began, r.view_id(), [&r](const View& v) { return v.edit_join(r.root()); },
+                       [](const EditReport& e, pb::ViewInfo& info) { info.set_join_offset_spread(e.offset_spread); });
     }
     case C::kSetRoots: {
       const std::vector<std::string> roots(req.set_roots().roots().begin(), req.set_roots().roots().end());
       if (roots.empty()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, "set roots: give at least one root"};
-      return edit_view(req.set_roots().view_id(), [&](View& v) { return v.set_roots(roots); });
+      return edit_view(req, began, req.set_roots().view_id(), [&roots](const View& v) { return v.edit_set_roots(roots); });
     }
-    case C::kStripDummies: {
-      std::vector<std::string> removed;
-      Reply r = edit_view(req.strip_dummies().view_id(), [&](View& v) { return v.strip_dummies(&removed); });
-      if (auto* m = std::get_if<pb::ServerMessage>(&r)) {
-        for (auto& name : removed) m->mutable_view()->add_removed(name);
-      }
-      return r;
-    }
-    case C::kSetCoordinates:
-      return edit_view(req.set_coordinates().view_id(),
-                       [&](View& v) { return v.set_relative_to(req.set_coordinates().relative_to()); });
+    case C::kStripDummies:
+      return edit_view(req, began, req.strip_dummies().view_id(), [](const View& v) { return v.edit_strip_dummies(); },
+                       [](const EditReport& e, pb::ViewInfo& info) {
+                         for (const auto& name : e.removed) info.add_removed(name);
+                       });
+    case C::kSetCoordinates: return set_coordinates(req.set_coordinates());
     case C::kQueryFrames: return query(req.query_frames());
     case C::kSubscribe: return subscribe(req.subscribe());
     case C::kUnsubscribe: return unsubscribe(req.unsubscribe());
@@ -330,16 +335,61 @@ Reply RequestHandler::close_view(const pb::CloseView& r) {
 
 // An edit that fails leaves the view as it was: NOT_FOUND for an unknown
 // joint, FAILED_PRECONDITION for anything else the view refuses.
-template <class Edit>
-Reply RequestHandler::edit_view(std::uint32_t view_id, Edit&& edit) {
+namespace {
+
+Refusal refusal_of(const Error& e) {
+  switch (e.kind) {
+    case ErrorKind::kNotFound: return Refusal{pb::ERROR_CODE_NOT_FOUND, e.to_string()};
+    case ErrorKind::kResourceExhausted: return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, e.to_string()};
+    default: return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, e.to_string()};
+  }
+}
+
+}  // namespace
+
+Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point began, std::uint32_t view_id,
+                                const std::function<Result<ViewEdit>(const View&)>& make, EditDecoration decorate) {
   View* v = find_view(view_id);
   if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(view_id)};
+  auto edit = make(*v);
+  if (!edit.ok()) return refusal_of(edit.error());
+  // A short motion's edit costs less than a trip to the edit thread.
+  if (edit->values() <= server_.cfg.edit_inline_values) return commit_edit(view_id, *edit, edit->run(), decorate);
+  // A long one is computed on the edit thread; meanwhile this connection's
+  // requests are not read (they keep their order, and wait in the kernel),
+  // and everyone's frames go on.
+  edit_deferred_ = true;
+  if (auto c = connection_.lock()) c->hold_reading(true);
+  net::post(server_.edit_pool, [self = weak_from_this(), &io = server_.io, edit = std::move(edit).value(), view_id,
+                                decorate, request_id = req.request_id(), kind = request_kind(req), began]() mutable {
+    auto next = [&]() -> Result<std::shared_ptr<const ViewContent>> {
+      try {
+        return edit.run();
+      } catch (const std::bad_alloc&) {
+        return make_error(ErrorKind::kResourceExhausted, "the server ran out of memory computing the edit");
+      }
+    }();
+    net::post(io, [self = std::move(self), edit = std::move(edit), next = std::move(next), view_id, decorate,
+                   request_id, kind, began]() mutable {
+      auto handler = self.lock();
+      if (!handler) return;
+      if (handler->stopped_) return;
+      Reply reply = handler->commit_edit(view_id, edit, std::move(next), decorate);
+      handler->answer(request_id, kind, began, std::move(reply));
+      if (auto c = handler->connection_.lock()) c->hold_reading(false);
+    });
+  });
+  return pb::ServerMessage{};
+}
+
+Reply RequestHandler::commit_edit(std::uint32_t view_id, const ViewEdit& edit,
+                                  Result<std::shared_ptr<const ViewContent>> next, EditDecoration decorate) {
+  View* v = find_view(view_id);
+  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(view_id)};
+  if (!next.ok()) return refusal_of(next.error());
   const auto before = v->content();
   const std::uint64_t old_bytes = owned_bytes(*v);
-  if (Status s = edit(*v); !s.ok()) {
-    const bool unknown = s.error().kind == ErrorKind::kNotFound;
-    return Refusal{unknown ? pb::ERROR_CODE_NOT_FOUND : pb::ERROR_CODE_FAILED_PRECONDITION, s.error().to_string()};
-  }
+  if (Status s = v->commit(edit, std::move(next).value()); !s.ok()) return refusal_of(s.error());
   // The view budget: an edit whose copy would pass it is undone and refused.
   const std::uint64_t new_bytes = owned_bytes(*v);
   const ServerConfig& cfg = server_.cfg;
@@ -358,6 +408,17 @@ Reply RequestHandler::edit_view(std::uint32_t view_id, Edit&& edit) {
   view_bytes_ = mine;
   server_.view_bytes = all;
   view_changed(*v);
+  pb::ServerMessage out;
+  *out.mutable_view() = view_info(*v);
+  if (decorate != nullptr) decorate(edit.report(), *out.mutable_view());
+  return out;
+}
+
+Reply RequestHandler::set_coordinates(const pb::SetCoordinates& r) {
+  View* v = find_view(r.view_id());
+  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+  if (Status s = v->set_relative_to(r.relative_to()); !s.ok()) return refusal_of(s.error());
+  view_changed(*v);  // the same motion: the same bytes
   pb::ServerMessage out;
   *out.mutable_view() = view_info(*v);
   return out;

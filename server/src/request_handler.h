@@ -8,6 +8,7 @@
 // UDP endpoint through the UdpPublisher.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -63,7 +64,9 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   };
 
   void send(const pb::ServerMessage& m);
-  Reply dispatch(const pb::ClientMessage& m);
+  Reply dispatch(const pb::ClientMessage& m, Clock::time_point began);
+  // Sends the reply (or the refusal) to request `request_id`, and counts it.
+  void answer(std::uint64_t request_id, std::string_view kind, Clock::time_point began, Reply reply);
   Reply hello(const pb::Hello& r);
   // Requests only a 'control' connection may make (docs/security.md).
   static bool needs_control(pb::ClientMessage::BodyCase request);
@@ -73,8 +76,17 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   Reply get_skeleton(const pb::GetSkeleton& r) const;
   Reply create_view(const pb::CreateView& r);
   Reply close_view(const pb::CloseView& r);
-  template <class Edit>
-  Reply edit_view(std::uint32_t view_id, Edit&& edit);
+  // A structural edit (gmr/server/view.h's ViewEdit): computed at once on a
+  // short motion, else on the server's edit thread while this connection's
+  // requests wait unread (the reply then comes from there; dispatch gives
+  // no reply). `decorate` adds what the edit reports to the reply.
+  using EditDecoration = void (*)(const EditReport&, pb::ViewInfo&);
+  Reply edit_view(const pb::ClientMessage& req, Clock::time_point began, std::uint32_t view_id,
+                  const std::function<Result<ViewEdit>(const View&)>& make, EditDecoration decorate = nullptr);
+  // Installs an edit's result under the view budget; the reply.
+  Reply commit_edit(std::uint32_t view_id, const ViewEdit& edit, Result<std::shared_ptr<const ViewContent>> next,
+                    EditDecoration decorate);
+  Reply set_coordinates(const pb::SetCoordinates& r);
   Reply query(const pb::QueryFrames& r) const;
   Reply stats();
 
@@ -118,6 +130,7 @@ class RequestHandler : public Connection::Handler, public std::enable_shared_fro
   bool handshaked_ = false;
   Role role_ = Role::kNone;  // set by Hello
   bool stopped_ = false;
+  bool edit_deferred_ = false;  // the request being dispatched is answered from the edit thread
   LogLimiter log_limit_;  // lines this client's bad requests may put in the log
 
   std::map<std::uint32_t, std::unique_ptr<View>> views_;

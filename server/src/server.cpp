@@ -331,6 +331,7 @@ void Server::wait() {
   if (!d.started) return;
   d.stopped_future.wait();
   if (d.thread.joinable()) d.thread.join();
+  d.edit_pool.join();  // an edit still running finishes; its answer has no loop to run in
   if (d.relay) d.relay->stop();
   for (auto& r : d.recordings) r.wait();  // the I/O thread is done: nobody adds one
   d.recordings.clear();

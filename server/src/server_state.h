@@ -103,6 +103,10 @@ struct Server::Impl {
   std::unique_ptr<net::ip::udp::socket> beacon_socket;
   std::unique_ptr<net::steady_timer> beacon_timer;
   std::unique_ptr<net::steady_timer> relay_timer;
+  // Long view edits run here (RequestHandler::edit_view): one thread, so
+  // edits queue rather than take the I/O thread's core. After io: joined
+  // before io goes (a finished edit posts its answer to io).
+  net::thread_pool edit_pool{1};
   std::thread thread;
   std::uint16_t tcp_port = 0;
   bool started = false;

@@ -95,48 +95,29 @@ bool same_structure(const Skeleton& a, const Skeleton& b) {
 
 }  // namespace
 
-void View::replace(std::shared_ptr<const Motion> motion, int relative_to,
-                   std::shared_ptr<const CompiledForm> compiled,
-                   std::shared_ptr<const std::vector<LiveStep>> live_steps) {
+namespace {
+
+// The content after `base` with this motion and viewer: a new float form
+// unless the motion is the same (a live view's one-frame motion gets none:
+// its streams compute it on the double path). The version moves only when
+// what a client sees changes: the joints, their order and links, or the frame
+// the coordinates are in. An edit that gives the same structure (a shift to
+// the root it has, stripping a motion with no zero-length bone) keeps it.
+std::shared_ptr<const ViewContent> next_content(const ViewContent& base, std::shared_ptr<const Motion> motion,
+                                                int relative_to, std::shared_ptr<const CompiledForm> compiled,
+                                                std::shared_ptr<const std::vector<LiveStep>> live_steps) {
   auto c = std::make_shared<ViewContent>();
-  // A live view's motion is one frame: streams compute it on the double path.
   if (!live_steps && (!compiled || compiled->motion() != motion)) {
     compiled = std::make_shared<const CompiledForm>(motion);
   }
-  // The version moves only when what a client sees changes: the joints, their
-  // order and links, or the frame the coordinates are in. An edit that gives
-  // the same structure (a shift to the root it has, stripping a motion with no
-  // zero-length bone) keeps it.
-  const bool same = relative_to == content_->relative_to && same_structure(motion->skeleton, content_->motion->skeleton);
+  const bool same = relative_to == base.relative_to && same_structure(motion->skeleton, base.motion->skeleton);
   c->motion = std::move(motion);
   c->compiled = live_steps ? nullptr : std::move(compiled);
   c->relative_to = relative_to;
-  c->skeleton_version = content_->skeleton_version + (same ? 0 : 1);
+  c->skeleton_version = base.skeleton_version + (same ? 0 : 1);
   c->live_steps = std::move(live_steps);
-  content_ = std::move(c);
+  return c;
 }
-
-Status View::apply(const std::string& what, LiveStep step) {
-  auto result = step(motion());
-  if (!result.ok()) return make_error(result.error().kind, what + ": " + result.error().to_string());
-  auto next = std::make_shared<const Motion>(std::move(result).value());
-  int viewer = -1;
-  if (content_->relative_to >= 0) {
-    const std::string& name = motion().skeleton.joint(content_->relative_to).name;
-    viewer = next->skeleton.find(name);
-    if (viewer < 0) return make_error(what + ": it would remove the viewer joint '" + name + "'");
-  }
-  std::shared_ptr<const std::vector<LiveStep>> steps;
-  if (content_->live_steps) {
-    auto more = std::make_shared<std::vector<LiveStep>>(*content_->live_steps);
-    more->push_back(std::move(step));
-    steps = std::move(more);
-  }
-  replace(std::move(next), viewer, {}, std::move(steps));
-  return Ok{};
-}
-
-namespace {
 
 // A step's joint, by name in the motion it is applied to (a live view's
 // frames all have the structure the edit was made on).
@@ -148,45 +129,104 @@ Result<int> find_joint(const Motion& m, const std::string& name) {
 
 }  // namespace
 
-Status View::shift_root(const std::string& joint) {
+void View::replace(std::shared_ptr<const Motion> motion, int relative_to,
+                   std::shared_ptr<const CompiledForm> compiled,
+                   std::shared_ptr<const std::vector<LiveStep>> live_steps) {
+  content_ = next_content(*content_, std::move(motion), relative_to, std::move(compiled), std::move(live_steps));
+}
+
+ViewEdit::ViewEdit(std::string what, LiveStep step, std::shared_ptr<const ViewContent> base,
+                   std::shared_ptr<EditReport> report)
+    : what_(std::move(what)), step_(std::move(step)), base_(std::move(base)), report_(std::move(report)) {
+  if (!report_) report_ = std::make_shared<EditReport>();
+}
+
+Result<std::shared_ptr<const ViewContent>> ViewEdit::run() const {
+  const ViewContent& base = *base_;
+  auto result = step_(*base.motion);
+  if (!result.ok()) return make_error(result.error().kind, what_ + ": " + result.error().to_string());
+  auto next = std::make_shared<const Motion>(std::move(result).value());
+  // The viewer joint stays the same joint, by name.
+  int viewer = -1;
+  if (base.relative_to >= 0) {
+    const std::string& name = base.motion->skeleton.joint(base.relative_to).name;
+    viewer = next->skeleton.find(name);
+    if (viewer < 0) return make_error(what_ + ": it would remove the viewer joint '" + name + "'");
+  }
+  // A live view remembers the step, to replay it on every frame.
+  std::shared_ptr<const std::vector<LiveStep>> steps;
+  if (base.live_steps) {
+    auto more = std::make_shared<std::vector<LiveStep>>(*base.live_steps);
+    more->push_back(step_);
+    steps = std::move(more);
+  }
+  auto content = next_content(base, std::move(next), viewer, {}, std::move(steps));
+  if (compile && content->compiled) content->compiled->get();
+  return content;
+}
+
+ViewEdit View::make_edit(std::string what, LiveStep step, std::shared_ptr<EditReport> report) const {
+  return ViewEdit(std::move(what), std::move(step), content_, std::move(report));
+}
+
+Status View::commit(const ViewEdit& edit, std::shared_ptr<const ViewContent> next) {
+  if (edit.base() != content_) {
+    return make_error(ErrorKind::kFailedPrecondition,
+                      "view " + std::to_string(id_) + " changed while the edit was computed; make it again");
+  }
+  content_ = std::move(next);
+  return Ok{};
+}
+
+Status View::apply(const Result<ViewEdit>& edit) {
+  if (!edit.ok()) return edit.error();
+  auto next = edit->run();
+  if (!next.ok()) return next.error();
+  return commit(*edit, std::move(next).value());
+}
+
+Result<ViewEdit> View::edit_shift_root(const std::string& joint) const {
   if (auto j = joint_index(joint); !j.ok()) return j.error();
-  return apply("shift root to '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
+  return make_edit("shift root to '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
     auto j = find_joint(m, joint);
     if (!j.ok()) return j.error();
     return gmr::shift_root(m, *j);
   });
 }
 
-Status View::split(const std::string& joint) {
+Result<ViewEdit> View::edit_split(const std::string& joint) const {
   auto j = joint_index(joint);
   if (!j.ok()) return j.error();
   if (motion().skeleton.is_root(*j)) return make_error("split at '" + joint + "': it is already a root");
-  return apply("split at '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
+  return make_edit("split at '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
     auto at = find_joint(m, joint);
     if (!at.ok()) return at.error();
     return split_tree(m, *at);
   });
 }
 
-Status View::join(const std::string& root, double* out_offset_spread) {
+Result<ViewEdit> View::edit_join(const std::string& root) const {
   if (auto j = joint_index(root); !j.ok()) return j.error();
-  // The report of the last application: this edit's, read just below.
-  auto report = std::make_shared<JoinReport>();
-  auto s = apply("join '" + root + "'", [root, report](const Motion& m) -> Result<Motion> {
-    auto j = find_joint(m, root);
-    if (!j.ok()) return j.error();
-    return join_tree(m, *j, report.get());
-  });
-  if (s.ok() && out_offset_spread) *out_offset_spread = report->offset_spread;
-  return s;
+  // The report of the last application: this edit's, read after run().
+  auto report = std::make_shared<EditReport>();
+  return make_edit("join '" + root + "'",
+                   [root, report](const Motion& m) -> Result<Motion> {
+                     auto j = find_joint(m, root);
+                     if (!j.ok()) return j.error();
+                     JoinReport r;
+                     auto joined = join_tree(m, *j, &r);
+                     report->offset_spread = r.offset_spread;
+                     return joined;
+                   },
+                   report);
 }
 
-Status View::set_roots(const std::vector<std::string>& roots) {
+Result<ViewEdit> View::edit_set_roots(const std::vector<std::string>& roots) const {
   if (roots.empty()) return make_error("set roots: give at least one root");
   for (const auto& r : roots) {
     if (auto j = joint_index(r); !j.ok()) return j.error();
   }
-  return apply("set roots", [roots](const Motion& m) -> Result<Motion> {
+  return make_edit("set roots", [roots](const Motion& m) -> Result<Motion> {
     std::vector<int> idx;
     for (const auto& r : roots) {
       auto j = find_joint(m, r);
@@ -197,15 +237,30 @@ Status View::set_roots(const std::vector<std::string>& roots) {
   });
 }
 
+Result<ViewEdit> View::edit_strip_dummies() const {
+  auto report = std::make_shared<EditReport>();
+  return make_edit("strip dummies",
+                   [report](const Motion& m) -> Result<Motion> {
+                     std::vector<RemovedJoint> removed;
+                     auto stripped = gmr::strip_dummies(m, &removed);
+                     report->removed.clear();
+                     for (const auto& r : removed) report->removed.push_back(r.name);
+                     return stripped;
+                   },
+                   report);
+}
+
+Status View::join(const std::string& root, double* out_offset_spread) {
+  auto edit = edit_join(root);
+  Status s = apply(edit);
+  if (s.ok() && out_offset_spread) *out_offset_spread = edit->report().offset_spread;
+  return s;
+}
+
 Status View::strip_dummies(std::vector<std::string>* out_removed) {
-  auto removed = std::make_shared<std::vector<RemovedJoint>>();
-  auto s = apply("strip dummies", [removed](const Motion& m) -> Result<Motion> {
-    removed->clear();
-    return gmr::strip_dummies(m, removed.get());
-  });
-  if (s.ok() && out_removed) {
-    for (const auto& r : *removed) out_removed->push_back(r.name);
-  }
+  auto edit = edit_strip_dummies();
+  Status s = apply(edit);
+  if (s.ok() && out_removed) *out_removed = edit->report().removed;
   return s;
 }
 

@@ -202,8 +202,16 @@ void WsConnection::account() {
   if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + in_.size());
 }
 
+void WsConnection::hold_reading(bool hold) {
+  reads_held_ = hold;
+  if (!hold && read_paused_ && may_read()) {
+    read_paused_ = false;
+    read();
+  }
+}
+
 bool WsConnection::may_read() const {
-  return reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
+  return !reads_held_ && reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
          (budget_ == nullptr || budget_->allows_reading(accounted_));
 }
 

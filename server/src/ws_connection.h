@@ -82,6 +82,7 @@ class WsConnection final : public CountingOutbox, public std::enable_shared_from
   void send_frames_now(std::uint32_t key) override;
   void close_after_reply() override;
   void established() override { established_ = true; }
+  void hold_reading(bool hold) override;
   void stop(const std::string& reason) override;
   void finish() override;
   ConnectionCounters counters() const override;
@@ -112,6 +113,7 @@ class WsConnection final : public CountingOutbox, public std::enable_shared_from
   bool stopped_ = false;
   bool close_after_flush_ = false;
   bool read_paused_ = false;
+  bool reads_held_ = false;  // hold_reading
   bool reading_ = false;
   bool writing_ = false;
   bool socket_closed_ = false;

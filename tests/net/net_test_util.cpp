@@ -129,6 +129,11 @@ std::optional<pb::ServerMessage> RawConnection::receive(std::chrono::millisecond
   return m;
 }
 
+bool RawConnection::readable(std::chrono::milliseconds timeout) {
+  pollfd p{fd_, POLLIN, 0};
+  return ::poll(&p, 1, static_cast<int>(timeout.count())) > 0;
+}
+
 std::optional<pb::ServerMessage> RawConnection::reply(std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   for (;;) {

@@ -59,6 +59,8 @@ class RawConnection {
   std::optional<pb::ServerMessage> reply(std::chrono::milliseconds timeout = std::chrono::seconds(5));
   // True once the server closed the connection (read returned 0 or reset).
   bool wait_closed(std::chrono::milliseconds timeout = std::chrono::seconds(5));
+  // Whether bytes from the server wait to be read (none is consumed).
+  bool readable(std::chrono::milliseconds timeout);
   bool closed() const { return closed_; }
   void shutdown_send();
   // Hello + reply; returns the reply.

@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 
 #include <deque>
+#include <limits>
 
 #include "gmr/wire/framing.h"
 #include "gmr/wire/frames.h"
@@ -55,10 +56,18 @@ class RecordingOutbox final : public server::Outbox {
 
 class RequestHandlerTest : public ::testing::Test {
  protected:
-  RequestHandlerTest() : server_(server::ServerConfig{}, test_library(), true) {
+  RequestHandlerTest() : server_(config(), test_library(), true) {
     spdlog::set_level(spdlog::level::warn);  // the handler logs every hello
     handler_ = std::make_shared<server::RequestHandler>(server_, outbox_);
     handler_->start();
+  }
+
+  // Every edit computed at once: nothing runs this test's io_context, which
+  // answers the edits of long motions (server_edit_test.cpp tests those).
+  static server::ServerConfig config() {
+    server::ServerConfig cfg;
+    cfg.edit_inline_values = std::numeric_limits<std::size_t>::max();
+    return cfg;
   }
 
   // Sends `m` with request id `id` and returns the reply it produced.

@@ -70,6 +70,41 @@ struct ViewContent {
   std::shared_ptr<const std::vector<LiveStep>> live_steps;
 };
 
+// What an edit reports besides the view it makes.
+struct EditReport {
+  double offset_spread = 0.0;        // join: how far the joined root's offset varies
+  std::vector<std::string> removed;  // strip dummies: the joints it removed
+};
+
+// One structural edit of a view, taken apart so that the server computes it
+// off its I/O thread: made and checked against the view (View::edit_*),
+// run anywhere (run() reads only immutable data), then committed on the
+// view's own thread (View::commit).
+class ViewEdit {
+ public:
+  // The view's next content, or why the edit fails. Thread-safe; may take
+  // long on a long motion. With `compile`, the float form is compiled here too.
+  Result<std::shared_ptr<const ViewContent>> run() const;
+  // The content the edit applies to.
+  const std::shared_ptr<const ViewContent>& base() const { return base_; }
+  // Values (frames x channels) it reads: what it costs.
+  std::size_t values() const { return base_->motion->values.size(); }
+  // What the last run() reported.
+  const EditReport& report() const { return *report_; }
+
+  bool compile = false;  // float32 streams play the view: compile its float form in run()
+
+ private:
+  friend class View;
+  ViewEdit(std::string what, LiveStep step, std::shared_ptr<const ViewContent> base,
+           std::shared_ptr<EditReport> report);
+
+  std::string what_;
+  LiveStep step_;
+  std::shared_ptr<const ViewContent> base_;
+  std::shared_ptr<EditReport> report_;
+};
+
 class View {
  public:
   // `compiled`: the float form of `motion` to share (e.g. with other views of
@@ -90,14 +125,27 @@ class View {
   std::shared_ptr<LiveSource> live_source() const { return live_.lock(); }
   bool live() const { return content_->live_steps != nullptr; }
 
-  // Each edit either applies and bumps skeleton_version, or fails and leaves
-  // the view as it was. Joints by name; errors name the joint and the reason.
-  Status shift_root(const std::string& joint);
-  Status split(const std::string& joint);
+  // The structural edits, made and checked against the view now (an unknown
+  // joint fails here, with ErrorKind::kNotFound), computed by run(), and
+  // installed by commit(). Joints by name; errors name the joint and the reason.
+  Result<ViewEdit> edit_shift_root(const std::string& joint) const;
+  Result<ViewEdit> edit_split(const std::string& joint) const;
+  Result<ViewEdit> edit_join(const std::string& root) const;
+  Result<ViewEdit> edit_set_roots(const std::vector<std::string>& roots) const;
+  Result<ViewEdit> edit_strip_dummies() const;
+  // Installs what `edit.run()` gave, bumping skeleton_version when the
+  // structure changed; fails, leaving the view as it is, when the view
+  // changed since the edit was made.
+  Status commit(const ViewEdit& edit, std::shared_ptr<const ViewContent> next);
+
+  // The same edits at once: each either applies, or fails and leaves the
+  // view as it was.
+  Status shift_root(const std::string& joint) { return apply(edit_shift_root(joint)); }
+  Status split(const std::string& joint) { return apply(edit_split(joint)); }
   Status join(const std::string& root, double* out_offset_spread = nullptr);
-  Status set_roots(const std::vector<std::string>& roots);
+  Status set_roots(const std::vector<std::string>& roots) { return apply(edit_set_roots(roots)); }
   Status strip_dummies(std::vector<std::string>* out_removed = nullptr);
-  Status set_relative_to(const std::string& joint);  // empty: world coordinates
+  Status set_relative_to(const std::string& joint);  // empty: world coordinates (cheap: never a ViewEdit)
 
   // The joint's index, or an error (ErrorKind::kNotFound) "view 3 (walk) has
   // no joint 'x'". Every edit fails with that error for an unknown joint.
@@ -107,9 +155,10 @@ class View {
   void replace(std::shared_ptr<const Motion> motion, int relative_to,
                std::shared_ptr<const CompiledForm> compiled = {},
                std::shared_ptr<const std::vector<LiveStep>> live_steps = {});
-  // Applies `step` to the view's motion (`what` prefixes its error), keeping
-  // the viewer joint by name; a live view remembers the step.
-  Status apply(const std::string& what, LiveStep step);
+  // Runs and commits `edit`.
+  Status apply(const Result<ViewEdit>& edit);
+  // An edit applying `step` to the view's motion (`what` prefixes its error).
+  ViewEdit make_edit(std::string what, LiveStep step, std::shared_ptr<EditReport> report = {}) const;
 
   std::uint32_t id_;
   std::string motion_name_;
