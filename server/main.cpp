@@ -10,8 +10,11 @@
 #include <CLI/CLI.hpp>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/signal_set.hpp>
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <filesystem>
 #include <functional>
@@ -96,11 +99,17 @@ int main(int argc, char** argv) {
   app.add_option("--max-buffered-bytes", cfg.max_buffered_bytes,
                  "Bytes all connections may hold together (0: no server-wide limit)")
       ->capture_default_str();
-  app.add_option("--send-budget", cfg.send_budget,
-                 "Frames/s all subscriptions together may ask for; past it a subscription is refused "
-                 "(0: no limit, for load tests that mean to overload)")
+  std::string send_budget = "auto";
+  app.add_option("--send-budget", send_budget,
+                 "Frames/s all subscriptions together may ask for; past it a subscription is refused. auto: "
+                 "measured at start (about 0.1 s); 0: no limit, for load tests that mean to overload")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check([](const std::string& v) -> std::string {
+        double x = 0;
+        const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), x);
+        if (v == "auto" || (ec == std::errc() && end == v.data() + v.size() && x >= 0 && std::isfinite(x))) return {};
+        return "--send-budget takes auto or a number of frames per second (0: no limit), not '" + v + "'";
+      });
   app.add_option("--max-view-bytes", cfg.max_view_bytes, "Motion bytes all edited views may own together")
       ->capture_default_str();
   app.add_option("--max-view-bytes-per-connection", cfg.max_view_bytes_per_connection,
@@ -187,6 +196,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "gmr-server: --max-message-bytes must be at least 4096 and the other limits at least 1\n");
     return 1;
   }
+  cfg.calibrate_send_budget = send_budget == "auto";
+  if (!cfg.calibrate_send_budget) cfg.send_budget = std::strtod(send_budget.c_str(), nullptr);
   cfg.idle_timeout = std::chrono::milliseconds(idle_ms);
   cfg.relay_timeout = std::chrono::milliseconds(relay_timeout_ms);
   cfg.heartbeat_interval = std::chrono::milliseconds(heartbeat_ms);

@@ -252,7 +252,12 @@ int main(int argc, char** argv) {
     }
     motion = list->front().name;
   }
-  auto subscribe_one = [&](std::size_t i) -> bool {
+  // Two phases: every client connects, makes its view and registers its UDP
+  // endpoint while the server is still idle; then all subscribe. (Set up one
+  // by one, the last clients' requests and registrations would queue behind
+  // the frames of the first thousands.)
+  std::vector<std::uint32_t> views(runs.size(), 0);
+  auto prepare_one = [&](std::size_t i) -> bool {
     if (!runs[i]) runs[i] = connect_one(i);
     if (!runs[i]) return false;
     ClientRun* r = runs[i].get();
@@ -262,7 +267,20 @@ int main(int argc, char** argv) {
       if (error.empty()) error = view.error().to_string();
       return false;
     }
-    auto sub = r->client->subscribe(view->id, so, [r](const gmr::client::ReceivedFrame& f) { r->on_frame(f); });
+    views[i] = view->id;
+    if (udp) {
+      if (gmr::Status s = r->client->register_udp(); !s.ok()) {
+        std::lock_guard lock(error_mutex);
+        if (error.empty()) error = "client " + std::to_string(i) + ": " + s.error().to_string();
+        return false;
+      }
+    }
+    return true;
+  };
+  auto subscribe_one = [&](std::size_t i) -> bool {
+    if (!runs[i] || views[i] == 0) return false;
+    ClientRun* r = runs[i].get();
+    auto sub = r->client->subscribe(views[i], so, [r](const gmr::client::ReceivedFrame& f) { r->on_frame(f); });
     if (!sub.ok()) {
       std::lock_guard lock(error_mutex);
       if (sub.error().message.find("RESOURCE_EXHAUSTED") != std::string::npos) {
@@ -277,7 +295,8 @@ int main(int argc, char** argv) {
     r->subscription = sub->id;
     return true;
   };
-  parallel_for(runs.size(), setup_threads, subscribe_one);
+  parallel_for(runs.size(), setup_threads, prepare_one);
+  if (error.empty()) parallel_for(runs.size(), setup_threads, subscribe_one);
   if (!error.empty()) {
     std::fprintf(stderr, "gmr-load: %s\n", error.c_str());
     return 1;

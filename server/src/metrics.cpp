@@ -149,6 +149,8 @@ std::string Metrics::text(Server::Impl& s) const {
         static_cast<double>(s.streams.active()));
   f.add("gmr_committed_frames_per_second", "Frames per second all subscriptions ask for (against the send budget)",
         T::Gauge, static_cast<double>(s.committed_mhz) / 1000.0);
+  f.add("gmr_send_budget_frames_per_second", "Frames per second subscriptions may ask for in all (0: no limit)",
+        T::Gauge, s.cfg.send_budget);
 
   // Frames: computed and encoded once per stream, then sent per subscriber.
   f.add("gmr_frames_computed_total", "Forward-kinematics runs for streams", T::Counter,

@@ -1,9 +1,11 @@
 #include "gmr/server/server.h"
 
+#include <cmath>
 #include <stdexcept>
 
 #include <spdlog/spdlog.h>
 
+#include "calibrate.h"
 #include "gmr/wire/framing.h"
 #include "request_handler.h"
 #include "server_state.h"
@@ -172,6 +174,7 @@ ServerStats Server::Impl::snapshot() {
   st.connections_refused = connections_refused;
   st.hellos_refused = auth_refused;
   st.committed_frames_per_second = static_cast<double>(committed_mhz) / 1000.0;
+  st.send_budget = cfg.send_budget;
   st.subscriptions_refused = subscriptions_refused;
   st.buffered_bytes = buffers.held;
   st.max_buffered_bytes = buffers.max_held;
@@ -250,6 +253,17 @@ std::unique_ptr<net::ssl::context> make_tls_context(const ServerConfig& cfg) {
 void Server::start() {
   auto& d = *impl_;
   if (d.started) throw std::runtime_error("server already started");
+  if (d.cfg.calibrate_send_budget) {
+    auto c = calibrate_send_budget();
+    if (!c.ok()) throw std::runtime_error(c.error().to_string() + " (give --send-budget a figure)");
+    d.cfg.send_budget = std::floor(c->budget);
+    d.calibration = *c;
+    spdlog::info("send budget {:.0f} frames/s: a frame-sized TCP send costs {:.0f} ns here (the slowest of {} CPUs; "
+                 "the fastest {:.0f}) against {:.0f} ns on the reference machine, which held {:.0f} (measured in "
+                 "{:.2f} s; --send-budget N to set it)",
+                 d.cfg.send_budget, c->ns_per_send, c->cpus, c->fastest_ns_per_send, kReferenceNsPerSend,
+                 kReferenceBudget, c->seconds);
+  }
   d.tls = make_tls_context(d.cfg);
   boost::system::error_code ec;
   const auto address = net::ip::make_address(d.cfg.bind_address, ec);

@@ -1,18 +1,23 @@
 // Fair admission (docs/protocol.md, "Admission"): connections that never say
 // Hello, or only send heartbeats, cannot hold the server's slots; one address
 // cannot take them all; a well-behaved client gets in during a flood.
-#include <gtest/gtest.h>
-
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <poll.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdio>
+#include <sstream>
 #include <thread>
 
 #include "gmr/wire/framing.h"
 
+#include "calibrate.h"
 #include "net_test_util.h"
 
 namespace gmr::test {
@@ -164,6 +169,62 @@ TEST(Admission, SubscriptionsPastTheSendBudgetAreRefused) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   EXPECT_EQ(s.server.stats().committed_frames_per_second, 0.0);
+}
+
+// --send-budget auto (gmr-server's default): the budget is measured at start.
+TEST(Admission, AnAutoBudgetIsMeasuredAtStart) {
+  auto c = server::calibrate_send_budget(480, 2000, 3);
+  ASSERT_TRUE(c.ok()) << c.error().to_string();
+  std::printf("this machine: %.0f ns per 480-byte loopback TCP send on the slowest of %zu CPUs (%.0f on the fastest) "
+              "-> a budget of %.0f frames/s (%.2f s)\n",
+              c->ns_per_send, c->cpus, c->fastest_ns_per_send, c->budget, c->seconds);
+  EXPECT_GT(c->fastest_ns_per_send, 0.0);
+  EXPECT_GE(c->ns_per_send, c->fastest_ns_per_send);
+  EXPECT_GE(c->cpus, 1u);
+  EXPECT_EQ(c->sends, 6000u * c->cpus);
+  EXPECT_DOUBLE_EQ(c->budget, server::kReferenceBudget * server::kReferenceNsPerSend / c->ns_per_send);
+  EXPECT_FALSE(server::calibrate_send_budget(480, 0, 3).ok());
+
+  std::ostringstream log;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("capture", sink));
+  server::ServerConfig cfg;
+  cfg.port = 0;
+  cfg.udp_port = 0;
+  cfg.http_port = -1;
+  cfg.bind_address = "127.0.0.1";
+  cfg.calibrate_send_budget = true;
+  {
+    server::Server s(cfg, test_library());
+    spdlog::set_level(spdlog::level::info);
+    s.start();
+    spdlog::set_level(spdlog::level::warn);
+    spdlog::set_default_logger(previous);
+    const double budget = s.stats().send_budget;
+    EXPECT_GT(budget, 0.0);
+    EXPECT_NE(log.str().find("send budget " + std::to_string(static_cast<long long>(budget)) + " frames/s"),
+              std::string::npos)
+        << log.str();
+    // Admission then works as with a configured figure
+    // (SubscriptionsPastTheSendBudgetAreRefused).
+    EXPECT_EQ(s.stats().committed_frames_per_second, 0.0);
+    s.stop();
+  }
+  spdlog::set_default_logger(previous);
+
+#ifdef GMR_SERVER_PATH
+  // gmr-server refuses what is neither auto nor a figure, in one line.
+  const std::string command = std::string(GMR_SERVER_PATH) + " --send-budget lots --port 0 2>&1";
+  FILE* p = ::popen(command.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string out;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof buffer, p) != nullptr) out += buffer;
+  const int status = ::pclose(p);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) != 0) << status;
+  EXPECT_NE(out.find("--send-budget takes auto or a number of frames per second"), std::string::npos) << out;
+#endif
 }
 
 }  // namespace

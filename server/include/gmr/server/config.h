@@ -146,6 +146,10 @@ struct ServerConfig {
   // I/O thread held at p99 <= 2 ms on the reference 2-core machine
   // (docs/performance.md); measure yours with gmr-load.
   double send_budget = 30000;
+  // Measure the budget at start instead (gmr-server's default, --send-budget
+  // auto): send_budget becomes the reference figure scaled by how fast this
+  // machine sends (server/src/calibrate.h), logged with the measurement.
+  bool calibrate_send_budget = false;
   // How far a stream may fall behind its schedule (a stalled server) and
   // still catch up frame by frame; beyond it playback jumps to the frame due
   // now. Tests raise it so that a slow (sanitizer) build still sends every frame.

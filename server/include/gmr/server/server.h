@@ -44,7 +44,8 @@ struct ServerStats {
   std::uint64_t udp_challenges = 0;   // challenges sent (one per valid registration datagram)
   std::uint64_t connections_refused = 0;
   std::uint64_t hellos_refused = 0;   // unknown token, or none where one is needed
-  double committed_frames_per_second = 0;  // what all subscriptions ask for (against config.send_budget)
+  double committed_frames_per_second = 0;  // what all subscriptions ask for (against send_budget)
+  double send_budget = 0;                  // config.send_budget, or what --send-budget auto measured (0: none)
   std::uint64_t subscriptions_refused = 0; // refused for the send budget
   std::uint64_t buffered_bytes = 0;      // now: all connections' replies, frames, writes, request bodies
   std::uint64_t max_buffered_bytes = 0;  // high-water mark of buffered_bytes
