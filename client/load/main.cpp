@@ -327,25 +327,21 @@ int main(int argc, char** argv) {
     std::this_thread::sleep_until(at);
   }
 
-  // The window: the server's counters just before and just after it.
-  std::atomic<bool> have_server{true};
+  // The window: the server's counters just before and just after it, one
+  // request each (server-wide counters: a saturated server answers N
+  // per-connection requests only slowly, and frames sent meanwhile would count).
   std::string stats_refused;
-  auto snapshot = [&](std::vector<gmr::client::ServerCounters>& into) {
-    into.assign(runs.size(), {});
-    parallel_for(runs.size(), setup_threads, [&](std::size_t i) {
-      auto st = runs[i]->client->stats();
-      if (!st.ok()) {
-        std::lock_guard lock(error_mutex);
-        if (stats_refused.empty()) stats_refused = st.error().message;
-        have_server = false;
-        return false;
-      }
-      into[i] = *st;
-      return true;
-    });
+  auto snapshot = [&](gmr::client::ServerCounters& into) {
+    auto st = runs.front()->client->stats();
+    if (!st.ok()) {
+      if (stats_refused.empty()) stats_refused = st.error().message;
+      return false;
+    }
+    into = *st;
+    return true;
   };
-  std::vector<gmr::client::ServerCounters> before, after;
-  snapshot(before);
+  gmr::client::ServerCounters before, after;
+  bool have_server = snapshot(before);
   rusage usage_before{}, usage_after{};
   ::getrusage(RUSAGE_SELF, &usage_before);
   const double server_cpu_before = server_pid > 0 ? process_cpu_seconds(server_pid) : -1;
@@ -356,7 +352,7 @@ int main(int argc, char** argv) {
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const double server_cpu_after = server_pid > 0 ? process_cpu_seconds(server_pid) : -1;
   ::getrusage(RUSAGE_SELF, &usage_after);
-  snapshot(after);
+  have_server = have_server && snapshot(after);
 
   result.cpu_user_seconds = cpu_seconds(usage_after.ru_utime) - cpu_seconds(usage_before.ru_utime);
   result.cpu_system_seconds = cpu_seconds(usage_after.ru_stime) - cpu_seconds(usage_before.ru_stime);
@@ -375,14 +371,12 @@ int main(int argc, char** argv) {
   }
   result.have_server = have_server;
   if (have_server) {
-    for (std::size_t i = 0; i < runs.size(); ++i) {
-      result.server_sent += after[i].frames_sent - before[i].frames_sent;
-      result.server_dropped += after[i].frames_dropped - before[i].frames_dropped;
-      result.server_skipped += after[i].frames_skipped - before[i].frames_skipped;
-    }
-    result.server_computed = after[0].frames_computed - before[0].frames_computed;
-    result.server_encoded = after[0].frames_encoded - before[0].frames_encoded;
-    result.server_late_total = after[0].frames_skipped_total - before[0].frames_skipped_total;
+    result.server_sent = after.frames_sent_total - before.frames_sent_total;
+    result.server_dropped = after.frames_dropped_total - before.frames_dropped_total;
+    result.server_skipped = after.frames_skipped_total - before.frames_skipped_total;
+    result.server_computed = after.frames_computed - before.frames_computed;
+    result.server_encoded = after.frames_encoded - before.frames_encoded;
+    result.server_late_total = after.frames_skipped_total - before.frames_skipped_total;
   } else {
     std::printf("gmr-load: the server's figures below are missing: %s\n", stats_refused.c_str());
   }

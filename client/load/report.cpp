@@ -184,9 +184,9 @@ LoadResult merge(const std::vector<LoadResult>& runs) {
     m.seconds = std::max(m.seconds, r.seconds);
     m.setup_seconds = std::max(m.setup_seconds, r.setup_seconds);
     m.have_server = m.have_server && r.have_server;
-    m.server_sent += r.server_sent;
-    m.server_dropped += r.server_dropped;
-    m.server_skipped += r.server_skipped;
+    m.server_sent = std::max(m.server_sent, r.server_sent);
+    m.server_dropped = std::max(m.server_dropped, r.server_dropped);
+    m.server_skipped = std::max(m.server_skipped, r.server_skipped);
     m.server_computed = std::max(m.server_computed, r.server_computed);
     m.server_encoded = std::max(m.server_encoded, r.server_encoded);
     m.server_late_total = std::max(m.server_late_total, r.server_late_total);
@@ -252,12 +252,11 @@ std::string describe(const LoadResult& r) {
                 cpu > 0 ? 100 * r.cpu_system_seconds / cpu : 0.0, r.threads,
                 cpu / window > 0.9 * r.threads ? ": the load generator was saturated, not only the server" : "");
   if (r.have_server) {
-    out += format("server, window   %llu frames sent to these clients, %llu dropped for them (slow reader or full "
-                  "UDP queue), %llu skipped (late); %llu FK runs, %llu encodings, %llu ticks skipped in all\n",
+    out += format("server, window   %llu frames sent to all its clients, %llu dropped (slow reader or full UDP "
+                  "queue), %llu skipped (late); %llu FK runs, %llu encodings\n",
                   static_cast<unsigned long long>(r.server_sent), static_cast<unsigned long long>(r.server_dropped),
                   static_cast<unsigned long long>(r.server_skipped), static_cast<unsigned long long>(r.server_computed),
-                  static_cast<unsigned long long>(r.server_encoded),
-                  static_cast<unsigned long long>(r.server_late_total));
+                  static_cast<unsigned long long>(r.server_encoded));
   } else {
     out += "server, window   (the server's counters were not available)\n";
   }

@@ -57,8 +57,8 @@ struct LoadResult {
   double cpu_user_seconds = 0;
   double cpu_system_seconds = 0;
   unsigned threads = 0;
-  // The server's counters over the window (per-connection ones summed over
-  // this run's connections; server-wide ones, merged, the largest).
+  // The server's counters over the window, all its clients' (gmr-load
+  // measures a server of its own); merged, the largest.
   bool have_server = false;
   std::uint64_t server_sent = 0, server_dropped = 0, server_skipped = 0;
   std::uint64_t server_computed = 0, server_encoded = 0, server_late_total = 0;

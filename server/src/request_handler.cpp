@@ -513,6 +513,15 @@ Reply RequestHandler::stats() {
   st->set_frames_encoded(server_.counters.frames_encoded);
   st->set_frames_sent(own.frames_sent);
   st->set_frames_dropped(own.frames_dropped);
+  // Every connection's, in one snapshot: what a load test measures its
+  // window with (2 requests, not 2 per client).
+  ConnectionCounters all;
+  for (const auto& [transport, closed] : server_.closed_counters) all.add_totals(closed);
+  for (const auto& [id, entry] : server_.connections) {
+    if (auto open = entry.connection.lock()) all.add_totals(open->counters());
+  }
+  st->set_frames_sent_total(all.frames_sent);
+  st->set_frames_dropped_total(all.frames_dropped);
   st->set_frames_skipped(own.frames_skipped);
   st->set_frames_skipped_total(server_.counters.frames_skipped);
   st->set_queued_bytes(own.queued_bytes);
