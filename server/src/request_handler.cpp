@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
+#include <exception>
 #include <new>
 #include <utility>
 
@@ -333,10 +334,11 @@ Reply RequestHandler::close_view(const pb::CloseView& r) {
   return out;
 }
 
-// An edit that fails leaves the view as it was: NOT_FOUND for an unknown
-// joint, FAILED_PRECONDITION for anything else the view refuses.
 namespace {
 
+// A library error as the protocol's: NOT_FOUND for an unknown joint,
+// RESOURCE_EXHAUSTED for memory, FAILED_PRECONDITION for anything else the
+// view refuses (the view is left as it was).
 Refusal refusal_of(const Error& e) {
   switch (e.kind) {
     case ErrorKind::kNotFound: return Refusal{pb::ERROR_CODE_NOT_FOUND, e.to_string()};
@@ -367,6 +369,8 @@ Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point 
         return edit.run();
       } catch (const std::bad_alloc&) {
         return make_error(ErrorKind::kResourceExhausted, "the server ran out of memory computing the edit");
+      } catch (const std::exception& e) {  // nothing may leave the edit thread's handler
+        return make_error(ErrorKind::kFailedPrecondition, std::string("the edit failed: ") + e.what());
       }
     }();
     net::post(io, [self = std::move(self), edit = std::move(edit), next = std::move(next), view_id, decorate,

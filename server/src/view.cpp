@@ -166,7 +166,11 @@ Result<std::shared_ptr<const ViewContent>> ViewEdit::run() const {
 }
 
 ViewEdit View::make_edit(std::string what, LiveStep step, std::shared_ptr<EditReport> report) const {
-  return ViewEdit(std::move(what), std::move(step), content_, std::move(report));
+  ViewEdit edit(std::move(what), std::move(step), content_, std::move(report));
+  // Float32 streams played the view: its new float form is compiled with the
+  // edit, not on the I/O thread at their next frame.
+  edit.compile = content_->compiled && content_->compiled->workspace_floats() > 0;
+  return edit;
 }
 
 Status View::commit(const ViewEdit& edit, std::shared_ptr<const ViewContent> next) {

@@ -10,6 +10,7 @@
 
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/server/library.h"
+#include "gmr/server/view.h"
 #include "net_test_util.h"
 
 namespace gmr::test {
@@ -178,6 +179,32 @@ TEST(ViewEdits, AClientThatLeavesMidEditLeavesNothingBehind) {
   auto shifted = c->shift_root(v->id, leaf);
   ASSERT_TRUE(shifted.ok()) << shifted.error().to_string();
   EXPECT_TRUE(shifted->skeleton.is_root(shifted->skeleton.find(leaf)));
+}
+
+// An edit of a view that float32 streams played compiles the new float form
+// with the edit (on the edit thread), not at the streams' next frame on the
+// I/O thread; a view nobody played in float32 leaves it for later.
+TEST(ViewEdits, TheFloatFormIsCompiledWithTheEditWhenFloatStreamsPlayedTheView) {
+  const auto m = long_walk(200);
+  const std::string leaf = m->skeleton.joint(static_cast<int>(m->skeleton.size()) - 1).name;
+  server::View played(1, "long", m);
+  ASSERT_NE(played.content()->compiled->get(), nullptr);  // what a float32 stream does first
+  auto edit = played.edit_shift_root(leaf);
+  ASSERT_TRUE(edit.ok()) << edit.error().to_string();
+  EXPECT_TRUE(edit->compile);
+  auto next = edit->run();
+  ASSERT_TRUE(next.ok()) << next.error().to_string();
+  EXPECT_GT((*next)->compiled->workspace_floats(), 0u) << "compiled by run()";
+  ASSERT_TRUE(played.commit(*edit, *next).ok());
+  EXPECT_FALSE(played.commit(*edit, *next).ok()) << "an edit made on an older content";
+
+  server::View unplayed(2, "long", m);
+  auto lazy = unplayed.edit_shift_root(leaf);
+  ASSERT_TRUE(lazy.ok());
+  EXPECT_FALSE(lazy->compile);
+  auto later = lazy->run();
+  ASSERT_TRUE(later.ok());
+  EXPECT_EQ((*later)->compiled->workspace_floats(), 0u) << "left for the first float32 stream";
 }
 
 }  // namespace
