@@ -257,7 +257,6 @@ void Server::start() {
     auto c = calibrate_send_budget();
     if (!c.ok()) throw std::runtime_error(c.error().to_string() + " (give --send-budget a figure)");
     d.cfg.send_budget = std::floor(c->budget);
-    d.calibration = *c;
     spdlog::info("send budget {:.0f} frames/s: a frame-sized TCP send costs {:.0f} ns here (the slowest of {} CPUs; "
                  "the fastest {:.0f}) against {:.0f} ns on the reference machine, which held {:.0f} (measured in "
                  "{:.2f} s; --send-budget N to set it)",

@@ -17,7 +17,6 @@
 #include <thread>
 #include <vector>
 
-#include "calibrate.h"
 #include "connection.h"
 #include "http_server.h"
 #include "live.h"
@@ -94,7 +93,6 @@ struct Server::Impl {
   // no drift however many come and go), against cfg.send_budget.
   std::uint64_t committed_mhz = 0;
   std::uint64_t subscriptions_refused = 0;  // for the send budget
-  SendCalibration calibration;              // when cfg.calibrate_send_budget: what start() measured
 
   net::io_context io;
   tcp::acceptor acceptor{io};
