@@ -58,6 +58,11 @@ int main(int argc, char** argv) {
   app.add_option("--bind", cfg.bind_address, "Address to listen on (loopback unless told otherwise)")->capture_default_str();
   app.add_option("--max-message-bytes", cfg.max_message_bytes, "Largest message either way")->capture_default_str();
   app.add_option("--max-connections", cfg.max_connections, "Connections served at once")->capture_default_str();
+  app.add_option("--io-threads", cfg.io_threads,
+                 "Threads that send frames and read requests; connections are spread over them, one of them also "
+                 "runs requests and streams (0: one per CPU)")
+      ->capture_default_str()
+      ->check(CLI::Range(std::size_t{0}, std::size_t{64}));
   app.add_option("--max-views", cfg.max_views_per_connection, "Views per connection")->capture_default_str();
   app.add_option("--max-connections-per-address", cfg.max_connections_per_address,
                  "Connections from one IP address (0: no limit; load tests on one host need 0)")

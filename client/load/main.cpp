@@ -377,6 +377,7 @@ int main(int argc, char** argv) {
     result.server_computed = after.frames_computed - before.frames_computed;
     result.server_encoded = after.frames_encoded - before.frames_encoded;
     result.server_late_total = after.frames_skipped_total - before.frames_skipped_total;
+    result.server_io_threads = after.io_threads;
   } else {
     std::printf("gmr-load: the server's figures below are missing: %s\n", stats_refused.c_str());
   }

@@ -91,7 +91,8 @@ std::string to_json(const LoadResult& r) {
   if (r.have_server) {
     j["server"] = {{"frames_sent", r.server_sent},         {"frames_dropped", r.server_dropped},
                    {"frames_skipped", r.server_skipped},   {"frames_computed", r.server_computed},
-                   {"frames_encoded", r.server_encoded},   {"frames_skipped_total", r.server_late_total}};
+                   {"frames_encoded", r.server_encoded},   {"frames_skipped_total", r.server_late_total},
+                   {"io_threads", r.server_io_threads}};
   }
   if (r.server_cpu_seconds >= 0) j["server_cpu_seconds"] = r.server_cpu_seconds;
   // The histogram's non-empty buckets as [lowest ns, count].
@@ -140,6 +141,7 @@ LoadResult from_json(const std::string& text, const std::string& label) {
       r.server_computed = s.at("frames_computed").get<std::uint64_t>();
       r.server_encoded = s.at("frames_encoded").get<std::uint64_t>();
       r.server_late_total = s.at("frames_skipped_total").get<std::uint64_t>();
+      r.server_io_threads = s.value("io_threads", 0u);
     }
     r.server_cpu_seconds = j.value("server_cpu_seconds", -1.0);
     for (const auto& b : j.at("latency_ns").at("buckets")) {
@@ -190,6 +192,7 @@ LoadResult merge(const std::vector<LoadResult>& runs) {
     m.server_computed = std::max(m.server_computed, r.server_computed);
     m.server_encoded = std::max(m.server_encoded, r.server_encoded);
     m.server_late_total = std::max(m.server_late_total, r.server_late_total);
+    m.server_io_threads = std::max(m.server_io_threads, r.server_io_threads);
     m.server_cpu_seconds = std::max(m.server_cpu_seconds, r.server_cpu_seconds);
   }
   return m;
@@ -261,8 +264,9 @@ std::string describe(const LoadResult& r) {
     out += "server, window   (the server's counters were not available)\n";
   }
   if (r.server_cpu_seconds >= 0) {
-    out += format("server CPU       %.2f cores, %.0f ns per delivered frame\n", r.server_cpu_seconds / window,
-                  r.frames > 0 ? 1e9 * r.server_cpu_seconds / static_cast<double>(r.frames) : 0.0);
+    out += format("server CPU       %.2f cores, %.0f ns per delivered frame%s\n", r.server_cpu_seconds / window,
+                  r.frames > 0 ? 1e9 * r.server_cpu_seconds / static_cast<double>(r.frames) : 0.0,
+                  r.server_io_threads > 0 ? format(", on %u I/O threads", r.server_io_threads).c_str() : "");
   }
   return out;
 }

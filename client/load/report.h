@@ -62,6 +62,7 @@ struct LoadResult {
   bool have_server = false;
   std::uint64_t server_sent = 0, server_dropped = 0, server_skipped = 0;
   std::uint64_t server_computed = 0, server_encoded = 0, server_late_total = 0;
+  std::uint32_t server_io_threads = 0;  // its I/O threads (0: it did not say)
   // The server process's CPU over the window, when gmr-load was told its pid.
   double server_cpu_seconds = -1;
 };

@@ -985,6 +985,8 @@ Result<ServerCounters> Client::stats() {
   c.multicast_frames_sent = s.multicast_frames_sent();
   c.frames_sent_total = s.frames_sent_total();
   c.frames_dropped_total = s.frames_dropped_total();
+  c.io_threads = s.io_threads();
+  c.io_thread = s.io_thread();
   return c;
 }
 

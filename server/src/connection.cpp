@@ -10,6 +10,7 @@
 #include <array>
 #include <cerrno>
 #include <cstring>
+#include <optional>
 
 #include "gmr/wire/framing.h"
 #include "prometheus/histogram.h"
@@ -43,8 +44,12 @@ void tune_socket(tcp::socket& socket, const ConnectionLimits& limits, std::uint6
 }
 
 Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
-                       BufferBudget* budget, net::ssl::context* tls)
-    : socket_(std::move(socket)),
+                       BufferBudget* budget, net::ssl::context* tls, ConnectionPlacement placement)
+    : io_(io),
+      control_(placement.control != nullptr ? placement.control : &io),
+      lane_(placement.lane),
+      threads_(placement.threads),
+      socket_(std::move(socket)),
       id_(id),
       limits_(limits),
       budget_(budget),
@@ -59,93 +64,166 @@ Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id
 }
 
 Connection::~Connection() {
-  if (budget_ != nullptr) budget_->held -= accounted_;
+  if (budget_ != nullptr) budget_->release(accounted_);
+}
+
+template <class F>
+void Connection::on_lane_do(F&& f) {
+  if (on_lane()) {
+    f();
+  } else {
+    net::post(io_, std::forward<F>(f));
+  }
 }
 
 void Connection::account() {
   if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + body_.size());
 }
 
+bool Connection::stopped() const {
+  Lock lock(m_);
+  return stopped_;
+}
+
+bool Connection::closing() const {
+  Lock lock(m_);
+  return stopped_ || close_after_flush_;
+}
+
+void Connection::established() {
+  Lock lock(m_);
+  established_ = true;
+}
+
 void Connection::hold_reading(bool hold) {
+  Lock lock(m_);
   reads_held_ = hold;
-  if (!hold && read_paused_ && may_read()) {
-    read_paused_ = false;
-    read_prefix();
-  }
+  if (!hold) resume_reading();
 }
 
 bool Connection::may_read() const {
-  return !reads_held_ && reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
+  return !reads_held_ && !at_handler_ && reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
          (budget_ == nullptr || budget_->allows_reading(accounted_));
 }
 
+void Connection::resume_reading() {
+  if (stopped_ || !read_paused_ || !may_read()) return;
+  read_paused_ = false;
+  on_lane_do([self = shared_from_this()] {
+    Lock lock(self->m_);
+    self->read_prefix();
+  });
+}
+
 void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std::uint64_t)> on_closed) {
-  handler_ = std::move(handler);
-  on_closed_ = std::move(on_closed);
-  tune_socket(socket_.tcp(), limits_, id_);
-  last_read_ = last_write_ = Clock::now();
-  spdlog::info("conn {}: connected from {}{}", id_, peer_, socket_.tls() ? " (TLS)" : "");
-  arm_watchdog();
-  if (!socket_.tls()) {
-    read_prefix();
-    return;
+  {
+    Lock lock(m_);
+    handler_ = std::move(handler);
+    on_closed_ = std::move(on_closed);
   }
-  // The handshake counts against the Hello deadline (the watchdog's).
-  socket_.tls_stream().async_handshake(net::ssl::stream_base::server,
-                                       [self = shared_from_this()](const boost::system::error_code& e) {
-                                         if (self->stopped_) return;
-                                         if (e) {
-                                           self->stop("TLS handshake failed: " + e.message());
-                                           return;
-                                         }
-                                         self->secured_ = true;
-                                         self->last_read_ = Clock::now();
-                                         self->read_prefix();
-                                       });
+  // The socket is the lane's: everything it does starts there.
+  on_lane_do([self = shared_from_this()] {
+    Lock lock(self->m_);
+    if (self->stopped_) return;
+    tune_socket(self->socket_.tcp(), self->limits_, self->id_);
+    self->last_read_ = self->last_write_ = Clock::now();
+    spdlog::info("conn {}: connected from {}{}", self->id_, self->peer_, self->socket_.tls() ? " (TLS)" : "");
+    self->arm_watchdog();
+    if (!self->socket_.tls()) {
+      self->read_prefix();
+      return;
+    }
+    // The handshake counts against the Hello deadline (the watchdog's).
+    self->socket_.tls_stream().async_handshake(net::ssl::stream_base::server,
+                                               [self](const boost::system::error_code& e) {
+                                                 Lock relock(self->m_);
+                                                 if (self->stopped_) return;
+                                                 if (e) {
+                                                   self->stop("TLS handshake failed: " + e.message());
+                                                   return;
+                                                 }
+                                                 self->secured_ = true;
+                                                 self->last_read_ = Clock::now();
+                                                 self->read_prefix();
+                                                 self->flush();  // replies queued meanwhile
+                                               });
+  });
 }
 
 void Connection::stop(const std::string& reason) {
-  if (stopped_) return;
-  stopped_ = true;
-  spdlog::info("conn {}: closed: {} (frames sent {}, dropped {})", id_, reason, counters_.frames_sent,
-               counters_.frames_dropped);
-  if (handler_) handler_->on_stop();
-  frames_.clear();
-  replies_.clear();
-  reply_bytes_ = 0;
-  std::string().swap(body_);
-  body_received_ = 0;
-  account();
-  boost::system::error_code ec;
-  socket_.tcp().shutdown(tcp::socket::shutdown_both, ec);
-  socket_.tcp().close(ec);
-  watchdog_.cancel();
-  if (on_closed_) on_closed_(id_);
+  std::shared_ptr<Handler> handler;
+  std::function<void(std::uint64_t)> on_closed;
+  {
+    Lock lock(m_);
+    if (stopped_) return;
+    stopped_ = true;
+    spdlog::info("conn {}: closed: {} (frames sent {}, dropped {})", id_, reason, counters_.frames_sent,
+                 counters_.frames_dropped);
+    frames_.clear();
+    replies_.clear();
+    reply_bytes_ = 0;
+    std::string().swap(body_);
+    body_received_ = 0;
+    account();
+    handler = handler_;
+    on_closed = std::move(on_closed_);
+  }
+  // The handler's and the server's part on the control loop, the socket's
+  // on the lane (each at once when this is its thread).
+  auto self = shared_from_this();
+  auto tell = [self, handler = std::move(handler), on_closed = std::move(on_closed)] {
+    if (handler) handler->on_stop();
+    if (on_closed) on_closed(self->id_);
+  };
+  auto close = [self] {
+    Lock lock(self->m_);
+    boost::system::error_code ec;
+    self->socket_.tcp().shutdown(tcp::socket::shutdown_both, ec);
+    self->socket_.tcp().close(ec);
+    self->watchdog_.cancel();
+  };
+  if (control_->get_executor().running_in_this_thread()) {
+    tell();
+  } else {
+    net::post(*control_, std::move(tell));
+  }
+  on_lane_do(std::move(close));
 }
 
 void Connection::finish() {
-  close_after_reply();
-  flush();
+  Lock lock(m_);
+  close_after_flush_ = true;
+  frames_.clear();
+  account();
+  request_flush();
 }
 
 void Connection::close_after_reply() {
-  close_after_flush_ = true;
+  Lock lock(m_);
+  close_on_next_reply_ = true;
   frames_.clear();
   account();
 }
 
 void Connection::send(std::string framed) {
+  Lock lock(m_);
   if (stopped_) return;
   reply_bytes_ += framed.size();
   replies_.push_back(std::make_shared<const std::string>(std::move(framed)));
+  // Closing waits for this reply (and not for one another thread queues).
+  if (std::exchange(close_on_next_reply_, false)) {
+    close_after_flush_ = true;
+    frames_.clear();
+  }
   note_queue();
   account();
-  flush();
+  request_flush();
 }
 
 bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
                             Clock::duration max_age) {
-  if (closing()) return true;
+  Lock lock(m_);
+  if (stopped_ || close_after_flush_) return true;
   // With no write in flight the frame goes out at once; otherwise it waits,
   // within this connection's bounds and the server's budget.
   const Clock::time_point now = Clock::now();
@@ -154,25 +232,31 @@ bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr
                                      budget_ != nullptr && budget_->over(), counters_);
   note_queue();
   account();
-  flush();
+  request_flush();
   return kept_all;
 }
 
 bool Connection::congested(std::uint32_t key) const {
+  Lock lock(m_);
   if (!writing_ || stopped_) return false;
   if (budget_ != nullptr && budget_->over()) return true;
   if (!frames_.waiting(key)) return false;
   return Clock::now() - write_started_ > limits_.congested_after;
 }
 
-std::uint64_t Connection::stale_dropped(std::uint32_t key) const { return frames_.stale_dropped(key); }
+std::uint64_t Connection::stale_dropped(std::uint32_t key) const {
+  Lock lock(m_);
+  return frames_.stale_dropped(key);
+}
 
 void Connection::discard_frames(std::uint32_t key) {
+  Lock lock(m_);
   frames_.discard(key);
   account();
 }
 
 void Connection::send_frames_now(std::uint32_t key) {
+  Lock lock(m_);
   for (const auto& frame : frames_.take(key)) {
     auto bytes = std::make_shared<const std::string>(frame.head + *frame.body);
     reply_bytes_ += bytes->size();
@@ -182,16 +266,58 @@ void Connection::send_frames_now(std::uint32_t key) {
   account();
 }
 
+void Connection::count_udp_frame_sent() {
+  Lock lock(m_);
+  CountingOutbox::count_udp_frame_sent();
+}
+void Connection::count_udp_frame_dropped() {
+  Lock lock(m_);
+  CountingOutbox::count_udp_frame_dropped();
+}
+void Connection::count_frame_dropped(std::uint64_t n) {
+  Lock lock(m_);
+  CountingOutbox::count_frame_dropped(n);
+}
+void Connection::count_frame_skipped(std::uint64_t n) {
+  Lock lock(m_);
+  CountingOutbox::count_frame_skipped(n);
+}
+
 void Connection::note_queue() { counters_.max_queued_bytes = std::max(counters_.max_queued_bytes, queued_bytes()); }
 
 ConnectionCounters Connection::counters() const {
+  Lock lock(m_);
   ConnectionCounters c = counters_;
   c.queued_bytes = queued_bytes();
   return c;
 }
 
-void Connection::flush() {
+void Connection::request_flush() {
   if (writing_ || stopped_) return;
+  if (on_lane()) {
+    flush();
+    return;
+  }
+  // Once per wake of the lane: what else arrives meanwhile goes in the same
+  // write. Only the control loop asks from off the lane.
+  if (flush_posted_) return;
+  flush_posted_ = true;
+  auto self = shared_from_this();
+  if (threads_ != nullptr) {
+    threads_->defer(lane_, LaneTask{[](void* c) { static_cast<Connection*>(c)->deferred_flush(); }, this, self});
+    return;
+  }
+  net::post(io_, [self] { self->deferred_flush(); });
+}
+
+void Connection::deferred_flush() {
+  Lock lock(m_);
+  flush_posted_ = false;
+  flush();
+}
+
+void Connection::flush() {
+  if (writing_ || stopped_ || !secured_) return;
   if (replies_.empty() && frames_.empty()) {
     if (close_after_flush_) stop("closed by the server");
     return;
@@ -226,6 +352,11 @@ void Connection::flush() {
   }
   writing_frames_ = !hold_heads_.empty();
   if (!writing_frames_) oldest_frame_in_flight_ = Clock::time_point::max();
+  if (buffers.empty()) {  // every waiting frame was stale
+    account();
+    if (close_after_flush_) stop("closed by the server");
+    return;
+  }
   writing_ = true;
   write_started_ = Clock::now();
   if (socket_.tls()) {
@@ -240,6 +371,7 @@ void Connection::flush() {
   }
   account();
   socket_.async_write(buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
+    Lock lock(self->m_);
     self->writing_ = false;
     self->counters_.bytes_sent += n;
     self->hold_.clear();
@@ -297,6 +429,7 @@ std::string watchdog_verdict(const LinkTimes& t, const ConnectionLimits& lim, Cl
 void Connection::arm_watchdog() {
   watchdog_.expires_after(watchdog_period(limits_, established_));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
+    Lock lock(self->m_);
     if (ec || self->stopped_) return;
     const auto now = Clock::now();
     const LinkTimes times{self->established_, self->writing_,       self->started_,
@@ -330,7 +463,8 @@ void Connection::read_prefix() {
   // Back-pressure: a client that sends requests faster than it reads the
   // replies is not read until they drain; its replies never pile up beyond
   // the cap. While the server's buffers are over budget, nor is a connection
-  // that holds more than its share of them.
+  // that holds more than its share of them; nor while a request is with the
+  // Handler (or held there).
   if (!may_read()) {
     read_paused_ = true;
     return;
@@ -338,6 +472,7 @@ void Connection::read_prefix() {
   static_assert(std::tuple_size_v<decltype(prefix_)> == wire::kLengthPrefixBytes);
   socket_.async_read(net::buffer(prefix_),
                      [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+                       Lock lock(self->m_);
                        self->on_prefix(ec);
                      });
 }
@@ -371,31 +506,62 @@ void Connection::read_body() {
   account();
   socket_.async_read(net::buffer(body_.data() + body_received_, chunk),
                      [self = shared_from_this()](const boost::system::error_code& e, std::size_t got) {
-                       self->on_body(e, got);
+                       std::optional<std::string> request;
+                       {
+                         Lock lock(self->m_);
+                         request = self->on_body(e, got);
+                       }
+                       if (request) self->hand_over(std::move(*request));
                      });
 }
 
-void Connection::on_body(const boost::system::error_code& ec, std::size_t got) {
-  if (stopped_) return;
+std::optional<std::string> Connection::on_body(const boost::system::error_code& ec, std::size_t got) {
+  if (stopped_) return std::nullopt;
   body_received_ += got;
   counters_.bytes_received += got;
   if (ec) {
     spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_,
                  body_expected_);
     stop(wire::TlsSocket::peer_closed(ec) ? std::string("truncated message") : "read failed: " + ec.message());
-    return;
+    return std::nullopt;
   }
   last_read_ = Clock::now();
   if (body_received_ < body_expected_) {
     read_body();
-    return;
+    return std::nullopt;
   }
-  handler_->on_message(body_);
+  // The request goes to the Handler; reading waits until it is answered.
+  std::string body = std::move(body_);
+  body_ = std::string();  // a large request's buffer is not kept
   body_received_ = 0;
-  body_.clear();
-  if (body_.capacity() > kBodyChunk) std::string().swap(body_);  // a large request's buffer is not kept
+  at_handler_ = true;
   account();
-  read_prefix();
+  read_prefix();  // pauses: a request is with the Handler
+  return body;
+}
+
+void Connection::hand_over(std::string body) {
+  // Without the lock: the Handler calls back into this connection, and must
+  // not hold up its lane meanwhile.
+  auto hand = [self = shared_from_this(), body = std::move(body)] {
+    {
+      Lock lock(self->m_);
+      if (self->stopped_) return;
+    }
+    self->handler_->on_message(body);
+    Lock lock(self->m_);
+    self->handed_back();
+  };
+  if (control_ == &io_) {
+    hand();
+  } else {
+    net::post(*control_, std::move(hand));
+  }
+}
+
+void Connection::handed_back() {
+  at_handler_ = false;
+  resume_reading();
 }
 
 }  // namespace gmr::server

@@ -3,7 +3,7 @@
 // one write in flight, and watches the link. It knows nothing of views,
 // streams or the protocol's requests.
 //
-//   socket --reads--> Handler::on_message(body)
+//   socket --reads--> Handler::on_message(body)       (on the control loop)
 //   send(reply) -------+
 //   push_frame(key) ---+--> outbox --one async_write at a time--> socket
 //                          replies in order, then frames; per key at most
@@ -17,21 +17,33 @@
 // prefix reserves nothing). Every byte held counts in the server-wide
 // BufferBudget: above its limit, connections holding more than their share
 // are not read and frames that would wait are dropped. With TLS, the
-// handshake comes before the first read. Everything runs on the I/O thread.
+// handshake comes before the first read.
+//
+// Threads (io_threads.h): the socket, its reads and writes and the watchdog
+// belong to the connection's lane (the io_context it was made with); the
+// Handler runs on the control loop, and so do the streams that push frames.
+// Every Outbox call may come from either thread: the state is under one
+// mutex, and socket work asked for from the control loop is posted to the
+// lane. One request is with the Handler at a time (reading waits for it), so
+// requests are answered in order, and a client flooding requests holds one
+// body on the control loop, never a queue of them.
 #pragma once
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <deque>
 #include <functional>
-#include <map>
 #include <memory>
+#include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "gmr/wire/tls_socket.h"
 #include "net.h"
 #include "frame_queue.h"
+#include "io_threads.h"
 #include "outbox.h"
 
 namespace prometheus {
@@ -41,22 +53,29 @@ class Histogram;
 namespace gmr::server {
 
 // The bytes all connections hold for their clients (replies, frames, writes
-// in flight, request bodies being read), against one limit.
+// in flight, request bodies being read), against one limit. Connections on
+// every I/O thread settle into it: the counts are atomic.
 struct BufferBudget {
+  BufferBudget(std::uint64_t limit_bytes = 0, std::uint64_t fair_share_bytes = 0)
+      : limit(limit_bytes), fair_share(fair_share_bytes) {}
   std::uint64_t limit = 0;  // 0: none
-  std::uint64_t held = 0;
-  std::uint64_t max_held = 0;  // high-water mark
   // Over the limit, a connection holding more than this is not read (one
   // holding less, say a new client, still is: stuck clients cannot lock
   // everyone out).
   std::uint64_t fair_share = 0;
-  bool over() const { return limit != 0 && held > limit; }
+  std::atomic<std::uint64_t> held{0};
+  std::atomic<std::uint64_t> max_held{0};  // high-water mark
+  bool over() const { return limit != 0 && held.load(std::memory_order_relaxed) > limit; }
   // A connection that counted `accounted` bytes now holds `now`.
   void settle(std::uint64_t& accounted, std::uint64_t now) {
-    held = held - accounted + now;
-    max_held = std::max(max_held, held);
+    const std::uint64_t h = held.fetch_add(now - accounted, std::memory_order_relaxed) + (now - accounted);
+    std::uint64_t m = max_held.load(std::memory_order_relaxed);
+    while (h > m && !max_held.compare_exchange_weak(m, h, std::memory_order_relaxed)) {
+    }
     accounted = now;
   }
+  // A connection that counted `accounted` bytes is gone.
+  void release(std::uint64_t accounted) { held.fetch_sub(accounted, std::memory_order_relaxed); }
   // Whether a connection holding `accounted` bytes may be read.
   bool allows_reading(std::uint64_t accounted) const { return !(over() && accounted > fair_share); }
 };
@@ -94,9 +113,20 @@ std::string watchdog_verdict(const LinkTimes& times, const ConnectionLimits& lim
 // A framed Heartbeat, what the server writes when it wrote nothing for a while.
 std::string heartbeat_message();
 
+// Where a connection runs: the control loop its Handler runs on (null: the
+// connection's own io_context, one thread for everything), its lane's number
+// (what stats report), and the server's I/O threads, through which writes
+// the control loop asks for reach the lane in batches (null: posted one by
+// one).
+struct ConnectionPlacement {
+  net::io_context* control = nullptr;
+  std::size_t lane = 0;
+  IoThreads* threads = nullptr;
+};
+
 class Connection final : public CountingOutbox, public std::enable_shared_from_this<Connection> {
  public:
-  // What the connection hands its messages to.
+  // What the connection hands its messages to (on the control loop).
   class Handler {
    public:
     virtual ~Handler() = default;
@@ -106,13 +136,15 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
     virtual void on_stop() = 0;
   };
 
-  // `budget` and `tls` (either may be null) outlive the connection. With
-  // `tls` the connection speaks TLS: its handshake comes first.
+  // `io`: the lane the socket belongs to. `budget` and `tls` (either may be
+  // null) outlive the connection. With `tls` the connection speaks TLS: its
+  // handshake comes first.
   Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
-             BufferBudget* budget = nullptr, net::ssl::context* tls = nullptr);
+             BufferBudget* budget = nullptr, net::ssl::context* tls = nullptr, ConnectionPlacement placement = {});
   ~Connection() override;
 
-  // Starts reading and the watchdog. `on_closed` runs once when it stopped.
+  // Starts reading and the watchdog (on the lane). `on_closed` runs once,
+  // on the control loop, when it stopped.
   void start(std::shared_ptr<Handler> handler, std::function<void(std::uint64_t id)> on_closed);
   // Ends the connection now: the handler's on_stop, then the socket closes.
   // Idempotent.
@@ -124,8 +156,9 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   // of send_frames_now go into the reply queue, so an end notice follows its
   // last frames.
   std::uint64_t id() const override { return id_; }
-  bool stopped() const override { return stopped_; }
-  bool closing() const override { return stopped_ || close_after_flush_; }
+  std::size_t lane() const override { return lane_; }
+  bool stopped() const override;
+  bool closing() const override;
   void send(std::string framed) override;
   bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
                   Clock::duration max_age = {}) override;
@@ -134,8 +167,12 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   void discard_frames(std::uint32_t key) override;
   void send_frames_now(std::uint32_t key) override;
   void close_after_reply() override;
-  void established() override { established_ = true; }
+  void established() override;
   void hold_reading(bool hold) override;
+  void count_udp_frame_sent() override;
+  void count_udp_frame_dropped() override;
+  void count_frame_dropped(std::uint64_t n) override;
+  void count_frame_skipped(std::uint64_t n) override;
   const std::string& peer_address() const { return peer_address_; }
   // Observes, per write that carried frames, how long its oldest frame
   // waited from push_frame to the write's completion (seconds).
@@ -143,13 +180,28 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   ConnectionCounters counters() const override;
 
  private:
-  // The read chain: prefix, then body, then the handler, then the next
-  // prefix; it pauses while replies wait above max_reply_queue_bytes and
-  // flush() resumes it.
+  using Lock = std::lock_guard<std::recursive_mutex>;
+
+  // Everything below runs with m_ held (but hand_over). On the lane only:
+  // read_prefix, on_prefix, read_body, on_body, flush, arm_watchdog.
+  bool on_lane() const { return io_.get_executor().running_in_this_thread(); }
+  // Runs `f` on the lane (now, when this is the lane's thread).
+  template <class F>
+  void on_lane_do(F&& f);
+  // A write, now on the lane or handed there once.
+  void request_flush();
+  void deferred_flush();  // on the lane, locks
+  // Reading resumes (on the lane) when it was paused and may go on.
+  void resume_reading();
   void read_prefix();
   void on_prefix(const boost::system::error_code& ec);
   void read_body();
-  void on_body(const boost::system::error_code& ec, std::size_t got);
+  // A whole request body, for hand_over (called without m_).
+  std::optional<std::string> on_body(const boost::system::error_code& ec, std::size_t got);
+  // Gives a request to the Handler on the control loop; when it has
+  // answered (handed_back), reading goes on.
+  void hand_over(std::string body);
+  void handed_back();
   void flush();
   void arm_watchdog();
   std::uint64_t queued_bytes() const { return reply_bytes_ + frames_.bytes() + in_flight_bytes_; }
@@ -159,6 +211,13 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   // Reading may go on: replies and the budget allow it.
   bool may_read() const;
 
+  // Guards everything below that is not const after start(). Recursive: a
+  // stop() may come from inside a locked step (a write that failed).
+  mutable std::recursive_mutex m_;
+  net::io_context& io_;
+  net::io_context* control_;  // where the Handler and on_closed run
+  std::size_t lane_;
+  IoThreads* threads_;
   wire::TlsSocket socket_;
   std::uint64_t id_;
   ConnectionLimits limits_;
@@ -170,8 +229,11 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   std::function<void(std::uint64_t)> on_closed_;
   bool stopped_ = false;
   bool close_after_flush_ = false;
+  bool close_on_next_reply_ = false;  // close_after_reply: the next send() closes after it
   bool read_paused_ = false;
   bool reads_held_ = false;  // hold_reading
+  bool at_handler_ = false;  // a request body is with the Handler
+  bool flush_posted_ = false;
   BufferBudget* budget_;
   std::uint64_t accounted_ = 0;  // what this connection added to budget_->held
   std::array<std::uint8_t, 4> prefix_{};

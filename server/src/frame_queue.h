@@ -35,10 +35,13 @@ class FrameQueue {
 
   FrameQueue(std::size_t per_key, std::size_t max_bytes) : per_key_(std::max<std::size_t>(1, per_key)), max_bytes_(max_bytes) {}
 
-  // Queues `f` for `key`. `writing`: a write is in flight (without one the
-  // frame goes out at once, so the byte bound does not apply); `over_budget`:
-  // the server-wide buffer budget is exceeded (a frame that would wait is
-  // dropped). False when a frame was dropped (counted in `c`).
+  // Queues `f` for `key`. `writing`: a write is in flight, behind which
+  // frames wait for the client to read (the per-key and byte bounds apply).
+  // Without one the frame goes out with the next write, soon (at once, or
+  // when its I/O thread takes the write the control loop handed it): it is
+  // kept whatever the per-key bound, within twice the byte bound.
+  // `over_budget`: the server-wide buffer budget is exceeded (a frame that
+  // would wait is dropped). False when a frame was dropped (counted in `c`).
   bool push(std::uint32_t key, PendingFrame f, bool writing, bool over_budget, ConnectionCounters& c) {
     const std::uint64_t size = f.size();
     if (writing && over_budget) {
@@ -47,9 +50,15 @@ class FrameQueue {
     }
     bool kept_all = true;
     auto& queue = frames_[key];
-    if (queue.size() >= per_key_) {
+    if (writing && queue.size() >= per_key_) {
       pop_front(queue, c);
       kept_all = false;
+    }
+    if (!writing && max_bytes_ != 0 && bytes_ + size > 2 * max_bytes_) {
+      // A lane that does not come round (a starved thread): bounded all the same.
+      if (queue.empty()) frames_.erase(key);
+      ++c.frames_dropped;
+      return false;
     }
     if (writing && max_bytes_ != 0) {
       // The oldest of this key give way; a frame that would still not fit

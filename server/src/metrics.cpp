@@ -135,6 +135,14 @@ std::string Metrics::text(Server::Impl& s) const {
     f.add("gmr_connections_accepted_total", "Client connections accepted", T::Counter,
           it == s.accepted.end() ? 0.0 : static_cast<double>(it->second), {{"transport", transport}});
   }
+  if (s.lanes) {
+    f.add("gmr_io_threads", "Threads the sockets' work runs on, the control loop included (--io-threads)", T::Gauge,
+          static_cast<double>(s.lanes->size()));
+    for (std::size_t lane = 0; lane < s.lanes->size(); ++lane) {
+      f.add("gmr_io_thread_connections", "TCP connections whose socket work runs on each I/O thread (0: the control loop)",
+            T::Gauge, static_cast<double>(s.lanes->connections(lane)), {{"thread", std::to_string(lane)}});
+    }
+  }
   f.add("gmr_connections_refused_total", "Connections refused for a connection limit (TCP and WebSocket)", T::Counter,
         static_cast<double>(s.connections_refused));
   f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter, static_cast<double>(s.auth_refused));
@@ -190,7 +198,7 @@ std::string Metrics::text(Server::Impl& s) const {
   f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm",
         T::Counter, static_cast<double>(s.udp.rejected()));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,
-        static_cast<double>(s.buffers.held));
+        static_cast<double>(s.buffers.held.load()));
   f.add("gmr_view_bytes", "Motion bytes edited views own", T::Gauge, static_cast<double>(s.view_bytes));
 
   auto families = registry_->Collect();

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -42,6 +43,8 @@ class Outbox {
   virtual std::uint64_t id() const = 0;
   // "tcp" or "websocket": what metrics label its counts with.
   virtual const char* transport() const { return "tcp"; }
+  // The I/O thread its socket work runs on (io_threads.h); 0: the control loop.
+  virtual std::size_t lane() const { return 0; }
   // Stopped: nothing more goes out.
   virtual bool stopped() const = 0;
   // Stopped, or finishing: no more frames are taken.

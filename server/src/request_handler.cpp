@@ -39,7 +39,9 @@ RequestHandler::RequestHandler(Server::Impl& server, const std::shared_ptr<Outbo
     : server_(server),
       connection_(outbox),
       connection_id_(outbox->id()),
-      udp_(std::make_shared<UdpPublisher::Registration>()) {}
+      udp_(std::make_shared<UdpPublisher::Registration>()) {
+  udp_->lane = outbox->lane();  // its UDP frames leave from its connection's I/O thread
+}
 
 void RequestHandler::start() {
   token_ = server_.udp.add_session([weak = weak_from_this()](const udp::endpoint& ep) {
@@ -537,6 +539,8 @@ Reply RequestHandler::stats() {
   st->set_live_frames_received(server_.live_frames_received);
   st->set_live_frames_refused(server_.live_frames_refused);
   st->set_multicast_frames_sent(server_.multicast_frames_sent);
+  st->set_io_threads(static_cast<std::uint32_t>(server_.lanes ? server_.lanes->size() : 1));
+  if (auto conn = connection_.lock()) st->set_io_thread(static_cast<std::uint32_t>(conn->lane()));
   return out;
 }
 

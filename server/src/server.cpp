@@ -3,6 +3,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <unistd.h>
+
 #include <spdlog/spdlog.h>
 
 #include "calibrate.h"
@@ -66,6 +68,7 @@ std::shared_ptr<const CompiledForm> Server::Impl::compiled_form(std::size_t entr
 void Server::Impl::connection_closed(std::uint64_t id) {
   auto it = connections.find(id);
   if (it == connections.end()) return;
+  if (it->second.counted_on_lane) lanes->release(it->second.lane);
   if (auto c = it->second.connection.lock()) closed_counters[c->transport()].add_totals(c->counters());
   if (auto n = per_address.find(it->second.address); n != per_address.end() && --n->second == 0) per_address.erase(n);
   connections.erase(it);
@@ -88,14 +91,44 @@ void Server::Impl::accept_loop() {
       if (std::string why = admit(address); !why.empty()) {
         refuse(std::move(socket), why);
       } else {
-        const std::uint64_t id = next_connection_id++;
-        auto c = std::make_shared<Connection>(io, std::move(socket), id, connection_limits(), &buffers, tls.get());
-        c->set_frame_wait_histogram(&metrics.frame_wait(c->transport()));
-        c->start(add_connection(c, address), [this](std::uint64_t closed) { connection_closed(closed); });
+        accept_connection(std::move(socket), address);
       }
     }
     accept_loop();
   });
+}
+
+void Server::Impl::accept_connection(tcp::socket socket, const std::string& address) {
+  const std::size_t lane = lanes->assign();
+  if (lane != 0) {
+    // The descriptor moves to the lane's io_context: its reads, writes and
+    // timers run on that thread from now on.
+    boost::system::error_code ec;
+    const auto protocol = socket.local_endpoint(ec).protocol();
+    tcp::socket moved(lanes->io(lane));
+    if (!ec) {
+      const auto fd = socket.release(ec);
+      if (!ec) {
+        moved.assign(protocol, fd, ec);
+        if (ec) ::close(fd);
+      }
+    }
+    if (ec) {
+      spdlog::warn("cannot move a connection to I/O thread {}: {}", lane, ec.message());
+      lanes->release(lane);
+      return;
+    }
+    socket = std::move(moved);
+  }
+  const std::uint64_t id = next_connection_id++;
+  auto c = std::make_shared<Connection>(lanes->io(lane), std::move(socket), id, connection_limits(), &buffers,
+                                        tls.get(), ConnectionPlacement{&io, lane, lanes.get()});
+  c->set_frame_wait_histogram(&metrics.frame_wait(c->transport()));
+  auto handler = add_connection(c, address);
+  auto& entry = connections[id];
+  entry.lane = lane;
+  entry.counted_on_lane = true;
+  c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
 }
 
 std::string Server::Impl::admit(const std::string& address) {
@@ -164,6 +197,7 @@ void Server::Impl::begin_stop() {
 ServerStats Server::Impl::snapshot() {
   ServerStats st;
   st.connections = connections.size();
+  st.io_threads = lanes ? lanes->size() : 1;
   st.streams = streams.active();
   st.frames_computed = counters.frames_computed;
   st.frames_computed_float = counters.frames_computed_float;
@@ -176,8 +210,8 @@ ServerStats Server::Impl::snapshot() {
   st.committed_frames_per_second = static_cast<double>(committed_mhz) / 1000.0;
   st.send_budget = cfg.send_budget;
   st.subscriptions_refused = subscriptions_refused;
-  st.buffered_bytes = buffers.held;
-  st.max_buffered_bytes = buffers.max_held;
+  st.buffered_bytes = buffers.held.load();
+  st.max_buffered_bytes = buffers.max_held.load();
   st.view_bytes = view_bytes;
   for (auto& [id, entry] : connections) {
     auto c = entry.connection.lock();
@@ -190,6 +224,7 @@ ServerStats Server::Impl::snapshot() {
     s.frames_skipped = k.frames_skipped;
     s.queued_bytes = k.queued_bytes;
     s.max_queued_bytes = k.max_queued_bytes;
+    s.io_thread = entry.lane;
     auto h = entry.handler.lock();
     s.udp_registered = h && h->udp()->endpoint.has_value();
     st.sessions.push_back(s);
@@ -279,7 +314,8 @@ void Server::start() {
   const std::uint16_t udp_port = d.cfg.udp_port >= 0 ? static_cast<std::uint16_t>(d.cfg.udp_port)
                                  : d.cfg.port == 0   ? std::uint16_t{0}
                                                      : d.tcp_port;
-  d.udp.open(address, udp_port);
+  d.lanes = std::make_unique<IoThreads>(d.io, io_thread_count(d.cfg.io_threads));
+  d.udp.open(address, udp_port, d.lanes.get());
   if (!d.cfg.multicast_group.empty()) {
     d.multicast = d.udp.open_multicast(d.cfg.multicast_group, d.cfg.multicast_port, d.cfg.multicast_ttl);
     spdlog::info("shared streams may go to multicast {}:{} (TTL {})", d.cfg.multicast_group, d.cfg.multicast_port,
@@ -310,13 +346,15 @@ void Server::start() {
   if (d.ready) d.accept_loop();
   d.udp.start();
   d.http.start();
-  spdlog::info("serving {} on tcp{} {}:{} and udp {}:{}{}{}",
+  spdlog::info("serving {} on tcp{} {}:{} and udp {}:{}{}{} ({} I/O thread{})",
                d.ready ? std::to_string(d.library.size()) + " motions" : std::string("(library loading)"),
                d.tls ? " (TLS)" : "", d.cfg.bind_address, d.tcp_port, d.cfg.bind_address, d.udp.port(),
                d.http.port() != 0 ? ", http " + d.cfg.bind_address + ":" + std::to_string(d.http.port()) : std::string(),
                d.cfg.credentials ? ", " + std::to_string(d.cfg.credentials->size()) + " tokens, anonymous clients " +
                                        role_name(d.cfg.anonymous)
-                                 : std::string());
+                                 : std::string(),
+               d.lanes->size(), d.lanes->size() == 1 ? "" : "s");
+  d.lanes->start();
   d.thread = std::thread([impl = impl_] {
     try {
       impl->io.run();
@@ -344,6 +382,7 @@ void Server::wait() {
   if (!d.started) return;
   d.stopped_future.wait();
   if (d.thread.joinable()) d.thread.join();
+  if (d.lanes) d.lanes->join();  // their connections closed with the control loop's last work
   d.edit_pool.join();  // an edit still running finishes; its answer has no loop to run in
   if (d.relay) d.relay->stop();
   for (auto& r : d.recordings) r.wait();  // the I/O thread is done: nobody adds one

@@ -1,5 +1,7 @@
 // Private to the server: what the listener, the request handlers and the
-// streams share. Touched only on the I/O thread.
+// streams share. Touched only on the control loop (io), but for what says
+// otherwise: connections live on their I/O threads (io_threads.h) and guard
+// their own state; `buffers` is atomic.
 //
 //   Listener --accept--> Connection (TCP) ------+
 //   HttpListener --/ws--> WsConnection (WebSocket) --bodies--> RequestHandler (views, subscriptions)
@@ -19,6 +21,7 @@
 
 #include "connection.h"
 #include "http_server.h"
+#include "io_threads.h"
 #include "live.h"
 #include "relay.h"
 #include "targets.h"
@@ -86,7 +89,7 @@ struct Server::Impl {
 
   // Declared before io: connections that io's handlers still hold at
   // destruction give their bytes back to it.
-  BufferBudget buffers{cfg.max_buffered_bytes, 0, 0, cfg.max_buffered_bytes / std::max<std::size_t>(1, cfg.max_connections)};
+  BufferBudget buffers{cfg.max_buffered_bytes, cfg.max_buffered_bytes / std::max<std::size_t>(1, cfg.max_connections)};
   // Bytes of motions that views own (edited copies, docs/protocol.md).
   std::uint64_t view_bytes = 0;
   // Frames per second the subscriptions ask for, in millihertz (integers:
@@ -94,6 +97,10 @@ struct Server::Impl {
   std::uint64_t committed_mhz = 0;
   std::uint64_t subscriptions_refused = 0;  // for the send budget
 
+  // The I/O threads (made by start()): lane 0 is io below. Declared before
+  // io: what io's handlers still hold when it goes (connections) may own
+  // sockets of the other lanes, which must outlive them.
+  std::unique_ptr<IoThreads> lanes;
   net::io_context io;
   tcp::acceptor acceptor{io};
   UdpPublisher udp{io, cfg.max_udp_datagrams_in_flight};
@@ -120,6 +127,8 @@ struct Server::Impl {
     std::weak_ptr<Outbox> connection;
     std::weak_ptr<RequestHandler> handler;
     std::string address;  // the client's IP address
+    std::size_t lane = 0;  // its I/O thread (WebSocket clients are on the control loop)
+    bool counted_on_lane = false;  // IoThreads::assign counted it (TCP)
   };
   std::map<std::uint64_t, ConnectionEntry> connections;
   std::map<std::string, std::size_t> per_address;  // open connections by IP address
@@ -154,6 +163,8 @@ struct Server::Impl {
   // request handler; returns the handler, which the caller starts the
   // connection with.
   std::shared_ptr<RequestHandler> add_connection(const std::shared_ptr<Outbox>& outbox, const std::string& address);
+  // An accepted TCP socket as a Connection on the least busy I/O thread.
+  void accept_connection(tcp::socket socket, const std::string& address);
   // Installs the library (set_library), on the I/O thread.
   void install_library(std::vector<LibraryEntry> entries);
   void begin_stop();

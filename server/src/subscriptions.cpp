@@ -257,10 +257,12 @@ void RequestHandler::view_changed(const View& v) {
       ended.emplace_back(id, "the view changed: a multicast subscription follows its shared stream (subscribe again)");
       continue;
     }
-    // The new skeleton goes out before any frame of its version: replies
-    // and pushes are written before waiting frames (connection.h).
+    // The new skeleton goes out before any frame of its version (replies
+    // and pushes are written before waiting frames, connection.h), and
+    // after every frame of the old one: those still waiting go first.
     if (v.content()->skeleton_version != sub.skeleton_version) {
       sub.skeleton_version = v.content()->skeleton_version;
+      if (auto conn = connection_.lock()) conn->send_frames_now(id);
       pb::ServerMessage m;
       auto* c = m.mutable_skeleton_changed();
       c->set_subscription_id(id);

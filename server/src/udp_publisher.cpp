@@ -5,11 +5,14 @@
 #include <netinet/udp.h>
 #include <sys/random.h>
 #include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cerrno>
 #include <cstring>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 
@@ -17,10 +20,248 @@
 
 namespace gmr::server {
 
+#ifndef UDP_SEGMENT
+#define UDP_SEGMENT 103  // linux/udp.h, for C libraries that predate it
+#endif
+
+namespace {
+
+// UDP GSO limits: at most 64 segments, and the whole message within one
+// IP datagram's 64 KiB.
+constexpr std::size_t kMaxGsoSegments = std::min<std::size_t>(64, 65000 / wire::kMaxDatagramBytes);
+// Entries per sendmmsg call (the kernel caps a call at UIO_MAXIOV, 1024).
+constexpr std::size_t kSendBatch = 256;
+// Datagrams read per pass of the event loop.
+constexpr int kReceiveBatch = 64;
+
+}  // namespace
+
+// One I/O thread's sending: a batch the control loop appends to (under m_)
+// and the lane sends (sendmmsg), through its own descriptor of the socket.
+//
+//   control loop: send() --append--> filling_ --(lane takes it)--> sending_ --sendmmsg--> kernel
+//
+// flush_posted_ is true from the first append until the lane finds nothing
+// left to send, so one flush at a time runs, and none is lost.
+class UdpPublisher::Sender {
+ public:
+  // `threads` (may be null): where the lane's flushes are handed, batched.
+  Sender(net::io_context& io, udp::socket& main, std::size_t max_in_flight, IoThreads* threads, std::size_t lane)
+      : socket_(io), max_in_flight_(max_in_flight), threads_(threads), lane_(lane) {
+    const int fd = ::dup(main.native_handle());
+    if (fd < 0) throw std::runtime_error(std::string("cannot duplicate the UDP socket: ") + std::strerror(errno));
+    boost::system::error_code ec;
+    socket_.assign(main.local_endpoint().protocol(), fd, ec);
+    if (ec) {
+      ::close(fd);
+      throw std::runtime_error("cannot use the UDP socket on an I/O thread: " + ec.message());
+    }
+  }
+
+  bool send(const std::shared_ptr<Registration>& to, std::string_view message) {
+    std::lock_guard lock(m_);
+    if (closed_ || !to->endpoint) return false;
+    if (to->in_flight + wire::fragment_count(message.size()) > max_in_flight_) return false;
+    std::size_t at = filling_.bytes.size();
+    const std::size_t appended = wire::append_fragments(filling_.bytes, to->next_message_id++, message);
+    const std::size_t end = filling_.bytes.size();
+    // Without GSO every datagram is its own entry; with it, runs of up to
+    // kMaxGsoSegments share one.
+    const std::size_t per_entry = gso_.load(std::memory_order_relaxed) ? kMaxGsoSegments : 1;
+    for (std::size_t done = 0; done < appended;) {
+      const std::size_t n = std::min(per_entry, appended - done);
+      const std::size_t bytes = std::min(n * wire::kMaxDatagramBytes, end - at);
+      filling_.entries.push_back(Batched{at, bytes, n, *to->endpoint, to});
+      at += bytes;
+      done += n;
+    }
+    to->in_flight += appended;
+    if (!flush_posted_) {
+      flush_posted_ = true;
+      // After the control loop's pass: its whole fan-out in one batch.
+      if (threads_ != nullptr) {
+        threads_->defer(lane_, LaneTask{[](void* s) { static_cast<Sender*>(s)->flush(); }, this, nullptr});
+      } else {
+        net::post(socket_.get_executor(), [this] { flush(); });
+      }
+    }
+    return true;
+  }
+
+  // No more sends; what waits is given back, and the lane closes its descriptor.
+  void close() {
+    {
+      std::lock_guard lock(m_);
+      closed_ = true;
+    }
+    net::post(socket_.get_executor(), [this] {
+      boost::system::error_code ec;
+      socket_.close(ec);
+      flush();  // gives back what waits (a flush waiting for room ends with operation_aborted)
+    });
+  }
+
+  std::uint64_t send_calls() const { return send_calls_.load(std::memory_order_relaxed); }
+  std::uint64_t datagrams_sent() const { return datagrams_sent_.load(std::memory_order_relaxed); }
+
+ private:
+  // Consecutive fragments of one frame to one address: one sendmmsg entry
+  // (a GSO message when `count` > 1).
+  struct Batched {
+    std::size_t offset = 0;  // into Batch::bytes
+    std::size_t bytes = 0;
+    std::size_t count = 0;   // datagrams
+    udp::endpoint to;
+    std::shared_ptr<Registration> registration;
+  };
+  struct Batch {
+    std::string bytes;
+    std::vector<Batched> entries;
+    void clear() {
+      entries.clear();
+      bytes.clear();
+      if (bytes.capacity() > (std::size_t{4} << 20)) bytes.shrink_to_fit();  // after a burst
+    }
+  };
+
+  // Gives entries [first, end) of `b` back to their registrations, unsent (m_ held).
+  static void release(Batch& b, std::size_t first) {
+    for (std::size_t i = first; i < b.entries.size(); ++i) b.entries[i].registration->in_flight -= b.entries[i].count;
+  }
+
+  // On the lane: sends what was appended until nothing is left, or the
+  // socket is full (it goes on when writable), or closed.
+  void flush() {
+    for (;;) {
+      {
+        std::lock_guard lock(m_);
+        if (closed_) {
+          release(sending_, sent_);
+          release(filling_, 0);
+          sending_.clear();
+          filling_.clear();
+          sent_ = 0;
+          return;
+        }
+        if (sent_ == sending_.entries.size()) {
+          sending_.clear();
+          sent_ = 0;
+          if (filling_.entries.empty()) {
+            flush_posted_ = false;
+            return;
+          }
+          std::swap(filling_, sending_);
+        }
+      }
+      if (!send_some()) return;
+    }
+  }
+
+  // Hands sending_ from sent_ on to the kernel. False when the socket is
+  // full: a wait for room is armed, which flushes again.
+  bool send_some() {
+    std::array<mmsghdr, kSendBatch> msgs;
+    std::array<iovec, kSendBatch> iovs;
+    alignas(cmsghdr) std::array<char, kSendBatch * CMSG_SPACE(sizeof(std::uint16_t))> controls;
+    const int fd = socket_.native_handle();
+    while (sent_ < sending_.entries.size()) {
+      const std::size_t n = std::min(kSendBatch, sending_.entries.size() - sent_);
+      for (std::size_t i = 0; i < n; ++i) {
+        Batched& b = sending_.entries[sent_ + i];
+        iovs[i] = iovec{sending_.bytes.data() + b.offset, b.bytes};
+        msghdr& h = msgs[i].msg_hdr;
+        h = msghdr{};
+        h.msg_name = b.to.data();
+        h.msg_namelen = static_cast<socklen_t>(b.to.size());
+        h.msg_iov = &iovs[i];
+        h.msg_iovlen = 1;
+        if (b.count > 1) {
+          char* control = controls.data() + i * CMSG_SPACE(sizeof(std::uint16_t));
+          h.msg_control = control;
+          h.msg_controllen = CMSG_SPACE(sizeof(std::uint16_t));
+          cmsghdr* c = CMSG_FIRSTHDR(&h);
+          c->cmsg_level = SOL_UDP;
+          c->cmsg_type = UDP_SEGMENT;
+          c->cmsg_len = CMSG_LEN(sizeof(std::uint16_t));
+          const auto segment = static_cast<std::uint16_t>(wire::kMaxDatagramBytes);
+          std::memcpy(CMSG_DATA(c), &segment, sizeof segment);
+        }
+      }
+      const int sent = ::sendmmsg(fd, msgs.data(), static_cast<unsigned>(n), MSG_DONTWAIT);
+      send_calls_.fetch_add(1, std::memory_order_relaxed);
+      if (sent > 0) {
+        std::size_t datagrams = 0;
+        {
+          std::lock_guard lock(m_);
+          for (int i = 0; i < sent; ++i) {
+            Batched& b = sending_.entries[sent_ + static_cast<std::size_t>(i)];
+            b.registration->in_flight -= b.count;
+            datagrams += b.count;
+          }
+        }
+        datagrams_sent_.fetch_add(datagrams, std::memory_order_relaxed);
+        sent_ += static_cast<std::size_t>(sent);
+        continue;
+      }
+      const int err = sent < 0 ? errno : EAGAIN;
+      if (err == EINTR) continue;
+      if (err == EAGAIN || err == EWOULDBLOCK || err == ENOBUFS) {
+        // The socket buffer is full: the rest goes when the kernel has room.
+        socket_.async_wait(udp::socket::wait_write, [this](const boost::system::error_code& ec) {
+          if (ec == net::error::operation_aborted) {
+            std::lock_guard lock(m_);
+            closed_ = true;
+          }
+          flush();
+        });
+        return false;
+      }
+      // The first entry failed on its own (an address the kernel will not
+      // send to, or a GSO message the device cannot segment): it is lost, as
+      // any datagram may be, and the rest still go.
+      Batched& b = sending_.entries[sent_];
+      if (b.count > 1 && (err == EIO || err == EINVAL || err == ENOPROTOOPT)) {
+        if (gso_.exchange(false)) {
+          spdlog::warn("UDP: the kernel refuses GSO messages ({}); sending each datagram on its own from now on",
+                       std::strerror(err));
+        }
+      } else if (rejected_sends_++ % 1000 == 0) {
+        spdlog::warn("UDP: cannot send {} bytes to {}:{}: {} ({} so far)", b.bytes, b.to.address().to_string(),
+                     b.to.port(), std::strerror(err), rejected_sends_);
+      }
+      {
+        std::lock_guard lock(m_);
+        b.registration->in_flight -= b.count;
+      }
+      ++sent_;
+    }
+    return true;
+  }
+
+  std::mutex m_;
+  udp::socket socket_;
+  std::size_t max_in_flight_;
+  IoThreads* threads_;
+  std::size_t lane_;
+  // Guarded by m_:
+  Batch filling_;
+  bool flush_posted_ = false;
+  bool closed_ = false;
+  // The lane's alone:
+  Batch sending_;
+  std::size_t sent_ = 0;  // entries of sending_ handed to the kernel
+  std::uint64_t rejected_sends_ = 0;
+  std::atomic<bool> gso_{true};  // until the kernel refuses a GSO message
+  std::atomic<std::uint64_t> send_calls_{0};
+  std::atomic<std::uint64_t> datagrams_sent_{0};
+};
+
 UdpPublisher::UdpPublisher(net::io_context& io, std::size_t max_in_flight)
     : socket_(io), max_in_flight_(max_in_flight) {}
 
-void UdpPublisher::open(const net::ip::address& address, std::uint16_t port) {
+UdpPublisher::~UdpPublisher() = default;
+
+void UdpPublisher::open(const net::ip::address& address, std::uint16_t port, IoThreads* threads) {
   const udp::endpoint ep(address, port);
   boost::system::error_code ec;
   socket_.open(ep.protocol(), ec);
@@ -32,6 +273,14 @@ void UdpPublisher::open(const net::ip::address& address, std::uint16_t port) {
   port_ = socket_.local_endpoint().port();
   // Reads past the first datagram of a pass (receive()) must not block.
   socket_.non_blocking(true, ec);
+  if (threads == nullptr) {
+    senders_.push_back(std::make_unique<Sender>(static_cast<net::io_context&>(socket_.get_executor().context()),
+                                                socket_, max_in_flight_, nullptr, 0));
+    return;
+  }
+  for (std::size_t lane = 0; lane < threads->size(); ++lane) {
+    senders_.push_back(std::make_unique<Sender>(threads->io(lane), socket_, max_in_flight_, threads, lane));
+  }
 }
 
 std::shared_ptr<UdpPublisher::Registration> UdpPublisher::open_multicast(const std::string& group, std::uint16_t port,
@@ -65,6 +314,19 @@ void UdpPublisher::close() {
   closed_ = true;
   boost::system::error_code ec;
   socket_.close(ec);
+  for (auto& s : senders_) s->close();
+}
+
+std::uint64_t UdpPublisher::send_calls() const {
+  std::uint64_t n = 0;
+  for (const auto& s : senders_) n += s->send_calls();
+  return n;
+}
+
+std::uint64_t UdpPublisher::datagrams_sent() const {
+  std::uint64_t n = 0;
+  for (const auto& s : senders_) n += s->datagrams_sent();
+  return n;
 }
 
 namespace {
@@ -112,134 +374,9 @@ UdpPublisher::Session* UdpPublisher::find(const wire::UdpToken& token) {
   return &it->second;
 }
 
-#ifndef UDP_SEGMENT
-#define UDP_SEGMENT 103  // linux/udp.h, for C libraries that predate it
-#endif
-
-namespace {
-
-// UDP GSO limits: at most 64 segments, and the whole message within one
-// IP datagram's 64 KiB.
-constexpr std::size_t kMaxGsoSegments = std::min<std::size_t>(64, 65000 / wire::kMaxDatagramBytes);
-// Entries per sendmmsg call (the kernel caps a call at UIO_MAXIOV, 1024).
-constexpr std::size_t kSendBatch = 256;
-// Datagrams read per pass of the event loop.
-constexpr int kReceiveBatch = 64;
-
-}  // namespace
-
 bool UdpPublisher::send(const std::shared_ptr<Registration>& to, std::string_view message) {
-  if (closed_ || !to->endpoint) return false;
-  if (to->in_flight + wire::fragment_count(message.size()) > max_in_flight_) return false;
-  std::size_t at = batch_bytes_.size();
-  const std::size_t appended = wire::append_fragments(batch_bytes_, to->next_message_id++, message);
-  const std::size_t end = batch_bytes_.size();
-  // Without GSO every datagram is its own entry; with it, runs of up to
-  // kMaxGsoSegments share one.
-  const std::size_t per_entry = gso_ ? kMaxGsoSegments : 1;
-  for (std::size_t done = 0; done < appended;) {
-    const std::size_t n = std::min(per_entry, appended - done);
-    const std::size_t bytes = std::min(n * wire::kMaxDatagramBytes, end - at);
-    batch_.push_back(Batched{at, bytes, n, *to->endpoint, to});
-    at += bytes;
-    done += n;
-  }
-  to->in_flight += appended;
-  if (!flush_posted_ && !awaiting_writable_) {
-    flush_posted_ = true;
-    net::post(socket_.get_executor(), [this] {
-      flush_posted_ = false;
-      flush();
-    });
-  }
-  return true;
-}
-
-void UdpPublisher::release(std::size_t first) {
-  for (std::size_t i = first; i < batch_.size(); ++i) batch_[i].registration->in_flight -= batch_[i].count;
-}
-
-void UdpPublisher::flush() {
-  if (closed_) {
-    release(batch_sent_);
-    clear_batch();
-    return;
-  }
-  std::array<mmsghdr, kSendBatch> msgs;
-  std::array<iovec, kSendBatch> iovs;
-  alignas(cmsghdr) std::array<char, kSendBatch * CMSG_SPACE(sizeof(std::uint16_t))> controls;
-  const int fd = socket_.native_handle();
-  while (batch_sent_ < batch_.size()) {
-    const std::size_t n = std::min(kSendBatch, batch_.size() - batch_sent_);
-    for (std::size_t i = 0; i < n; ++i) {
-      Batched& b = batch_[batch_sent_ + i];
-      iovs[i] = iovec{batch_bytes_.data() + b.offset, b.bytes};
-      msghdr& h = msgs[i].msg_hdr;
-      h = msghdr{};
-      h.msg_name = b.to.data();
-      h.msg_namelen = static_cast<socklen_t>(b.to.size());
-      h.msg_iov = &iovs[i];
-      h.msg_iovlen = 1;
-      if (b.count > 1) {
-        char* control = controls.data() + i * CMSG_SPACE(sizeof(std::uint16_t));
-        h.msg_control = control;
-        h.msg_controllen = CMSG_SPACE(sizeof(std::uint16_t));
-        cmsghdr* c = CMSG_FIRSTHDR(&h);
-        c->cmsg_level = SOL_UDP;
-        c->cmsg_type = UDP_SEGMENT;
-        c->cmsg_len = CMSG_LEN(sizeof(std::uint16_t));
-        const auto segment = static_cast<std::uint16_t>(wire::kMaxDatagramBytes);
-        std::memcpy(CMSG_DATA(c), &segment, sizeof segment);
-      }
-    }
-    const int sent = ::sendmmsg(fd, msgs.data(), static_cast<unsigned>(n), MSG_DONTWAIT);
-    ++send_calls_;
-    if (sent > 0) {
-      for (int i = 0; i < sent; ++i) {
-        Batched& b = batch_[batch_sent_ + static_cast<std::size_t>(i)];
-        b.registration->in_flight -= b.count;
-        datagrams_sent_ += b.count;
-      }
-      batch_sent_ += static_cast<std::size_t>(sent);
-      continue;
-    }
-    const int err = sent < 0 ? errno : EAGAIN;
-    if (err == EINTR) continue;
-    if (err == EAGAIN || err == EWOULDBLOCK || err == ENOBUFS) {
-      // The socket buffer is full: the rest goes when the kernel has room.
-      awaiting_writable_ = true;
-      socket_.async_wait(udp::socket::wait_write, [this](const boost::system::error_code& ec) {
-        awaiting_writable_ = false;
-        if (ec == net::error::operation_aborted) closed_ = true;
-        flush();
-      });
-      return;
-    }
-    // The first entry failed on its own (an address the kernel will not send
-    // to, or a GSO message the device cannot segment): it is lost, as any
-    // datagram may be, and the rest still go.
-    Batched& b = batch_[batch_sent_];
-    if (b.count > 1 && (err == EIO || err == EINVAL || err == ENOPROTOOPT)) {
-      if (gso_) {
-        gso_ = false;
-        spdlog::warn("UDP: the kernel refuses GSO messages ({}); sending each datagram on its own from now on",
-                     std::strerror(err));
-      }
-    } else if (rejected_sends_++ % 1000 == 0) {
-      spdlog::warn("UDP: cannot send {} bytes to {}:{}: {} ({} so far)", b.bytes, b.to.address().to_string(),
-                   b.to.port(), std::strerror(err), rejected_sends_);
-    }
-    b.registration->in_flight -= b.count;
-    ++batch_sent_;
-  }
-  clear_batch();
-}
-
-void UdpPublisher::clear_batch() {
-  batch_.clear();
-  batch_bytes_.clear();
-  batch_sent_ = 0;
-  if (batch_bytes_.capacity() > (std::size_t{4} << 20)) batch_bytes_.shrink_to_fit();  // after a burst
+  if (closed_ || to->lane >= senders_.size()) return false;
+  return senders_[to->lane]->send(to, message);
 }
 
 void UdpPublisher::receive() {

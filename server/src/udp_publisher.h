@@ -9,6 +9,13 @@
 // (so one tick's fan-out is one batch) with sendmmsg(2), a frame's fragments
 // as one UDP GSO message (UDP_SEGMENT) where the kernel takes it. A full
 // socket buffer parks the batch until the socket is writable.
+//
+// Threads (io_threads.h): registrations are read and answered on the control
+// loop. Sending has one sender per I/O thread (a duplicate of the socket's
+// descriptor, so every datagram leaves from the one port): a registration
+// is sent through its lane's sender (Registration::lane, its connection's),
+// so the kernel's work for a frame runs on that lane while send() itself
+// only appends, from the control loop, under the sender's lock.
 #pragma once
 
 #include <array>
@@ -23,6 +30,7 @@
 #include <vector>
 
 #include "gmr/wire/udp.h"
+#include "io_threads.h"
 #include "net.h"
 
 namespace gmr::server {
@@ -32,16 +40,20 @@ class UdpPublisher {
   // Where one session's UDP frames go, once registered.
   struct Registration {
     std::optional<udp::endpoint> endpoint;
+    std::size_t lane = 0;               // the sender (I/O thread) its frames leave from
+    // Guarded by that sender's lock:
     std::size_t in_flight = 0;          // datagrams batched, not yet handed to the kernel
     std::uint32_t next_message_id = 0;  // fragments of one message share an id
   };
   using OnRegister = std::function<void(const udp::endpoint&)>;
 
   UdpPublisher(net::io_context& io, std::size_t max_in_flight);
+  ~UdpPublisher();
 
-  // Binds `address`:`port` (0: any free port). Throws std::runtime_error
-  // naming the address when it cannot.
-  void open(const net::ip::address& address, std::uint16_t port);
+  // Binds `address`:`port` (0: any free port), with a sender on each of
+  // `threads`' lanes (null: one sender on the control loop). Throws
+  // std::runtime_error naming the address when it cannot.
+  void open(const net::ip::address& address, std::uint16_t port, IoThreads* threads = nullptr);
   std::uint16_t port() const { return port_; }
   // Lets the socket send to IPv4 multicast `group`:`port` with `ttl`, out of
   // the interface of the bound address (unless it is any). Throws
@@ -58,15 +70,15 @@ class UdpPublisher {
   wire::UdpToken add_session(OnRegister on_register);
   void remove_session(const wire::UdpToken& token);
 
-  // Sends a whole ServerMessage to `to` as fragments. False, sending
-  // nothing, when `to` is not registered or already has max_in_flight
-  // datagrams in flight.
+  // Sends a whole ServerMessage to `to` as fragments, through its lane's
+  // sender. False, sending nothing, when `to` is not registered or already
+  // has max_in_flight datagrams in flight. Control loop only.
   bool send(const std::shared_ptr<Registration>& to, std::string_view message);
 
   // sendmmsg calls made, and the datagrams they carried (a GSO message
-  // counts its segments).
-  std::uint64_t send_calls() const { return send_calls_; }
-  std::uint64_t datagrams_sent() const { return datagrams_sent_; }
+  // counts its segments), all senders.
+  std::uint64_t send_calls() const;
+  std::uint64_t datagrams_sent() const;
 
   // Datagrams that were not a valid registration or confirm.
   std::uint64_t rejected() const { return rejected_; }
@@ -80,19 +92,7 @@ class UdpPublisher {
     std::optional<udp::endpoint> challenged;  // the address a challenge went to, awaiting its confirm
     wire::UdpToken cookie{};
   };
-  // Consecutive fragments of one frame to one address: one sendmmsg entry
-  // (a GSO message when `count` > 1).
-  struct Batched {
-    std::size_t offset = 0;  // into batch_bytes_
-    std::size_t bytes = 0;
-    std::size_t count = 0;   // datagrams
-    udp::endpoint to;
-    std::shared_ptr<Registration> registration;
-  };
-  void flush();
-  // Gives the entries from `first` on back to their registrations, unsent.
-  void release(std::size_t first);
-  void clear_batch();
+  class Sender;
   void receive();
   void handle(std::string_view datagram);
   // The live session holding `token` (constant-time compare), or null.
@@ -109,14 +109,7 @@ class UdpPublisher {
   std::uint64_t challenges_ = 0;
   std::uint64_t rejected_sends_ = 0;
 
-  std::string batch_bytes_;
-  std::vector<Batched> batch_;
-  std::size_t batch_sent_ = 0;  // entries of batch_ already handed to the kernel
-  bool flush_posted_ = false;
-  bool awaiting_writable_ = false;
-  bool gso_ = true;  // until the kernel refuses a GSO message
-  std::uint64_t send_calls_ = 0;
-  std::uint64_t datagrams_sent_ = 0;
+  std::vector<std::unique_ptr<Sender>> senders_;  // one per lane
 };
 
 }  // namespace gmr::server

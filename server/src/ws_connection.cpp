@@ -139,7 +139,7 @@ WsConnection::WsConnection(net::io_context& io, tcp::socket socket, std::uint64_
 }
 
 WsConnection::~WsConnection() {
-  if (budget_ != nullptr) budget_->held -= accounted_;
+  if (budget_ != nullptr) budget_->release(accounted_);
 }
 
 std::optional<WsConnection::Format> WsConnection::format_of(const http::request<http::string_body>& upgrade) {

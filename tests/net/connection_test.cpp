@@ -1,11 +1,15 @@
 // Connection without views: the transport alone, on a loopback socket, with
-// a handler that echoes every message back.
+// a handler that echoes every message back; on one thread, or with the
+// socket on a lane thread and the handler on a control thread of its own, as
+// gmr-server runs it (io_threads.h).
 #include "connection.h"
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <future>
 #include <optional>
+#include <set>
 #include <thread>
 
 #include "gmr/wire/framing.h"
@@ -22,27 +26,49 @@ class Echo final : public server::Connection::Handler {
   std::weak_ptr<server::Connection> connection;
   int messages = 0;
   int stops = 0;
+  // Where and how the handler was called: the threads it ran on, and
+  // whether two calls ever overlapped.
+  std::set<std::thread::id> threads;
+  std::atomic<int> inside{0};
+  bool overlapped = false;
   void on_message(const std::string& body) override {
+    if (inside.fetch_add(1) != 0) overlapped = true;
+    threads.insert(std::this_thread::get_id());
     ++messages;
+    // Long enough that a connection reading on meanwhile would hand over the next one.
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
     if (auto c = connection.lock()) c->send(wire::frame_bytes(body));
+    inside.fetch_sub(1);
   }
-  void on_stop() override { ++stops; }
+  void on_stop() override {
+    threads.insert(std::this_thread::get_id());
+    ++stops;
+  }
 };
 
-// A Connection serving one accepted loopback socket on its own thread.
+// A Connection serving one accepted loopback socket: on one thread, or
+// (`lane`) its socket on a thread of its own and its handler on the control
+// thread.
 struct EchoServer {
-  explicit EchoServer(server::ConnectionLimits limits) {
+  explicit EchoServer(server::ConnectionLimits limits, bool lane = false) {
     acceptor.open(tcp::v4());
     acceptor.bind(tcp::endpoint(net::ip::make_address("127.0.0.1"), 0));
     acceptor.listen();
     port = acceptor.local_endpoint().port();
-    acceptor.async_accept([this, limits](const boost::system::error_code& ec, tcp::socket s) {
+    net::io_context& socket_io = lane ? lane_io : io;
+    acceptor.async_accept(socket_io, [this, limits, &socket_io](const boost::system::error_code& ec, tcp::socket s) {
       ASSERT_FALSE(ec) << ec.message();
-      connection = std::make_shared<server::Connection>(io, std::move(s), 1, limits);
+      connection = std::make_shared<server::Connection>(socket_io, std::move(s), 1, limits, nullptr, nullptr,
+                                                        server::ConnectionPlacement{&io, 1, nullptr});
       echo->connection = connection;
-      connection->start(echo, [this](std::uint64_t) { ++closed; });
+      // Started from the control thread, as the server starts its connections.
+      net::post(io, [this] { connection->start(echo, [this](std::uint64_t) { ++closed; }); });
     });
-    thread = std::thread([this] { io.run(); });
+    thread = std::thread([this] {
+      control_thread = std::this_thread::get_id();
+      io.run();
+    });
+    if (lane) lane_thread = std::thread([this] { lane_io.run(); });
   }
   ~EchoServer() {
     net::post(io, [this] {
@@ -50,16 +76,21 @@ struct EchoServer {
       work.reset();
     });
     thread.join();
+    net::post(lane_io, [this] { lane_work.reset(); });
+    if (lane_thread.joinable()) lane_thread.join();
   }
   net::io_context io;
-  // Keeps io.run() going after the connection closed, so the test can still post to it.
+  net::io_context lane_io;
+  // Keep run() going after the connection closed, so the test can still post.
   std::optional<net::executor_work_guard<net::io_context::executor_type>> work{io.get_executor()};
+  std::optional<net::executor_work_guard<net::io_context::executor_type>> lane_work{lane_io.get_executor()};
   tcp::acceptor acceptor{io};
   std::uint16_t port = 0;
   std::shared_ptr<Echo> echo = std::make_shared<Echo>();
   std::shared_ptr<server::Connection> connection;
   int closed = 0;
-  std::thread thread;
+  std::thread::id control_thread;
+  std::thread thread, lane_thread;
 };
 
 server::ConnectionLimits limits() {
@@ -98,6 +129,65 @@ TEST(Connection, AnOversizedLengthPrefixClosesItAndStopsTheHandlerOnce) {
   EXPECT_EQ(stops, 1);
   EXPECT_EQ(closed, 1);
   EXPECT_EQ(s.echo->messages, 0);
+}
+
+// gmr-server's shape: the socket on a lane thread, the handler on the
+// control thread. Pipelined requests reach the handler one at a time, in
+// order, on the control thread only, and the replies it queues from there go
+// out in order; a stop asked for on the control thread closes the socket on
+// the lane and tells the handler once.
+TEST(Connection, OnALaneHandsEachRequestToTheControlThreadOneAtATimeInOrder) {
+  EchoServer s(limits(), /*lane=*/true);
+  RawConnection c(s.port);
+  std::string burst;
+  for (std::uint64_t id = 1; id <= 50; ++id) burst += wire::frame_message(request(id)).value();
+  c.send_bytes(burst);  // all 50 at once: the lane could read them all before the first is answered
+  for (std::uint64_t id = 1; id <= 50; ++id) {
+    auto back = c.receive();
+    ASSERT_TRUE(back.has_value()) << "reply " << id;
+    EXPECT_EQ(back->request_id(), id);
+  }
+  std::promise<void> stopped;
+  net::post(s.io, [&] {
+    s.connection->stop("asked on the control thread");
+    s.connection->stop("again");  // idempotent
+    stopped.set_value();
+  });
+  stopped.get_future().get();
+  EXPECT_TRUE(c.wait_closed());
+  std::promise<std::tuple<int, int, int, std::set<std::thread::id>, bool>> seen;
+  net::post(s.io, [&] {
+    seen.set_value({s.echo->messages, s.echo->stops, s.closed, s.echo->threads, s.echo->overlapped});
+  });
+  const auto [messages, stops, closed, threads, overlapped] = seen.get_future().get();
+  EXPECT_EQ(messages, 50);
+  EXPECT_EQ(stops, 1);
+  EXPECT_EQ(closed, 1);
+  EXPECT_FALSE(overlapped) << "two requests were with the handler at once";
+  EXPECT_EQ(threads, std::set<std::thread::id>{s.control_thread}) << "the handler ran off the control thread";
+}
+
+// A client that closes while its request is with the handler: the lane sees
+// the socket close, the handler finishes, is told once, and nothing more is
+// read or handed over.
+TEST(Connection, OnALaneAClientClosingMidRequestStopsItOnce) {
+  EchoServer s(limits(), /*lane=*/true);
+  {
+    RawConnection c(s.port);
+    for (std::uint64_t id = 1; id <= 5; ++id) c.send(request(id));
+  }  // closed at once, replies unread
+  std::promise<std::pair<int, int>> counts;
+  for (int i = 0; i < 200; ++i) {
+    std::promise<int> closed;
+    net::post(s.io, [&] { closed.set_value(s.closed); });
+    if (closed.get_future().get() == 1) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  net::post(s.io, [&] { counts.set_value({s.echo->stops, s.closed}); });
+  const auto [stops, closed] = counts.get_future().get();
+  EXPECT_EQ(stops, 1);
+  EXPECT_EQ(closed, 1);
+  EXPECT_LE(s.echo->messages, 5);
 }
 
 }  // namespace

@@ -31,7 +31,7 @@ def value(samples, name, **labels):
 class Metrics(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.server = env.Server(ARGS.bin_dir, http=True)
+        cls.server = env.Server(ARGS.bin_dir, "--io-threads", "3", http=True)
         cls.client = gmr_client.Client(port=cls.server.port, name="metrics test")
 
     @classmethod
@@ -63,6 +63,11 @@ class Metrics(unittest.TestCase):
         self.assertEqual(value(before, "gmr_ready"), 1)
         self.assertEqual(value(before, "gmr_library_motions"), 4)
         self.assertGreaterEqual(value(before, "gmr_connections", transport="tcp"), 1)
+        # Three I/O threads, and each TCP connection counted on one of them.
+        self.assertEqual(types.get("gmr_io_threads"), "gauge")
+        self.assertEqual(value(before, "gmr_io_threads"), 3)
+        per_thread = [value(before, "gmr_io_thread_connections", thread=str(t)) for t in range(3)]
+        self.assertEqual(sum(per_thread), value(before, "gmr_connections", transport="tcp"), per_thread)
 
         tcp = c.subscribe(c.create_view("walk").id, loop=True)
         udp = c.subscribe(c.create_view("wave").id, loop=True, udp=True)

@@ -231,6 +231,8 @@ struct ServerCounters {
   std::uint64_t multicast_frames_sent = 0; // to the multicast group, once each
   std::uint64_t frames_sent_total = 0;     // all connections, open and closed (one request's snapshot)
   std::uint64_t frames_dropped_total = 0;  // all connections, open and closed
+  std::uint32_t io_threads = 0;            // the server's I/O threads (0: a server that does not say)
+  std::uint32_t io_thread = 0;             // this connection's (0: the control loop)
 };
 
 // A live source this client publishes (docs/protocol.md, "Live sources").

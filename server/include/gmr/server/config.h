@@ -46,6 +46,12 @@ struct ServerConfig {
   std::string tls_certificate_file;
   std::string tls_key_file;
 
+  // Threads that carry the sockets' work (docs/architecture.md, "Threads"):
+  // TCP connections are spread over them, and each sends its frames (TCP
+  // writes, UDP datagrams) from its own; one of them, the control loop, also
+  // runs requests, views and streams. 0: one per CPU the process may run on.
+  std::size_t io_threads = 0;
+
   std::uint32_t max_message_bytes = wire::kDefaultMaxMessageBytes;  // either direction
   std::size_t max_connections = 256;
   // Admission (docs/protocol.md, "Admission"): a connection must complete its

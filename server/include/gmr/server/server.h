@@ -8,9 +8,11 @@
 //                      | frames (TcpTarget)     v
 //                   Stream (one FK + one encoding per tick) --UdpTarget--> UdpPublisher --> registered endpoint
 //
-// All networking and state live on one I/O thread; per tick the work is one
-// forward-kinematics pass and one encoding per stream, a few microseconds.
-// docs/architecture.md draws the whole data flow.
+// Requests, views and streams live on one thread, the control loop: per tick
+// the work is one forward-kinematics pass and one encoding per stream, a few
+// microseconds. The sockets' work (a send per subscriber per frame, most of a
+// busy server's time) is spread over config.io_threads I/O threads, one of
+// them the control loop. docs/architecture.md draws the whole data flow.
 #pragma once
 
 #include <chrono>
@@ -31,10 +33,12 @@ struct SessionStats {
   std::uint64_t queued_bytes = 0;     // now: replies + frames waiting or being written
   std::uint64_t max_queued_bytes = 0; // high-water mark
   bool udp_registered = false;
+  std::size_t io_thread = 0;          // the I/O thread its socket work runs on (0: the control loop)
 };
 
 struct ServerStats {
   std::size_t connections = 0;
+  std::size_t io_threads = 0;         // threads the sockets' work runs on, the control loop included
   std::size_t streams = 0;
   std::uint64_t frames_computed = 0;  // forward-kinematics runs for streams
   std::uint64_t frames_computed_float = 0;  // of those, by the float path (float32 streams)
@@ -64,7 +68,7 @@ class Server {
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
 
-  // Binds the TCP and UDP ports and starts the I/O thread. Throws
+  // Binds the TCP and UDP ports and starts the I/O threads. Throws
   // std::runtime_error naming the address when a port cannot be bound.
   void start();
   std::uint16_t tcp_port() const;
