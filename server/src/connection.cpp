@@ -244,11 +244,6 @@ bool Connection::congested(std::uint32_t key) const {
   return Clock::now() - write_started_ > limits_.congested_after;
 }
 
-std::uint64_t Connection::stale_dropped(std::uint32_t key) const {
-  Lock lock(m_);
-  return frames_.stale_dropped(key);
-}
-
 void Connection::discard_frames(std::uint32_t key) {
   Lock lock(m_);
   frames_.discard(key);
@@ -264,6 +259,15 @@ void Connection::send_frames_now(std::uint32_t key) {
     ++counters_.frames_sent;
   }
   account();
+}
+
+std::uint64_t Connection::end_frames(std::uint32_t key) {
+  Lock lock(m_);
+  const std::uint64_t stale = frames_.stale_dropped(key);
+  send_frames_now(key);
+  frames_.discard(key);
+  account();
+  return stale;
 }
 
 void Connection::count_udp_frame_sent() {

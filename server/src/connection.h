@@ -162,10 +162,10 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   void send(std::string framed) override;
   bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
                   Clock::duration max_age = {}) override;
-  std::uint64_t stale_dropped(std::uint32_t key) const override;
   bool congested(std::uint32_t key) const override;
   void discard_frames(std::uint32_t key) override;
   void send_frames_now(std::uint32_t key) override;
+  std::uint64_t end_frames(std::uint32_t key) override;
   void close_after_reply() override;
   void established() override;
   void hold_reading(bool hold) override;

@@ -55,19 +55,22 @@ class Outbox {
   // shared `body`. False when the key already had its share of frames
   // waiting and the oldest was dropped to make room (counted). A frame still
   // waiting `max_age` after this call is dropped instead of written (counted,
-  // and in stale_dropped(key)); zero: no limit.
+  // and in end_frames(key)'s answer); zero: no limit.
   virtual bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
                           std::chrono::steady_clock::duration max_age = {}) = 0;
-  // Frames of `key` dropped for waiting past their max_age.
-  virtual std::uint64_t stale_dropped(std::uint32_t key) const { return (void)key, 0; }
   // True while frames for `key` cannot go out soon: its share of frames is
   // waiting behind a write that has been in flight for a while (the client
   // is not reading). Streams then skip computing frames for it.
   virtual bool congested(std::uint32_t key) const { return (void)key, false; }
-  // Forgets the frames waiting for `key` (and its stale_dropped count).
+  // Forgets the frames waiting for `key` (and its count of stale frames).
   virtual void discard_frames(std::uint32_t key) = 0;
   // Moves the frames waiting for `key` ahead of the next reply.
   virtual void send_frames_now(std::uint32_t key) = 0;
+  // Subscription `key` ends: its waiting frames go ahead of the next reply,
+  // and the key is forgotten. Returns how many of its frames were dropped
+  // for waiting past their max_age, counted in the same step (a write
+  // meanwhile cannot drop one the answer misses).
+  virtual std::uint64_t end_frames(std::uint32_t key) = 0;
   // The client completed its handshake (the handshake deadline no longer applies).
   virtual void established() {}
   // While held, no more requests are read (those sent wait in the kernel);

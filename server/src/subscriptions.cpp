@@ -292,17 +292,13 @@ void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, co
   pb::ServerMessage m;
   m.mutable_subscription_ended()->set_subscription_id(id);
   m.mutable_subscription_ended()->set_frames_sent(sent);
+  // The frames still waiting go out before the end notice.
   auto c = connection_.lock();
-  const std::uint64_t stale = c ? c->stale_dropped(id) : 0;
+  const std::uint64_t stale = c ? c->end_frames(id) : 0;
   m.mutable_subscription_ended()->set_frames_dropped(s.target->dropped() + stale);
   m.mutable_subscription_ended()->set_frames_stale(stale);
   m.mutable_subscription_ended()->set_frames_skipped(s.target->late_skipped());
   m.mutable_subscription_ended()->set_reason(reason);
-  // The frames still waiting go out before the end notice.
-  if (c) {
-    c->send_frames_now(id);
-    c->discard_frames(id);  // nothing waits any more; forgets its stale count
-  }
   s.stream->remove(s.target.get());
   server_.committed_mhz -= s.rate_mhz;
   subs_.erase(it);

@@ -290,7 +290,6 @@ bool WsConnection::push_frame(std::uint32_t key, std::string head, std::shared_p
   return kept_all;
 }
 
-std::uint64_t WsConnection::stale_dropped(std::uint32_t key) const { return frames_.stale_dropped(key); }
 
 bool WsConnection::congested(std::uint32_t key) const {
   if (!writing_ || stopped_) return false;
@@ -312,6 +311,13 @@ void WsConnection::send_frames_now(std::uint32_t key) {
     ++counters_.frames_sent;
   }
   account();
+}
+
+std::uint64_t WsConnection::end_frames(std::uint32_t key) {
+  const std::uint64_t stale = frames_.stale_dropped(key);
+  send_frames_now(key);
+  discard_frames(key);
+  return stale;
 }
 
 void WsConnection::close_after_reply() {

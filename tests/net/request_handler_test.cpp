@@ -31,6 +31,7 @@ class RecordingOutbox final : public server::Outbox {
   }
   void discard_frames(std::uint32_t) override {}
   void send_frames_now(std::uint32_t) override {}
+  std::uint64_t end_frames(std::uint32_t) override { return 0; }
   void close_after_reply() override { closing_ = true; }
   void stop(const std::string&) override { closing_ = true; }
   void finish() override { closing_ = true; }

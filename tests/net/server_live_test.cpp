@@ -392,6 +392,9 @@ TEST(LivePublish, ASourceThatDisconnectsEndsItsSubscribersCleanly) {
   so.udp = true;
   watch(*sub, v, so, udp);
   publish_frames(*pub, id, *source, 0, 30, pace());
+  // A round trip: the server has taken all 30 (PublishFrame has no reply,
+  // and close() drops what the client has not written yet).
+  ASSERT_TRUE(pub->list_motions().ok());
   pub->close();  // mid-stream, without Unpublish
   for (Watch* w : {&tcp, &udp}) {
     const auto end = w->end.wait();
