@@ -80,10 +80,7 @@ void Connection::account() {
   if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + body_.size());
 }
 
-bool Connection::stopped() const {
-  Lock lock(m_);
-  return stopped_;
-}
+bool Connection::stopped() const { return stopped_.load(std::memory_order_acquire); }
 
 bool Connection::closing() const {
   Lock lock(m_);
@@ -156,7 +153,7 @@ void Connection::stop(const std::string& reason) {
   {
     Lock lock(m_);
     if (stopped_) return;
-    stopped_ = true;
+    stopped_.store(true, std::memory_order_release);
     spdlog::info("conn {}: closed: {} (frames sent {}, dropped {})", id_, reason, counters_.frames_sent,
                  counters_.frames_dropped);
     frames_.clear();
@@ -165,7 +162,9 @@ void Connection::stop(const std::string& reason) {
     std::string().swap(body_);
     body_received_ = 0;
     account();
-    handler = handler_;
+    // The handler goes with `tell`: a stopped connection holds none (its
+    // subscriptions hold the connection, so that would be a cycle).
+    handler = std::move(handler_);
     on_closed = std::move(on_closed_);
   }
   // The handler's and the server's part on the control loop, the socket's
@@ -238,7 +237,12 @@ bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr
 
 bool Connection::congested(std::uint32_t key) const {
   Lock lock(m_);
-  if (!writing_ || stopped_) return false;
+  if (stopped_) return false;
+  if (!writing_) {
+    // Its I/O thread has not come round to the write it was handed: the
+    // thread is behind (overloaded), and frames would only pile up.
+    return flush_posted_ && frames_.waiting(key) && Clock::now() - flush_asked_ > limits_.congested_after;
+  }
   if (budget_ != nullptr && budget_->over()) return true;
   if (!frames_.waiting(key)) return false;
   return Clock::now() - write_started_ > limits_.congested_after;
@@ -306,6 +310,7 @@ void Connection::request_flush() {
   // write. Only the control loop asks from off the lane.
   if (flush_posted_) return;
   flush_posted_ = true;
+  flush_asked_ = Clock::now();
   auto self = shared_from_this();
   if (threads_ != nullptr) {
     threads_->defer(lane_, LaneTask{[](void* c) { static_cast<Connection*>(c)->deferred_flush(); }, this, self});
@@ -548,11 +553,13 @@ void Connection::hand_over(std::string body) {
   // Without the lock: the Handler calls back into this connection, and must
   // not hold up its lane meanwhile.
   auto hand = [self = shared_from_this(), body = std::move(body)] {
+    std::shared_ptr<Handler> handler;
     {
       Lock lock(self->m_);
       if (self->stopped_) return;
+      handler = self->handler_;
     }
-    self->handler_->on_message(body);
+    handler->on_message(body);
     Lock lock(self->m_);
     self->handed_back();
   };

@@ -86,7 +86,9 @@ struct ConnectionLimits {
   std::size_t frames_per_key = 1;         // frames waiting per key (subscription)
   std::size_t max_frame_bytes = 0;        // frames waiting, all keys (0: no limit but frames_per_key)
   // While a write has been in flight this long with a key's frames waiting
-  // in full, that key is congested (streams skip computing its frames).
+  // in full, or a write handed to the connection's I/O thread has waited
+  // this long for it, that key is congested (streams skip computing its
+  // frames, counting them dropped).
   std::chrono::milliseconds congested_after{50};
   std::chrono::milliseconds idle_timeout{0};
   std::chrono::milliseconds handshake_timeout{0};  // 0: none
@@ -227,13 +229,16 @@ class Connection final : public CountingOutbox, public std::enable_shared_from_t
   Clock::time_point started_ = Clock::now();
   std::shared_ptr<Handler> handler_;
   std::function<void(std::uint64_t)> on_closed_;
-  bool stopped_ = false;
+  // Atomic: stopped() is read on every tick by each subscription's stream,
+  // without the lock; set only under it.
+  std::atomic<bool> stopped_{false};
   bool close_after_flush_ = false;
   bool close_on_next_reply_ = false;  // close_after_reply: the next send() closes after it
   bool read_paused_ = false;
   bool reads_held_ = false;  // hold_reading
   bool at_handler_ = false;  // a request body is with the Handler
   bool flush_posted_ = false;
+  Clock::time_point flush_asked_{};  // when the pending flush was handed to the lane
   BufferBudget* budget_;
   std::uint64_t accounted_ = 0;  // what this connection added to budget_->held
   std::array<std::uint8_t, 4> prefix_{};

@@ -1,9 +1,11 @@
 #include "io_threads.h"
 
+#include <pthread.h>
 #include <sched.h>
 
 #include <algorithm>
 #include <exception>
+#include <string>
 
 #include <spdlog/spdlog.h>
 
@@ -44,8 +46,12 @@ IoThreads::~IoThreads() {
 }
 
 std::size_t IoThreads::assign() {
-  std::size_t best = 0;
-  for (std::size_t i = 1; i < lanes_.size(); ++i) {
+  // From three lanes on, the control loop keeps its thread for what only it
+  // does (ticks, kinematics, fan-out to every lane); with two, it shares the
+  // sending, which is most of the work.
+  const std::size_t first = lanes_.size() >= kControlAloneFrom ? 1 : 0;
+  std::size_t best = first;
+  for (std::size_t i = first + 1; i < lanes_.size(); ++i) {
     if (lanes_[i]->connections < lanes_[best]->connections) best = i;
   }
   ++lanes_[best]->connections;
@@ -85,6 +91,9 @@ void IoThreads::start() {
     Lane& lane = *lanes_[i];
     if (lane.thread.joinable()) continue;
     lane.thread = std::thread([&lane, i] {
+      // "gmr-io-3" in top -H, perf and /proc/PID/task/*/comm.
+      const std::string name = "gmr-io-" + std::to_string(i);
+      ::pthread_setname_np(::pthread_self(), name.c_str());
       try {
         lane.io->run();
       } catch (const std::exception& e) {

@@ -2,8 +2,9 @@
 // io_context the caller runs): the listener, requests and views, streams,
 // HTTP, live sources. Lanes 1..N-1 each run an io_context of their own on a
 // thread of their own and carry only socket I/O: accepted TCP connections
-// are spread over all lanes (the one with the fewest first), and each
-// connection's reads, writes and watchdog, and the UDP sends of its
+// are spread over the lanes (the one with the fewest first; with three or
+// more lanes not over lane 0, which keeps its core for the control loop),
+// and each connection's reads, writes and watchdog, and the UDP sends of its
 // subscriptions, run on its lane.
 //
 //        control loop (lane 0)                       lane k
@@ -55,6 +56,8 @@ class IoThreads {
   net::io_context& io(std::size_t lane) { return *lanes_[lane]->io; }
   // Control loop only: the lane a new connection goes to (the fewest
   // connections; the lowest index on a tie), counted there until release().
+  // From kControlAloneFrom lanes on, never lane 0.
+  static constexpr std::size_t kControlAloneFrom = 3;
   std::size_t assign();
   void release(std::size_t lane);
   std::size_t connections(std::size_t lane) const { return lanes_[lane]->connections; }

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <pthread.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -356,6 +357,7 @@ void Server::start() {
                d.lanes->size(), d.lanes->size() == 1 ? "" : "s");
   d.lanes->start();
   d.thread = std::thread([impl = impl_] {
+    ::pthread_setname_np(::pthread_self(), "gmr-control");  // lane 0: requests, streams, and its connections
     try {
       impl->io.run();
     } catch (const std::exception& e) {

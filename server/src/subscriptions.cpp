@@ -115,6 +115,10 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   settings.float64 = r.precision() == pb::PRECISION_FLOAT64;
   settings.max_catch_up = cfg.max_catch_up;
 
+  // Its targets hold the connection (targets.h).
+  const auto conn = connection_.lock();
+  if (!conn) return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, "the connection is closing"};
+
   // Streams with the same content and schedule can share one FK and one
   // encoding per tick.
   // A live source's serial keeps a later source of the same name apart.
@@ -141,11 +145,11 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
       slot = channel;
     }
     std::erase_if(server_.multicast_channels, [](const auto& e) { return e.second.expired(); });
-    target = std::make_shared<MulticastTarget>(weak_from_this(), connection_, id, v->id(), server_.udp, channel);
+    target = std::make_shared<MulticastTarget>(weak_from_this(), conn, id, v->id(), server_.udp, channel);
   } else if (use_udp) {
-    target = std::make_shared<UdpTarget>(weak_from_this(), connection_, id, v->id(), server_.udp, udp_);
+    target = std::make_shared<UdpTarget>(weak_from_this(), conn, id, v->id(), server_.udp, udp_);
   } else {
-    target = std::make_shared<TcpTarget>(weak_from_this(), connection_, id, v->id());
+    target = std::make_shared<TcpTarget>(weak_from_this(), conn, id, v->id());
   }
   target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
                                                 : std::chrono::milliseconds(r.max_staleness_ms()));

@@ -2,6 +2,12 @@
 // connection's TCP outbox, or frames to its registered UDP endpoint. Both
 // count their drops (for SubscriptionEnded) and tell their handler when the
 // stream ends them.
+//
+// A target holds its connection (not a weak_ptr: locking one per subscriber
+// per tick costs atomic operations on a control block the connection's I/O
+// thread shares); the connection drops its handler when it stops, so the
+// connection -> handler -> subscription -> target -> connection cycle ends
+// there, and alive() reads the connection's stopped flag alone.
 #pragma once
 
 #include <memory>
@@ -16,7 +22,8 @@ class RequestHandler;
 
 class SubscriptionTarget : public Target {
  public:
-  SubscriptionTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Outbox> connection,
+  // `connection` is not null.
+  SubscriptionTarget(std::weak_ptr<RequestHandler> handler, std::shared_ptr<Outbox> connection,
                      std::uint32_t subscription, std::uint32_t view)
       : handler_(std::move(handler)), connection_(std::move(connection)), subscription_(subscription), view_(view) {}
 
@@ -33,7 +40,7 @@ class SubscriptionTarget : public Target {
 
  protected:
   std::weak_ptr<RequestHandler> handler_;
-  std::weak_ptr<Outbox> connection_;
+  std::shared_ptr<Outbox> connection_;
   std::uint32_t subscription_;
   std::uint32_t view_;
   std::uint64_t dropped_ = 0;
@@ -52,12 +59,13 @@ class TcpTarget final : public SubscriptionTarget {
 // Frames go to the connection's registered UDP endpoint, as fragments.
 class UdpTarget final : public SubscriptionTarget {
  public:
-  UdpTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Outbox> connection, std::uint32_t subscription,
+  UdpTarget(std::weak_ptr<RequestHandler> handler, std::shared_ptr<Outbox> connection, std::uint32_t subscription,
             std::uint32_t view, UdpPublisher& publisher, std::shared_ptr<UdpPublisher::Registration> endpoint)
       : SubscriptionTarget(std::move(handler), std::move(connection), subscription, view),
         publisher_(publisher),
         endpoint_(std::move(endpoint)) {}
   void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  bool congested() const override { return publisher_.congested(*endpoint_); }
 
  private:
   UdpPublisher& publisher_;
@@ -77,12 +85,13 @@ struct MulticastChannel {
 // channel's; its end, skips and drops are its own, told over its connection.
 class MulticastTarget final : public SubscriptionTarget {
  public:
-  MulticastTarget(std::weak_ptr<RequestHandler> handler, std::weak_ptr<Outbox> connection, std::uint32_t subscription,
+  MulticastTarget(std::weak_ptr<RequestHandler> handler, std::shared_ptr<Outbox> connection, std::uint32_t subscription,
                   std::uint32_t view, UdpPublisher& publisher, std::shared_ptr<MulticastChannel> channel)
       : SubscriptionTarget(std::move(handler), std::move(connection), subscription, view),
         publisher_(publisher),
         channel_(std::move(channel)) {}
   void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  bool congested() const override { return publisher_.congested(*channel_->group); }
   const std::shared_ptr<MulticastChannel>& channel() const { return channel_; }
 
  private:

@@ -58,12 +58,13 @@ class UdpPublisher::Sender {
     }
   }
 
-  bool send(const std::shared_ptr<Registration>& to, std::string_view message) {
+  bool send(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body) {
     std::lock_guard lock(m_);
     if (closed_ || !to->endpoint) return false;
-    if (to->in_flight + wire::fragment_count(message.size()) > max_in_flight_) return false;
+    if (to->in_flight + wire::fragment_count(head.size() + body.size()) > max_in_flight_) return false;
+    if (filling_.entries.empty()) filling_since_ = Clock::now();
     std::size_t at = filling_.bytes.size();
-    const std::size_t appended = wire::append_fragments(filling_.bytes, to->next_message_id++, message);
+    const std::size_t appended = wire::append_fragments(filling_.bytes, to->next_message_id++, head, body);
     const std::size_t end = filling_.bytes.size();
     // Without GSO every datagram is its own entry; with it, runs of up to
     // kMaxGsoSegments share one.
@@ -99,6 +100,15 @@ class UdpPublisher::Sender {
       socket_.close(ec);
       flush();  // gives back what waits (a flush waiting for room ends with operation_aborted)
     });
+  }
+
+  // How long the oldest datagram not yet handed to the kernel has waited
+  // (zero: none waits).
+  Clock::duration backlog() {
+    std::lock_guard lock(m_);
+    const auto now = Clock::now();
+    if (sending_active_) return now - sending_since_;
+    return filling_.entries.empty() ? Clock::duration::zero() : now - filling_since_;
   }
 
   std::uint64_t send_calls() const { return send_calls_.load(std::memory_order_relaxed); }
@@ -146,11 +156,14 @@ class UdpPublisher::Sender {
         if (sent_ == sending_.entries.size()) {
           sending_.clear();
           sent_ = 0;
+          sending_active_ = false;
           if (filling_.entries.empty()) {
             flush_posted_ = false;
             return;
           }
           std::swap(filling_, sending_);
+          sending_active_ = true;
+          sending_since_ = filling_since_;
         }
       }
       if (!send_some()) return;
@@ -245,6 +258,9 @@ class UdpPublisher::Sender {
   std::size_t lane_;
   // Guarded by m_:
   Batch filling_;
+  Clock::time_point filling_since_{};  // its first entry's
+  bool sending_active_ = false;        // sending_ holds entries the lane is sending
+  Clock::time_point sending_since_{};  // when its first entry was batched
   bool flush_posted_ = false;
   bool closed_ = false;
   // The lane's alone:
@@ -374,9 +390,13 @@ UdpPublisher::Session* UdpPublisher::find(const wire::UdpToken& token) {
   return &it->second;
 }
 
-bool UdpPublisher::send(const std::shared_ptr<Registration>& to, std::string_view message) {
+bool UdpPublisher::congested(const Registration& to) const {
+  return to.lane < senders_.size() && senders_[to.lane]->backlog() > congested_after_;
+}
+
+bool UdpPublisher::send(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body) {
   if (closed_ || to->lane >= senders_.size()) return false;
-  return senders_[to->lane]->send(to, message);
+  return senders_[to->lane]->send(to, head, body);
 }
 
 void UdpPublisher::receive() {

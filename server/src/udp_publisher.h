@@ -70,10 +70,18 @@ class UdpPublisher {
   wire::UdpToken add_session(OnRegister on_register);
   void remove_session(const wire::UdpToken& token);
 
-  // Sends a whole ServerMessage to `to` as fragments, through its lane's
-  // sender. False, sending nothing, when `to` is not registered or already
-  // has max_in_flight datagrams in flight. Control loop only.
-  bool send(const std::shared_ptr<Registration>& to, std::string_view message);
+  // Sends a whole ServerMessage, `head` then `body`, to `to` as fragments,
+  // through its lane's sender. False, sending nothing, when `to` is not
+  // registered or already has max_in_flight datagrams in flight. Control
+  // loop only.
+  bool send(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body = {});
+
+  // True when `to`'s sender (its I/O thread) has a datagram that has waited
+  // longer than set_congested_after to be handed to the kernel: the thread
+  // is behind, and streams skip computing frames for it (counting them
+  // dropped) instead of piling them up. Control loop only.
+  bool congested(const Registration& to) const;
+  void set_congested_after(Clock::duration d) { congested_after_ = d; }
 
   // sendmmsg calls made, and the datagrams they carried (a GSO message
   // counts its segments), all senders.
@@ -110,6 +118,7 @@ class UdpPublisher {
   std::uint64_t rejected_sends_ = 0;
 
   std::vector<std::unique_ptr<Sender>> senders_;  // one per lane
+  Clock::duration congested_after_ = std::chrono::milliseconds(50);
 };
 
 }  // namespace gmr::server

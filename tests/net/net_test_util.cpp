@@ -42,10 +42,10 @@ std::vector<server::LibraryEntry> test_library() {
 
 namespace {
 // The tests overload the server on purpose: no send budget unless a test
-// sets one of its own. Three I/O threads unless a test picks: whatever the
-// machine, clients land on the control loop and on two other threads, so
-// every test crosses threads (and TSan sees it).
-constexpr std::size_t kTestIoThreads = 3;
+// sets one of its own. Two I/O threads unless a test picks: whatever the
+// machine, clients land in turn on the control loop's thread and on another
+// one, so every test crosses threads (and TSan sees it).
+constexpr std::size_t kTestIoThreads = 2;
 server::ServerConfig test_config(server::ServerConfig cfg) {
   if (cfg.io_threads == 0) cfg.io_threads = kTestIoThreads;
   cfg.port = 0;

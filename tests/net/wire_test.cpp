@@ -44,6 +44,31 @@ std::string random_bytes(std::size_t n, unsigned seed) {
   return s;
 }
 
+// A message given in two pieces (a frame's head, the body its stream shares)
+// is cut into exactly the datagrams of the joined message, wherever the cut
+// between the pieces falls against the fragment boundaries.
+TEST(UdpFragments, TwoPiecesGiveTheDatagramsOfTheJoinedMessage) {
+  using gmr::wire::kMaxFragmentPayload;
+  std::size_t cases = 0;
+  for (std::size_t size : {std::size_t{0}, std::size_t{1}, kMaxFragmentPayload, kMaxFragmentPayload + 1,
+                           3 * kMaxFragmentPayload + 17}) {
+    const std::string message = random_bytes(size, static_cast<unsigned>(size) + 7);
+    std::string joined;
+    gmr::wire::append_fragments(joined, 9, message);
+    for (std::size_t cut : {std::size_t{0}, std::size_t{1}, size / 2, kMaxFragmentPayload - 1, kMaxFragmentPayload,
+                            kMaxFragmentPayload + 1, size}) {
+      if (cut > size) continue;
+      std::string pieces = "prefix";  // appended after what is there
+      const std::size_t n = gmr::wire::append_fragments(pieces, 9, std::string_view(message).substr(0, cut),
+                                                        std::string_view(message).substr(cut));
+      EXPECT_EQ(n, gmr::wire::fragment_count(size));
+      EXPECT_EQ(pieces, "prefix" + joined) << "size " << size << ", cut at " << cut;
+      ++cases;
+    }
+  }
+  EXPECT_EQ(cases, 27u);
+}
+
 TEST(UdpFragments, ReassembleExactlyInAnyOrderWithDuplicates) {
   for (std::size_t size : {std::size_t{0}, std::size_t{1}, gmr::wire::kMaxFragmentPayload,
                            gmr::wire::kMaxFragmentPayload + 1, std::size_t{10000}}) {

@@ -85,15 +85,31 @@ bool same_token(const UdpToken& a, const UdpToken& b) {
 }
 
 std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view message) {
-  const std::size_t count = fragment_count(message.size());
-  out.reserve(out.size() + count * kFragmentHeaderBytes + message.size());
+  return append_fragments(out, message_id, message, std::string_view());
+}
+
+std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view first, std::string_view rest) {
+  const std::size_t total = first.size() + rest.size();
+  const std::size_t count = fragment_count(total);
+  out.reserve(out.size() + count * kFragmentHeaderBytes + total);
+  // Bytes [from, from + n) of first + rest.
+  auto append_range = [&](std::size_t from, std::size_t n) {
+    if (from < first.size()) {
+      const std::size_t k = std::min(n, first.size() - from);
+      out.append(first.substr(from, k));
+      from += k;
+      n -= k;
+    }
+    if (n > 0) out.append(rest.substr(from - first.size(), n));
+  };
   for (std::size_t i = 0; i < count; ++i) {
     put_header(out, DatagramKind::kFragment);
     put_be(out, message_id);
     put_be(out, static_cast<std::uint16_t>(i));
     put_be(out, static_cast<std::uint16_t>(count));
-    put_be(out, static_cast<std::uint32_t>(message.size()));
-    out.append(message.substr(std::min(message.size(), i * kMaxFragmentPayload), kMaxFragmentPayload));
+    put_be(out, static_cast<std::uint32_t>(total));
+    const std::size_t from = std::min(total, i * kMaxFragmentPayload);
+    append_range(from, std::min(kMaxFragmentPayload, total - from));
   }
   return count;
 }

@@ -76,6 +76,9 @@ inline std::size_t fragment_count(std::size_t message_bytes) {
 // batches them: every one but the last is exactly kMaxDatagramBytes long.
 // Returns how many there are.
 std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view message);
+// The same for a message in two pieces, `first` then `rest` (a frame's own
+// head and the body its stream shares), without joining them first.
+std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view first, std::string_view rest);
 
 // Rebuilds messages from fragments that may arrive late, twice, out of order
 // or not at all. Keeps at most kMaxPartial messages in progress; starting one
