@@ -50,6 +50,7 @@ std::atomic<bool> g_measuring{false};
 struct ThreadHistogram {
   std::mutex mutex;
   Histogram histogram;
+  Histogram server_wait;
 };
 std::mutex g_histograms_mutex;
 std::vector<std::unique_ptr<ThreadHistogram>> g_histograms;
@@ -83,6 +84,7 @@ struct ClientRun {
       ThreadHistogram& h = this_threads_histogram();
       std::lock_guard lock(h.mutex);
       h.histogram.add(f.receive_time_ns - f.server_send_time_ns);
+      if (f.server_write_time_ns != 0) h.server_wait.add(f.server_write_time_ns - f.server_send_time_ns);
     }
     seen = true;
     last_sequence = f.sequence;
@@ -367,6 +369,7 @@ int main(int argc, char** argv) {
     for (const auto& h : g_histograms) {
       std::lock_guard hl(h->mutex);
       result.latency.add(h->histogram);
+      result.server_wait.add(h->server_wait);
     }
   }
   result.have_server = have_server;

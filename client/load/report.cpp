@@ -71,6 +71,30 @@ double Histogram::quantile_ns(double q) const {
 
 // ---- JSON ---------------------------------------------------------------
 
+namespace {
+
+// The histogram's non-empty buckets as [lowest ns, count], and its maximum.
+nlohmann::json histogram_json(const Histogram& h) {
+  nlohmann::json buckets = nlohmann::json::array();
+  for (std::size_t b = 0; b < Histogram::kBuckets; ++b) {
+    if (h.at(b) != 0) buckets.push_back({Histogram::bucket_low(b), h.at(b)});
+  }
+  return {{"max", h.max()}, {"buckets", buckets}};
+}
+
+void read_histogram(const nlohmann::json& j, const std::string& what, Histogram& h) {
+  for (const auto& b : j.at("buckets")) {
+    const auto low = b.at(0).get<std::int64_t>();
+    const std::size_t bucket = Histogram::bucket_of(low);
+    if (Histogram::bucket_low(bucket) != low) {
+      throw std::runtime_error(what + " bucket " + std::to_string(low) + " ns is not a bucket boundary");
+    }
+    h.set(bucket, b.at(1).get<std::uint64_t>());
+  }
+}
+
+}  // namespace
+
 std::string to_json(const LoadResult& r) {
   nlohmann::json j;
   j["format"] = "gmr-load 1";
@@ -95,12 +119,8 @@ std::string to_json(const LoadResult& r) {
                    {"io_threads", r.server_io_threads}};
   }
   if (r.server_cpu_seconds >= 0) j["server_cpu_seconds"] = r.server_cpu_seconds;
-  // The histogram's non-empty buckets as [lowest ns, count].
-  nlohmann::json buckets = nlohmann::json::array();
-  for (std::size_t b = 0; b < Histogram::kBuckets; ++b) {
-    if (r.latency.at(b) != 0) buckets.push_back({Histogram::bucket_low(b), r.latency.at(b)});
-  }
-  j["latency_ns"] = {{"max", r.latency.max()}, {"buckets", buckets}};
+  j["latency_ns"] = histogram_json(r.latency);
+  if (r.server_wait.count() > 0) j["server_wait_ns"] = histogram_json(r.server_wait);
   // Derived, for scripts (from_json reads the buckets back instead).
   j["delivered_per_second"] = r.seconds > 0 ? static_cast<double>(r.frames) / r.seconds : 0.0;
   j["expected_per_second"] = r.rate_hz * static_cast<double>(r.clients);
@@ -144,14 +164,8 @@ LoadResult from_json(const std::string& text, const std::string& label) {
       r.server_io_threads = s.value("io_threads", 0u);
     }
     r.server_cpu_seconds = j.value("server_cpu_seconds", -1.0);
-    for (const auto& b : j.at("latency_ns").at("buckets")) {
-      const auto low = b.at(0).get<std::int64_t>();
-      const std::size_t bucket = Histogram::bucket_of(low);
-      if (Histogram::bucket_low(bucket) != low) {
-        throw std::runtime_error("latency bucket " + std::to_string(low) + " ns is not a bucket boundary");
-      }
-      r.latency.set(bucket, b.at(1).get<std::uint64_t>());
-    }
+    read_histogram(j.at("latency_ns"), "latency", r.latency);
+    if (j.contains("server_wait_ns")) read_histogram(j.at("server_wait_ns"), "server wait", r.server_wait);
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(label + ": " + e.what());
   } catch (const std::runtime_error& e) {
@@ -166,6 +180,7 @@ LoadResult merge(const std::vector<LoadResult>& runs) {
   m.processes = 0;
   m.clients = m.frames = m.gaps = m.stale = 0;
   m.latency = Histogram{};
+  m.server_wait = Histogram{};
   m.cpu_user_seconds = m.cpu_system_seconds = 0;
   m.threads = 0;
   m.server_sent = m.server_dropped = m.server_skipped = 0;
@@ -180,6 +195,7 @@ LoadResult merge(const std::vector<LoadResult>& runs) {
     m.gaps += r.gaps;
     m.stale += r.stale;
     m.latency.add(r.latency);
+    m.server_wait.add(r.server_wait);
     m.cpu_user_seconds += r.cpu_user_seconds;
     m.cpu_system_seconds += r.cpu_system_seconds;
     m.threads += r.threads;
@@ -234,6 +250,12 @@ std::string describe(const LoadResult& r) {
   out += format("latency          p50 %.3f ms  p99 %.3f ms  p99.9 %.3f ms  max %.3f ms  (%llu frames)\n",
                 ms(r.latency.quantile_ns(0.5)), ms(r.latency.quantile_ns(0.99)), ms(r.latency.quantile_ns(0.999)),
                 ms(static_cast<double>(r.latency.max())), static_cast<unsigned long long>(r.latency.count()));
+  if (r.server_wait.count() > 0) {
+    out += format("  in the server  p50 %.3f ms  p99 %.3f ms  p99.9 %.3f ms  max %.3f ms  (encoded to written: "
+                  "the fan-out and the I/O thread's queue)\n",
+                  ms(r.server_wait.quantile_ns(0.5)), ms(r.server_wait.quantile_ns(0.99)),
+                  ms(r.server_wait.quantile_ns(0.999)), ms(static_cast<double>(r.server_wait.max())));
+  }
   // The distribution in powers of two of milliseconds, with a bar.
   if (r.latency.count() > 0) {
     out += "histogram        (latency up to; share of frames)\n";

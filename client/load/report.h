@@ -52,7 +52,11 @@ struct LoadResult {
   std::uint64_t frames = 0;  // received in the window
   std::uint64_t gaps = 0;    // sequence numbers that never arrived
   std::uint64_t stale = 0;   // dropped by the clients as older than max staleness
-  Histogram latency;
+  Histogram latency;      // receive time - Frame.server_send_time_ns (encoding)
+  // Frame.server_write_time_ns - server_send_time_ns, of the frames that
+  // carry a write stamp: how long a frame waited in the server after its
+  // encoding (behind the fan-out to other subscribers and the lane's queue).
+  Histogram server_wait;
   // Of this process (merged: summed).
   double cpu_user_seconds = 0;
   double cpu_system_seconds = 0;

@@ -12,6 +12,7 @@
 #include <cstring>
 #include <optional>
 
+#include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
 #include "prometheus/histogram.h"
 
@@ -256,7 +257,9 @@ void Connection::discard_frames(std::uint32_t key) {
 
 void Connection::send_frames_now(std::uint32_t key) {
   Lock lock(m_);
-  for (const auto& frame : frames_.take(key)) {
+  const std::int64_t now = now_ns();
+  for (auto& frame : frames_.take(key)) {
+    wire::set_write_stamp(frame.head, now);
     auto bytes = std::make_shared<const std::string>(frame.head + *frame.body);
     reply_bytes_ += bytes->size();
     replies_.push_back(std::move(bytes));
@@ -348,8 +351,11 @@ void Connection::flush() {
   // head then the shared body (hold_heads_ is reserved: buffers point into it).
   const std::size_t first_frame = hold_.size();
   hold_heads_.reserve(frames_.count());
+  // Every frame of this write is stamped with the same time: now.
+  const std::int64_t now = now_ns();
   frames_.drain(Clock::now(), counters_, [&](std::uint32_t, PendingFrame& f) {
     oldest_frame_in_flight_ = std::min(oldest_frame_in_flight_, f.pushed_at);
+    wire::set_write_stamp(f.head, now);
     hold_heads_.push_back(std::move(f.head));
     in_flight_bytes_ += hold_heads_.back().size() + f.body->size();
     hold_.push_back(std::move(f.body));

@@ -51,8 +51,9 @@ class Outbox {
   virtual bool closing() const = 0;
   // Queues a reply (already length-prefixed); replies go out in order.
   virtual void send(std::string framed) = 0;
-  // Queues a frame: `head` (this client's length prefix and ids) before the
-  // shared `body`. False when the key already had its share of frames
+  // Queues a frame: `head` (this client's length prefix, ids and write
+  // stamp, which the outbox sets as it writes the frame) before the shared
+  // `body`. False when the key already had its share of frames
   // waiting and the oldest was dropped to make room (counted). A frame still
   // waiting `max_age` after this call is dropped instead of written (counted,
   // and in end_frames(key)'s answer); zero: no limit.

@@ -35,7 +35,8 @@ void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std
 void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
   // The head and the shared body go into the datagrams as they are: no copy
   // of the whole message per subscriber.
-  if (!publisher_.send(endpoint_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), false), *body)) {
+  if (!publisher_.send_frame(endpoint_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), false),
+                             *body)) {
     ++dropped_;
     connection_->count_udp_frame_dropped();
     return;
@@ -48,7 +49,7 @@ void MulticastTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<con
   // Another subscriber of the stream already sent this one.
   if (!ch.last.owner_before(body) && !body.owner_before(ch.last)) return;
   ch.last = body;
-  if (!publisher_.send(ch.group, wire::frame_head_for(0, 0, stream_id, body->size(), false), *body)) {
+  if (!publisher_.send_frame(ch.group, wire::frame_head_for(0, 0, stream_id, body->size(), false), *body)) {
     ++dropped_;
     ++ch.dropped;
     return;

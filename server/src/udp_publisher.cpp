@@ -16,6 +16,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "gmr/wire/frames.h"
 #include "gmr/wire/udp.h"
 
 namespace gmr::server {
@@ -29,6 +30,7 @@ namespace {
 // UDP GSO limits: at most 64 segments, and the whole message within one
 // IP datagram's 64 KiB.
 constexpr std::size_t kMaxGsoSegments = std::min<std::size_t>(64, 65000 / wire::kMaxDatagramBytes);
+constexpr std::size_t kNoStamp = static_cast<std::size_t>(-1);
 // Entries per sendmmsg call (the kernel caps a call at UIO_MAXIOV, 1024).
 constexpr std::size_t kSendBatch = 256;
 // Datagrams read per pass of the event loop.
@@ -58,7 +60,9 @@ class UdpPublisher::Sender {
     }
   }
 
-  bool send(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body) {
+  // `stamped`: `head` is a frame's (frame_head_for), whose write stamp is
+  // filled in as the message's first datagram leaves.
+  bool send(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body, bool stamped) {
     std::lock_guard lock(m_);
     if (closed_ || !to->endpoint) return false;
     if (to->in_flight + wire::fragment_count(head.size() + body.size()) > max_in_flight_) return false;
@@ -69,12 +73,19 @@ class UdpPublisher::Sender {
     // Without GSO every datagram is its own entry; with it, runs of up to
     // kMaxGsoSegments share one.
     const std::size_t per_entry = gso_.load(std::memory_order_relaxed) ? kMaxGsoSegments : 1;
+    const std::size_t first = filling_.entries.size();
     for (std::size_t done = 0; done < appended;) {
       const std::size_t n = std::min(per_entry, appended - done);
       const std::size_t bytes = std::min(n * wire::kMaxDatagramBytes, end - at);
       filling_.entries.push_back(Batched{at, bytes, n, *to->endpoint, to});
       at += bytes;
       done += n;
+    }
+    // The stamp ends the head, which is far shorter than a fragment: it is
+    // in the first datagram, after its header.
+    static_assert(wire::kMaxFragmentPayload > 64);
+    if (stamped && head.size() >= wire::kWriteStampBytes && head.size() <= wire::kMaxFragmentPayload) {
+      filling_.entries[first].stamp_at = filling_.entries[first].offset + wire::kFragmentHeaderBytes + head.size() - 8;
     }
     to->in_flight += appended;
     if (!flush_posted_) {
@@ -123,6 +134,9 @@ class UdpPublisher::Sender {
     std::size_t count = 0;   // datagrams
     udp::endpoint to;
     std::shared_ptr<Registration> registration;
+    // On a frame's first entry: where in the batch its write stamp's 8
+    // value bytes are (kNoStamp: none).
+    std::size_t stamp_at = kNoStamp;
   };
   struct Batch {
     std::string bytes;
@@ -179,6 +193,13 @@ class UdpPublisher::Sender {
     const int fd = socket_.native_handle();
     while (sent_ < sending_.entries.size()) {
       const std::size_t n = std::min(kSendBatch, sending_.entries.size() - sent_);
+      // The frames this call starts are stamped with its time (a frame's
+      // later fragments have not left yet).
+      const std::int64_t now = now_ns();
+      for (std::size_t i = 0; i < n; ++i) {
+        const Batched& b = sending_.entries[sent_ + i];
+        if (b.stamp_at != kNoStamp) wire::set_write_stamp(sending_.bytes.data() + b.stamp_at, now);
+      }
       for (std::size_t i = 0; i < n; ++i) {
         Batched& b = sending_.entries[sent_ + i];
         iovs[i] = iovec{sending_.bytes.data() + b.offset, b.bytes};
@@ -396,7 +417,12 @@ bool UdpPublisher::congested(const Registration& to) const {
 
 bool UdpPublisher::send(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body) {
   if (closed_ || to->lane >= senders_.size()) return false;
-  return senders_[to->lane]->send(to, head, body);
+  return senders_[to->lane]->send(to, head, body, false);
+}
+
+bool UdpPublisher::send_frame(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body) {
+  if (closed_ || to->lane >= senders_.size()) return false;
+  return senders_[to->lane]->send(to, head, body, true);
 }
 
 void UdpPublisher::receive() {

@@ -75,6 +75,9 @@ class UdpPublisher {
   // registered or already has max_in_flight datagrams in flight. Control
   // loop only.
   bool send(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body = {});
+  // A frame: `head` (frame_head_for, no length prefix), its shared `body`,
+  // then a write stamp set as its first datagram is handed to the kernel.
+  bool send_frame(const std::shared_ptr<Registration>& to, std::string_view head, std::string_view body);
 
   // True when `to`'s sender (its I/O thread) has a datagram that has waited
   // longer than set_congested_after to be handed to the kernel: the thread

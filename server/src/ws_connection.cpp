@@ -7,6 +7,7 @@
 #include <charconv>
 #include <cmath>
 
+#include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
 #include "prometheus/histogram.h"
 
@@ -113,6 +114,7 @@ std::string frame_to_json(const pb::ServerMessage& m) {
   o.f64("motionTime", f.motion_time());
   o.u64("sequence", f.sequence());
   o.i64("serverSendTimeNs", f.server_send_time_ns());
+  o.i64("serverWriteTimeNs", f.server_write_time_ns());
   o.array("positions", f.positions());
   o.array("orientations", f.orientations());
   o.array("positionsF64", f.positions_f64());
@@ -303,8 +305,10 @@ void WsConnection::discard_frames(std::uint32_t key) {
 }
 
 void WsConnection::send_frames_now(std::uint32_t key) {
+  const std::int64_t now = now_ns();
   for (auto& f : frames_.take(key)) {
     std::string framed = std::move(f.head);
+    wire::set_write_stamp(framed, now);
     framed += *f.body;
     reply_bytes_ += framed.size();
     replies_.push_back(std::move(framed));
@@ -366,6 +370,7 @@ void WsConnection::flush() {
   // One frame per message, the subscriptions taking turns.
   if (auto f = frames_.pop_next(next_key_, Clock::now(), counters_)) {
     std::string framed = std::move(f->head);
+    wire::set_write_stamp(framed, now_ns());
     framed += *f->body;
     ++counters_.frames_sent;
     frame_in_flight_pushed_ = f->pushed_at;

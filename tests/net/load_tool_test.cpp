@@ -142,6 +142,13 @@ TEST(LoadTool, MeasuresAWindowWritesJsonMergesAndPlots) {
   std::uint64_t histogram = 0;
   for (const auto& b : j["latency_ns"]["buckets"]) histogram += b[1].get<std::uint64_t>();
   EXPECT_EQ(histogram, frames);
+  // Every UDP frame carries its write stamp: how long it waited in the
+  // server, which is never more than its whole latency.
+  std::uint64_t waits = 0;
+  for (const auto& b : j["server_wait_ns"]["buckets"]) waits += b[1].get<std::uint64_t>();
+  EXPECT_EQ(waits, frames);
+  EXPECT_LE(j["server_wait_ns"]["max"].get<std::int64_t>(), j["latency_ns"]["max"].get<std::int64_t>());
+  EXPECT_NE(r.out.find("in the server"), std::string::npos) << r.out;
   EXPECT_GE(j["server_cpu_seconds"].get<double>(), 0.0);
   // Two processes' results, merged.
   const ToolRun m = run("--merge " + json.string() + " " + json.string() + " --json " + merged.string());
@@ -150,6 +157,9 @@ TEST(LoadTool, MeasuresAWindowWritesJsonMergesAndPlots) {
   const auto mj = read_json(merged);
   EXPECT_EQ(mj["frames"].get<std::uint64_t>(), 2 * frames);
   EXPECT_EQ(mj["processes"], 2);
+  std::uint64_t merged_waits = 0;
+  for (const auto& b : mj["server_wait_ns"]["buckets"]) merged_waits += b[1].get<std::uint64_t>();
+  EXPECT_EQ(merged_waits, 2 * frames);
   // The plot is a PNG (gnuplot is one of install-deps' packages).
   std::ifstream in(png, std::ios::binary);
   std::array<char, 8> magic{};

@@ -169,6 +169,9 @@ TEST_P(ServerPositions, TcpStreamEqualsGmrPositionsForEveryView) {
       EXPECT_DOUBLE_EQ(frames[k].motion_time, static_cast<double>(f) * source_->frame_time);
       EXPECT_FALSE(frames[k].udp);
       EXPECT_GT(frames[k].server_send_time_ns, 0);
+      // Written after its encoding, received after it was written (one clock: loopback).
+      EXPECT_GE(frames[k].server_write_time_ns, frames[k].server_send_time_ns);
+      EXPECT_LE(frames[k].server_write_time_ns, frames[k].receive_time_ns);
       got.insert(got.end(), frames[k].positions.begin(), frames[k].positions.end());
     }
     EXPECT_POSITIONS_NEAR(ref.skeleton, reorder(applied->skeleton, all, got, ref), want, 1e-9 * ref.size);
@@ -196,6 +199,10 @@ TEST_P(ServerPositions, UdpStreamEqualsGmrPositionsWithFragmentedFrames) {
     for (const auto& f : frames) {
       ASSERT_TRUE(f.udp);
       ASSERT_LT(f.frame_index, source_->frame_count);
+      // The write stamp ends the message, across fragments: stamped as the
+      // first datagram left, between encoding and arrival.
+      EXPECT_GE(f.server_write_time_ns, f.server_send_time_ns);
+      EXPECT_LE(f.server_write_time_ns, f.receive_time_ns);
       EXPECT_EQ(f.orientations.size(), applied->skeleton.size());
       const auto got = reorder(applied->skeleton, all, f.positions, ref);
       const std::span<const Eigen::Vector3d> want(ref.positions.data() + f.frame_index * n, n);

@@ -178,6 +178,13 @@ TEST(Streaming, SharedStreamsComputeAndEncodeOncePerTick) {
     EXPECT_EQ(it->positions, f.positions);
     EXPECT_EQ(it->server_send_time_ns, f.server_send_time_ns);
   }
+  // One encoding time per tick, but each subscriber's own write time.
+  for (const auto* frames : {&fa, &fb}) {
+    for (const auto& f : *frames) {
+      EXPECT_GE(f.server_write_time_ns, f.server_send_time_ns);
+      EXPECT_LE(f.server_write_time_ns, f.receive_time_ns);
+    }
+  }
   // One FK and one encoding per tick, not per subscriber: fewer encodings
   // than frames delivered (b alone received 50 frames from the shared stream).
   EXPECT_GE(fb.size(), 50u);

@@ -184,13 +184,16 @@ TEST(FrameEncoding, SharedBodyPlusSubscriberHeadDecodesToTheFrame) {
     }
     const std::string body = gmr::wire::encode_frame_body(c);
     for (std::uint32_t view : {1u, 300u, 70000u}) {
-      const std::string head = gmr::wire::frame_head_for(view, view + 1, 5, body.size(), true);
+      std::string head = gmr::wire::frame_head_for(view, view + 1, 5, body.size(), true);
+      // The head ends with the write stamp, filled in as the frame leaves.
+      const std::int64_t written = 1'700'000'000'123'456'789 + view;
+      gmr::wire::set_write_stamp(head, written);
       const std::string whole = head + body;
       std::array<std::uint8_t, gmr::wire::kLengthPrefixBytes> prefix{};
       std::copy_n(whole.begin(), prefix.size(), prefix.begin());
       ASSERT_EQ(gmr::wire::read_length_prefix(prefix), whole.size() - prefix.size());
       const std::string out = whole.substr(prefix.size());
-      EXPECT_EQ(out, gmr::wire::frame_message_for(view, view + 1, 5, body));
+      EXPECT_EQ(out, gmr::wire::frame_message_for(view, view + 1, 5, body, written));
       pb::ServerMessage m;
       ASSERT_TRUE(m.ParseFromString(out));
       ASSERT_TRUE(m.has_frame());
@@ -204,6 +207,7 @@ TEST(FrameEncoding, SharedBodyPlusSubscriberHeadDecodesToTheFrame) {
       EXPECT_EQ(f->motion_time, 17 / 120.0);
       EXPECT_EQ(f->sequence, 99u);
       EXPECT_EQ(f->server_send_time_ns, 123456789);
+      EXPECT_EQ(f->server_write_time_ns, written);
       EXPECT_EQ(f->float64, float64);
       ASSERT_EQ(f->positions.size(), 2u);
       EXPECT_EQ(f->positions[0], Eigen::Vector3d(1.5, -2.25, 3.0));

@@ -184,7 +184,8 @@ class Frame:
     frame_index: int
     motion_time: float
     sequence: int
-    server_send_time_ns: int
+    server_send_time_ns: int   # when the server encoded it (system_clock ns)
+    server_write_time_ns: int  # when the server handed it to the kernel (0: not stamped)
     receive_time_ns: int
     udp: bool
     positions: np.ndarray                     # (J, 3)
@@ -216,7 +217,8 @@ def _decode_frame(f, udp: bool) -> Frame:
     if (local_r is None) != (local_t is None):
         raise GmrError("PROTOCOL", "local rotations without local translations, or the other way round")
     return Frame(f.subscription_id, f.view_id, f.stream_id, f.skeleton_version, f.frame_index, f.motion_time,
-                 f.sequence, f.server_send_time_ns, time.time_ns(), udp, positions, orientations, local_r, local_t)
+                 f.sequence, f.server_send_time_ns, f.server_write_time_ns, time.time_ns(), udp, positions,
+                 orientations, local_r, local_t)
 
 
 class Subscription:

@@ -52,29 +52,37 @@ std::string encode_frame_body(const FrameContent& c) {
   return f.SerializeAsString();
 }
 
+void set_write_stamp(char* value, std::int64_t ns) {
+  auto v = static_cast<std::uint64_t>(ns);
+  for (int i = 0; i < 8; ++i, v >>= 8) value[i] = static_cast<char>(v & 0xff);  // fixed64: little-endian
+}
+
+void set_write_stamp(std::string& head, std::int64_t ns) { set_write_stamp(head.data() + head.size() - 8, ns); }
+
 std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
                            std::size_t body_size, bool length_prefix) {
-  const std::string ids = frame_ids(view_id, subscription_id, stream_id);
+  static_assert(pb::Frame::kServerWriteTimeNsFieldNumber < 16, "the stamp's tag is one byte");
+  std::string ids = frame_ids(view_id, subscription_id, stream_id);
+  put_varint(ids, tag(pb::Frame::kServerWriteTimeNsFieldNumber, 1));  // 64-bit
+  ids.append(8, '\0');
   std::string head;
+  head.reserve(kLengthPrefixBytes + 12 + ids.size());
+  if (length_prefix) head.resize(kLengthPrefixBytes);
   put_varint(head, tag(pb::ServerMessage::kFrameFieldNumber, 2));
   put_varint(head, ids.size() + body_size);
   head += ids;
-  if (!length_prefix) return head;
-  std::string out(kLengthPrefixBytes, '\0');
-  write_length_prefix(static_cast<std::uint32_t>(head.size() + body_size),
-                      std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(out.data()),
-                                                                   kLengthPrefixBytes));
-  return out + head;
+  if (length_prefix) {
+    write_length_prefix(static_cast<std::uint32_t>(head.size() - kLengthPrefixBytes + body_size),
+                        std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(head.data()),
+                                                                     kLengthPrefixBytes));
+  }
+  return head;
 }
 
 std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
-                              std::string_view body) {
-  const std::string ids = frame_ids(view_id, subscription_id, stream_id);
-  std::string out;
-  out.reserve(ids.size() + body.size() + 8);
-  put_varint(out, tag(pb::ServerMessage::kFrameFieldNumber, 2));
-  put_varint(out, ids.size() + body.size());
-  out += ids;
+                              std::string_view body, std::int64_t write_ns) {
+  std::string out = frame_head_for(view_id, subscription_id, stream_id, body.size(), false);
+  set_write_stamp(out, write_ns);
   out.append(body);
   return out;
 }
@@ -145,6 +153,7 @@ Result<FrameValues> decode_frame(const pb::Frame& f) {
   d.motion_time = f.motion_time();
   d.sequence = f.sequence();
   d.server_send_time_ns = f.server_send_time_ns();
+  d.server_write_time_ns = f.server_write_time_ns();
   d.float64 = f.positions_f64_size() > 0;
   Status s = d.float64 ? unpack(f.positions_f64(), f.orientations_f64(), d.positions, d.orientations)
                        : unpack(f.positions(), f.orientations(), d.positions, d.orientations);

@@ -6,7 +6,12 @@
 // numbers 1..3; everything else (numbers >= 16) is the same for every
 // subscriber of a stream. Protobuf parses concatenated encodings as one
 // message, so a subscriber's bytes are a few varints followed by the shared
-// body: the expensive part (positions) is encoded once.
+// body: the expensive part (positions) is encoded once. The head ends with
+// the write stamp (field 4, 9 bytes of fixed size), filled in place as the
+// frame leaves:
+//
+//   [length prefix] ServerMessage.frame tag+length | ids | write stamp | shared body
+//   `-------------------- frame_head_for --------------------------'  (encoded once)
 #pragma once
 
 #include <Eigen/Core>
@@ -47,13 +52,21 @@ struct FrameContent {
 // The shared body: serialized Frame fields >= 16.
 std::string encode_frame_body(const FrameContent& content);
 
-// A whole serialized ServerMessage{frame: Frame{ids + body}} (no length
-// prefix): what a UDP datagram carries.
+// Frame.server_write_time_ns as it ends a frame's head: its tag and 8 bytes.
+inline constexpr std::size_t kWriteStampBytes = 9;
+// Overwrites the stamp's value (the last 8 bytes of a frame_head_for head,
+// or the 8 bytes at `value`).
+void set_write_stamp(char* value, std::int64_t ns);
+void set_write_stamp(std::string& head, std::int64_t ns);
+
+// A whole serialized ServerMessage{frame: Frame{ids + write stamp + body}}
+// (no length prefix), stamped `write_ns`.
 std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
-                              std::string_view body);
+                              std::string_view body, std::int64_t write_ns = 0);
 
 // The bytes that go before a shared body of `body_size` bytes to make it a
-// whole ServerMessage (with the TCP length prefix when `length_prefix`).
+// whole ServerMessage (with the TCP length prefix when `length_prefix`):
+// lengths, ids, and a write stamp of 0 as its last kWriteStampBytes.
 std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
                            std::size_t body_size, bool length_prefix);
 
