@@ -1,7 +1,8 @@
 """The Python client (client/python/gmr_client) against a gmr-server started
 here: every request, queries and streams equal to `gmr positions`, TCP and
 UDP (fragmented frames), conventions, local transforms and the rest pose,
-skeleton changes, liveness of a client that only listens, and errors.
+skeleton changes, liveness of a client that only listens, errors, and live
+sources published from Python.
 
     test_python_client.py --bin-dir build/bin --python-dir build/python
 
@@ -254,6 +255,120 @@ class DemoLibrary(unittest.TestCase):
             gmr_client.Client(port=1, timeout=2)
         self.assertEqual(e.exception.code, "CONNECTION")
         self.assertIn("127.0.0.1:1", str(e.exception))
+
+
+class LiveSources(unittest.TestCase):
+    """Publishing from Python (docs/live.md): a client is a live source,
+    another subscribes to views of it and gets exactly the frames published,
+    through the server's own kinematics; refusals are clear."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.server = env.Server(ARGS.bin_dir, "--anonymous", "publish")
+        cls.publisher = gmr_client.Client(port=cls.server.port, name="python publisher")
+        cls.subscriber = gmr_client.Client(port=cls.server.port, name="python subscriber")
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.publisher.close()
+        cls.subscriber.close()
+        cls.server.stop()
+
+    def lockstep(self, publication, frames, subs):
+        """Publishes each frame, then waits until every subscription has it:
+        returns, per subscription, the frames received (one per published frame)."""
+        got = [[] for _ in subs]
+        for k, values in enumerate(frames):
+            self.publisher.publish_frame(publication, values)
+            deadline = time.monotonic() + 5
+            while any(len(g) <= k for g in got):
+                self.assertLess(time.monotonic(), deadline, f"frame {k} did not arrive")
+                self.subscriber.poll(0.05)
+                for g, sub in zip(got, subs):
+                    g.extend(sub.frames())
+        return got
+
+    def test_positions_published_are_streamed_exactly_and_seen_from_a_joint(self):
+        s = self.subscriber
+        walk = s.create_view("walk")
+        q = s.query(walk.id, 0, 40)  # the demo walk's world positions: what a tracker would send
+        names = walk.skeleton.names
+        s.close_view(walk.id)
+        pub = self.publisher.publish("python/points", gmr_client.Skeleton.points(names), 1 / 120,
+                                     metres_per_unit=0.01)
+        self.assertEqual(pub.motion, "python/points")
+        self.assertEqual(pub.channel_count, 3 * len(names))
+        motions = {m.name: m for m in s.list_motions()}
+        self.assertEqual(motions["python/points"].source, "live")
+        world = s.create_view("python/points")
+        seen = s.create_view("python/points")
+        s.set_coordinates(seen.id, "head")
+        subs = [s.subscribe(world.id, float64=True, max_staleness_ms=0),
+                s.subscribe(seen.id, float64=True, max_staleness_ms=0)]
+        got = self.lockstep(pub, q.positions, subs)
+        head = names.index("head")
+        for k in range(len(q.positions)):
+            w, v = got[0][k], got[1][k]
+            self.assertEqual((w.frame_index, v.frame_index), (k, k))
+            order = [subs[0].skeleton.index(n) for n in names]
+            self.assertEqual(np.abs(w.positions[order] - q.positions[k]).max(), 0.0)
+            # Every joint a root without rotations: seen from the head is a translation.
+            want = q.positions[k] - q.positions[k][head]
+            self.assertLess(np.abs(v.positions[[subs[1].skeleton.index(n) for n in names]] - want).max(), 1e-12)
+            self.assertGreaterEqual(w.server_write_time_ns, w.server_send_time_ns)
+        self.publisher.unpublish(pub)
+        deadline = time.monotonic() + 5
+        while any(sub.ended is None for sub in subs):
+            self.assertLess(time.monotonic(), deadline, "the subscriptions did not end with the publication")
+            s.poll(0.05)
+        self.assertNotIn("python/points", [m.name for m in s.list_motions()])
+
+    def test_a_hierarchy_is_posed_by_its_channels(self):
+        # A root with translation and Z-then-Y rotation channels (R = Rz Ry),
+        # a child 10 units along its x axis: Zrotation 90 puts it on the
+        # root's y; Yrotation 90 then on -z, whatever Z does to that.
+        skeleton = gmr_client.Skeleton(
+            ["base", "tip"], np.array([-1, 0], dtype=np.int32), np.array([-1, -1], dtype=np.int32),
+            np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]]),
+            [["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation"], []], np.zeros((2, 3)),
+            np.tile([0.0, 0.0, 0.0, 1.0], (2, 1)))
+        pub = self.publisher.publish("python/arm", skeleton, 1 / 60)
+        s = self.subscriber
+        v = s.create_view("python/arm")
+        sub = s.subscribe(v.id, float64=True, max_staleness_ms=0)
+        frames = [[1, 2, 3, 90, 0], [1, 2, 3, 90, 90], [0, 0, 0, 0, 0]]
+        want = [[[1, 2, 3], [1, 12, 3]], [[1, 2, 3], [1, 2, -7]], [[0, 0, 0], [10, 0, 0]]]
+        got = self.lockstep(pub, frames, [sub])[0]
+        for k in range(3):
+            order = [sub.skeleton.index(n) for n in ("base", "tip")]
+            self.assertLess(np.abs(got[k].positions[order] - np.array(want[k], dtype=float)).max(), 1e-12, k)
+        self.publisher.unpublish(pub)
+
+    def test_refusals_are_clear(self):
+        pub = self.publisher.publish("python/refusals", gmr_client.Skeleton.points(["a", "b"]), 1 / 30)
+        with self.assertRaises(gmr_client.GmrError) as e:  # the name is taken
+            self.publisher.publish("python/refusals", gmr_client.Skeleton.points(["a"]), 1 / 30)
+        self.assertIn("python/refusals", str(e.exception))
+        with self.assertRaises(ValueError) as v:  # checked here, before it is sent
+            self.publisher.publish_frame(pub, [1, 2, 3])
+        self.assertIn("6 channel values", str(v.exception))
+        self.publisher.publish_frame(pub, [0, 0, 0, 1, float("nan"), 3])
+        self.publisher.publish_frame(pub.id + 1000, [0.0] * 6)
+        deadline = time.monotonic() + 5
+        errors = []
+        while len(errors) < 2 and time.monotonic() < deadline:
+            self.publisher.poll(0.05)
+            errors += self.publisher.take_errors()
+        self.assertEqual(len(errors), 2, errors)
+        self.assertIn("b", errors[0])  # the joint whose value is not finite
+        self.assertTrue(errors[0].startswith("BAD_REQUEST"), errors[0])
+        self.assertTrue(errors[1].startswith("NOT_FOUND"), errors[1])
+        self.assertEqual(self.publisher.take_errors(), [])
+        # The client still works: a request after the refusals gets its reply.
+        self.publisher.unpublish(pub)
+        with gmr_client.Client(port=self.server.port) as c, self.assertRaises(gmr_client.GmrError) as e:
+            c.publish("python/empty", gmr_client.Skeleton.points([]), 1 / 30)  # no joints
+        self.assertEqual(e.exception.code, "BAD_REQUEST")
 
 
 class RealFiles(unittest.TestCase):

@@ -6,7 +6,7 @@ use the package from the build tree (build/python) or an installed copy.
 """
 
 from .client import (DEFAULT_PORT, PRESETS, PROTOCOL_VERSION, Client, Conventions, Frame, GmrError, MotionInfo,
-                     QueryResult, Skeleton, Subscription, View)
+                     Publication, QueryResult, Skeleton, Subscription, View)
 
-__all__ = ["Client", "Conventions", "Frame", "GmrError", "MotionInfo", "QueryResult", "Skeleton", "Subscription",
-           "View", "DEFAULT_PORT", "PRESETS", "PROTOCOL_VERSION"]
+__all__ = ["Client", "Conventions", "Frame", "GmrError", "MotionInfo", "Publication", "QueryResult", "Skeleton",
+           "Subscription", "View", "DEFAULT_PORT", "PRESETS", "PROTOCOL_VERSION"]

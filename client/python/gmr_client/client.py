@@ -115,6 +115,36 @@ class Skeleton:
     def roots(self) -> List[int]:
         return [j for j, p in enumerate(self.parents) if p < 0]
 
+    @property
+    def channel_count(self) -> int:
+        """Channel values per frame of a motion on this skeleton."""
+        return sum(len(c) for c in self.channels)
+
+    @staticmethod
+    def points(names: Sequence[str]) -> "Skeleton":
+        """Every joint a root with Xposition Yposition Zposition: a motion of
+        world positions (what a marker or tracker system gives), to publish."""
+        n = len(names)
+        return Skeleton(list(names), np.full(n, -1, dtype=np.int32), np.full(n, -1, dtype=np.int32),
+                        np.zeros((n, 3)), [_CHANNELS[:3] for _ in range(n)], np.zeros((n, 3)),
+                        np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
+
+    def to_proto(self, out) -> None:
+        """Writes names, parents, soft parents, offsets and channels into a
+        stream_pb2.Skeleton (the rest pose is the server's to give)."""
+        out.Clear()
+        offsets = np.asarray(self.offsets, dtype=np.float64).reshape(len(self.names), 3)
+        for j, name in enumerate(self.names):
+            m = out.joints.add()
+            m.name = name
+            m.parent = int(self.parents[j])
+            m.soft_parent = int(self.soft_parents[j]) if len(self.soft_parents) else -1
+            m.offset.x, m.offset.y, m.offset.z = (float(v) for v in offsets[j])
+            for c in self.channels[j]:
+                if c not in _CHANNELS:
+                    raise ValueError(f"joint '{name}': unknown channel '{c}' (one of {', '.join(_CHANNELS)})")
+                m.channels.append(_CHANNELS.index(c))
+
     @staticmethod
     def from_proto(m) -> "Skeleton":
         n = len(m.joints)
@@ -148,6 +178,15 @@ class MotionInfo:
     frame_time: float
     source: str
     metres_per_unit: float  # 0: unknown
+
+
+@dataclasses.dataclass
+class Publication:
+    """A live source this client publishes (docs/live.md)."""
+    id: int
+    motion: str     # its name in the server's list: views and subscriptions use it
+    recording: str  # with record=True: the file the server writes when the publication ends
+    channel_count: int
 
 
 @dataclasses.dataclass
@@ -299,6 +338,9 @@ class Client:
         self._reassembler = _wire.Reassembler()
         self._max_message = _DEFAULT_MAX_MESSAGE_BYTES
         self.frames_malformed = 0
+        self._awaiting = set()  # request ids a call waits for; other replies are errors to keep
+        self._errors = collections.deque(maxlen=64)  # refusals of requests that get no reply
+        self._publications = {}  # id -> channel count
         try:
             self._sock = socket.create_connection((host, port), timeout=timeout)
         except OSError as e:
@@ -471,6 +513,58 @@ class Client:
     def stats(self):
         return self._ask("get_stats", "stats")
 
+    # ------------------------------------------------------------ live sources
+
+    def publish(self, name: str, skeleton: Skeleton, frame_time: float, *, metres_per_unit: float = 0.0,
+                record: bool = False) -> Publication:
+        """Makes this client a live source (docs/live.md): `name` joins the
+        server's list, and views of it stream each frame given to
+        publish_frame. Needs the publish role (an auth file's `publish TOKEN`,
+        or a server started with --anonymous publish). With `record`, the
+        server writes what it accepted as .gmrb when the publication ends."""
+        m = pb.ClientMessage()
+        p = m.publish
+        p.name = name
+        skeleton.to_proto(p.skeleton)
+        p.frame_time = frame_time
+        p.metres_per_unit = metres_per_unit
+        p.record = record
+        r = self._request(m, "published")
+        self._publications[r.publication_id] = skeleton.channel_count
+        return Publication(r.publication_id, r.motion, r.recording, skeleton.channel_count)
+
+    def publish_frame(self, publication: Union[int, Publication], values) -> None:
+        """Sends one frame: the skeleton's channel values in its order (joint
+        by joint, each joint's channels as published; degrees for rotations),
+        as a flat sequence or an array of any shape. No reply: a frame the
+        server refuses is kept for take_errors(). Reads what has arrived
+        without waiting, so a publisher that only publishes stays current."""
+        pid = publication.id if isinstance(publication, Publication) else int(publication)
+        flat = np.asarray(values, dtype=np.float64).reshape(-1)
+        expected = self._publications.get(pid)
+        if expected is not None and flat.size != expected:
+            raise ValueError(f"publication {pid} takes {expected} channel values per frame, not {flat.size}")
+        m = pb.ClientMessage()
+        m.request_id = self._next_request  # a refusal names it
+        self._next_request += 1
+        m.publish_frame.publication_id = pid
+        m.publish_frame.values.extend(flat.tolist())
+        self._send(m)
+        self._pump(0.0)
+
+    def unpublish(self, publication: Union[int, Publication]) -> None:
+        """Ends a publication: its subscribers' subscriptions end."""
+        pid = publication.id if isinstance(publication, Publication) else int(publication)
+        self._ask("unpublish", "ack", publication_id=pid)
+        self._publications.pop(pid, None)
+
+    def take_errors(self) -> List[str]:
+        """Refusals of requests that get no reply (publish_frame), oldest
+        first, as "CODE: message"; at most the last 64 are kept."""
+        out = list(self._errors)
+        self._errors.clear()
+        return out
+
     def register_udp(self) -> None:
         """Registers this connection's UDP endpoint (register, challenge, confirm; docs/protocol.md, "UDP")."""
         if self._udp_registered:
@@ -520,13 +614,17 @@ class Client:
     def _request(self, m, expect: str):
         m.request_id = self._next_request
         self._next_request += 1
-        self._send(m)
-        deadline = time.monotonic() + self.timeout
-        while m.request_id not in self._replies:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise GmrError("CONNECTION", f"no reply to request {m.request_id} within {self.timeout} s")
-            self._pump(left)
+        self._awaiting.add(m.request_id)
+        try:
+            self._send(m)
+            deadline = time.monotonic() + self.timeout
+            while m.request_id not in self._replies:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise GmrError("CONNECTION", f"no reply to request {m.request_id} within {self.timeout} s")
+                self._pump(left)
+        finally:
+            self._awaiting.discard(m.request_id)
         r = self._replies.pop(m.request_id)
         which = r.WhichOneof("body")
         if which == "error":
@@ -660,7 +758,11 @@ class Client:
             self._udp_registered = True
         elif which == "heartbeat":
             pass
-        elif msg.request_id:
+        elif msg.request_id in self._awaiting:
             self._replies[msg.request_id] = msg
+        elif msg.request_id and which == "error":  # a request that gets no reply was refused
+            self._errors.append(f"{pb.ErrorCode.Name(msg.error.code).replace('ERROR_CODE_', '')}: {msg.error.message}")
+        elif msg.request_id:
+            pass  # a reply nobody waits for any more (its request timed out)
         elif which == "error":  # an error about no request: the server is closing the connection
             raise GmrError(pb.ErrorCode.Name(msg.error.code).replace("ERROR_CODE_", ""), msg.error.message)
