@@ -195,6 +195,16 @@ std::string Metrics::text(Server::Impl& s) const {
     f.add("gmr_bytes_received_total", "Bytes read from client connections", T::Counter,
           static_cast<double>(t.bytes_received), {{"transport", transport}});
   }
+  f.add("gmr_bytes_sent_total", "Bytes written to client connections", T::Counter,
+        static_cast<double>(s.udp.bytes_sent()), {{"transport", "udp"}});  // with multicast: one UDP port
+  f.add("gmr_multicast_frames_sent_total", "Frames sent to the multicast group (once each, whatever the receivers)",
+        T::Counter, static_cast<double>(s.multicast_frames_sent));
+  f.add("gmr_live_sources", "Live sources: motions published by clients or relayed from replicas", T::Gauge,
+        static_cast<double>(s.live.size()));
+  f.add("gmr_live_frames_received_total", "Frames published to live sources and accepted", T::Counter,
+        static_cast<double>(s.live_frames_received));
+  f.add("gmr_live_frames_refused_total", "Frames published to live sources and refused (wrong size, not finite)",
+        T::Counter, static_cast<double>(s.live_frames_refused));
   f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm",
         T::Counter, static_cast<double>(s.udp.rejected()));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,

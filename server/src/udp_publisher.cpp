@@ -124,6 +124,7 @@ class UdpPublisher::Sender {
 
   std::uint64_t send_calls() const { return send_calls_.load(std::memory_order_relaxed); }
   std::uint64_t datagrams_sent() const { return datagrams_sent_.load(std::memory_order_relaxed); }
+  std::uint64_t bytes_sent() const { return bytes_sent_.load(std::memory_order_relaxed); }
 
  private:
   // Consecutive fragments of one frame to one address: one sendmmsg entry
@@ -224,16 +225,18 @@ class UdpPublisher::Sender {
       const int sent = ::sendmmsg(fd, msgs.data(), static_cast<unsigned>(n), MSG_DONTWAIT);
       send_calls_.fetch_add(1, std::memory_order_relaxed);
       if (sent > 0) {
-        std::size_t datagrams = 0;
+        std::size_t datagrams = 0, bytes = 0;
         {
           std::lock_guard lock(m_);
           for (int i = 0; i < sent; ++i) {
             Batched& b = sending_.entries[sent_ + static_cast<std::size_t>(i)];
             b.registration->in_flight -= b.count;
             datagrams += b.count;
+            bytes += b.bytes;
           }
         }
         datagrams_sent_.fetch_add(datagrams, std::memory_order_relaxed);
+        bytes_sent_.fetch_add(bytes, std::memory_order_relaxed);
         sent_ += static_cast<std::size_t>(sent);
         continue;
       }
@@ -291,6 +294,7 @@ class UdpPublisher::Sender {
   std::atomic<bool> gso_{true};  // until the kernel refuses a GSO message
   std::atomic<std::uint64_t> send_calls_{0};
   std::atomic<std::uint64_t> datagrams_sent_{0};
+  std::atomic<std::uint64_t> bytes_sent_{0};  // UDP payload bytes
 };
 
 UdpPublisher::UdpPublisher(net::io_context& io, std::size_t max_in_flight)
@@ -363,6 +367,12 @@ std::uint64_t UdpPublisher::send_calls() const {
 std::uint64_t UdpPublisher::datagrams_sent() const {
   std::uint64_t n = 0;
   for (const auto& s : senders_) n += s->datagrams_sent();
+  return n;
+}
+
+std::uint64_t UdpPublisher::bytes_sent() const {
+  std::uint64_t n = 0;
+  for (const auto& s : senders_) n += s->bytes_sent();
   return n;
 }
 

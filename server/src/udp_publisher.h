@@ -86,10 +86,11 @@ class UdpPublisher {
   bool congested(const Registration& to) const;
   void set_congested_after(Clock::duration d) { congested_after_ = d; }
 
-  // sendmmsg calls made, and the datagrams they carried (a GSO message
-  // counts its segments), all senders.
+  // sendmmsg calls made, the datagrams they carried (a GSO message counts
+  // its segments) and their payload bytes, all senders.
   std::uint64_t send_calls() const;
   std::uint64_t datagrams_sent() const;
+  std::uint64_t bytes_sent() const;
 
   // Datagrams that were not a valid registration or confirm.
   std::uint64_t rejected() const { return rejected_; }

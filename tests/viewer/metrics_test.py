@@ -31,7 +31,7 @@ def value(samples, name, **labels):
 class Metrics(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.server = env.Server(ARGS.bin_dir, "--io-threads", "3", http=True)
+        cls.server = env.Server(ARGS.bin_dir, "--io-threads", "3", "--anonymous", "publish", http=True)
         cls.client = gmr_client.Client(port=cls.server.port, name="metrics test")
 
     @classmethod
@@ -93,6 +93,14 @@ class Metrics(unittest.TestCase):
         self.assertGreater(value(during, "gmr_frames_encoded_total"), value(before, "gmr_frames_encoded_total"))
         self.assertGreater(value(during, "gmr_bytes_sent_total", transport="tcp"),
                            value(before, "gmr_bytes_sent_total", transport="tcp"))
+        # UDP bytes too: every frame of the demo's wave (float32 positions of
+        # all its joints) is more than 100 bytes.
+        udp_frames = value(during, "gmr_frames_sent_total", transport="udp") - \
+            value(before, "gmr_frames_sent_total", transport="udp")
+        self.assertGreaterEqual(value(during, "gmr_bytes_sent_total", transport="udp") -
+                                value(before, "gmr_bytes_sent_total", transport="udp"), 100 * udp_frames)
+        self.assertEqual(types.get("gmr_multicast_frames_sent"), "counter")
+        self.assertEqual(value(during, "gmr_multicast_frames_sent_total"), 0)  # no --multicast-group
         self.assertEqual((value(during, "gmr_request_errors_total", code="NOT_FOUND") or 0) -
                          (value(before, "gmr_request_errors_total", code="NOT_FOUND") or 0), 1)
         self.assertGreaterEqual(value(during, "gmr_requests_total", request="subscribe"), 2)
@@ -118,6 +126,32 @@ class Metrics(unittest.TestCase):
         ended, _ = scrape(self.server.http_port)
         self.assertEqual(value(ended, "gmr_subscriptions", transport="tcp"), 0)
         self.assertEqual(value(ended, "gmr_subscriptions", transport="udp"), 0)
+
+    def test_live_sources_are_counted(self):
+        before, types = scrape(self.server.http_port)
+        self.assertEqual(types.get("gmr_live_sources"), "gauge")
+        self.assertEqual(types.get("gmr_live_frames_received"), "counter")
+        self.assertEqual(types.get("gmr_live_frames_refused"), "counter")
+        with gmr_client.Client(port=self.server.port, name="metrics publisher") as p:
+            pub = p.publish("metrics/live", gmr_client.Skeleton.points(["a", "b"]), 1 / 60)
+            for k in range(5):
+                p.publish_frame(pub, [k, 0, 0, 0, k, 0])
+            p.publish_frame(pub, [0, 0, 0, 0, float("inf"), 0])
+            errors = []
+            deadline = time.monotonic() + 5
+            while not errors and time.monotonic() < deadline:
+                p.poll(0.05)
+                errors += p.take_errors()
+            self.assertEqual(len(errors), 1, errors)
+            during, _ = scrape(self.server.http_port)
+            self.assertEqual(value(during, "gmr_live_sources"), value(before, "gmr_live_sources") + 1)
+            self.assertEqual(value(during, "gmr_live_frames_received_total") -
+                             value(before, "gmr_live_frames_received_total"), 5)
+            self.assertEqual(value(during, "gmr_live_frames_refused_total") -
+                             value(before, "gmr_live_frames_refused_total"), 1)
+            p.unpublish(pub)
+        after, _ = scrape(self.server.http_port)
+        self.assertEqual(value(after, "gmr_live_sources"), value(before, "gmr_live_sources"))
 
 
 if __name__ == "__main__":
