@@ -8,6 +8,7 @@ packages=(
   libeigen3-dev            # the math: vectors, matrices, quaternions
   libgtest-dev libgmock-dev # tests
   libbenchmark-dev          # benchmarks in bench/
+  liburing-dev              # bench/udp_send_bench.cpp: io_uring against sendmmsg for the UDP fan-out
   libhwy-dev                # Highway: run-time SIMD dispatch for the fast FK path
   libcli11-dev              # argument parsing for the gmr and gmr-server commands
   nlohmann-json3-dev        # JSON: gmr-bench fk --json, gmr-load --json and --merge
