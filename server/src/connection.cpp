@@ -447,6 +447,9 @@ void Connection::arm_watchdog() {
     Lock lock(self->m_);
     if (ec || self->stopped_) return;
     const auto now = Clock::now();
+    // A client whose request the server is still on (its reads held for an
+    // edit, or a body with the handler) waits for the server: not idle.
+    if (self->reads_held_ || self->at_handler_) self->last_read_ = now;
     const LinkTimes times{self->established_, self->writing_,       self->started_,
                           self->last_read_,   self->write_started_, self->last_frames_written_};
     if (std::string why = watchdog_verdict(times, self->limits_, now, self->id_); !why.empty()) {

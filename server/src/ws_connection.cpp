@@ -466,6 +466,7 @@ void WsConnection::arm_watchdog() {
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     if (ec || self->stopped_) return;
     const auto now = Clock::now();
+    if (self->reads_held_) self->last_read_ = now;  // waiting for the server (an edit): not idle
     const LinkTimes times{self->established_, self->writing_,       self->started_,
                           self->last_read_,   self->write_started_, self->last_frames_written_};
     if (std::string why = watchdog_verdict(times, self->limits_, now, self->id_); !why.empty()) {

@@ -31,7 +31,22 @@ class Echo final : public server::Connection::Handler {
   std::set<std::thread::id> threads;
   std::atomic<int> inside{0};
   bool overlapped = false;
+  // With `hold`, a message is answered only at release(), its connection's
+  // reads held meanwhile (what an edit off the I/O thread does).
+  bool hold = false;
+  std::string held;
+  void release() {
+    if (auto c = connection.lock()) {
+      c->send(wire::frame_bytes(held));
+      c->hold_reading(false);
+    }
+  }
   void on_message(const std::string& body) override {
+    if (hold) {
+      held = body;
+      if (auto c = connection.lock()) c->hold_reading(true);
+      return;
+    }
     if (inside.fetch_add(1) != 0) overlapped = true;
     threads.insert(std::this_thread::get_id());
     ++messages;
@@ -102,6 +117,26 @@ server::ConnectionLimits limits() {
   l.heartbeat_interval = std::chrono::seconds(10);
   l.write_timeout = std::chrono::seconds(10);
   return l;
+}
+
+// A client whose reads the server holds (an edit running for it off the
+// I/O thread: the handler holds the connection's reads while it has the
+// request, as RequestHandler::edit_view does) is waiting for the server, not
+// idle, however long that takes; once answered, silence is idleness again.
+TEST(Connection, HeldReadsAreNotIdleness) {
+  server::ConnectionLimits l = limits();
+  l.idle_timeout = std::chrono::milliseconds(200);
+  l.heartbeat_interval = std::chrono::seconds(60);
+  EchoServer s(l);
+  s.echo->hold = true;
+  RawConnection c(s.port);
+  c.send(request(1));
+  EXPECT_FALSE(c.readable(std::chrono::milliseconds(1000))) << "closed or answered while held";
+  net::post(s.io, [&] { s.echo->release(); });
+  auto back = c.receive();
+  ASSERT_TRUE(back.has_value()) << "the held request was not answered";
+  EXPECT_EQ(back->request_id(), 1u);
+  EXPECT_TRUE(c.wait_closed(std::chrono::seconds(5))) << "a silent client was never timed out";
 }
 
 TEST(Connection, DeliversEachMessageAndWritesRepliesInOrder) {
