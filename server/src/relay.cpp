@@ -10,7 +10,8 @@ namespace gmr::server {
 
 // What libnats's threads reach through their closure pointer. It outlives
 // every callback: stop() waits for the subscription's completion callback,
-// and the connection callbacks hold no state but these fields.
+// and for the connection's closed callback, which libnats's callback thread
+// runs after any other connection callback (disconnected comes first).
 struct NatsRelay::Shared {
   net::io_context* io = nullptr;
   std::string origin;
@@ -20,6 +21,8 @@ struct NatsRelay::Shared {
   std::atomic<std::uint64_t>* received = nullptr;
   std::promise<void> completed;
   std::atomic<bool> completed_set{false};
+  std::promise<void> closed;
+  std::atomic<bool> closed_set{false};
   std::weak_ptr<Shared> self;  // what a posted handler holds
 };
 
@@ -45,6 +48,11 @@ void on_message(natsConnection*, natsSubscription*, natsMsg* msg, void* closure)
 void on_complete(void* closure) {
   auto* s = static_cast<NatsRelay::Shared*>(closure);
   if (!s->completed_set.exchange(true)) s->completed.set_value();
+}
+
+void on_closed(natsConnection*, void* closure) {
+  auto* s = static_cast<NatsRelay::Shared*>(closure);
+  if (!s->closed_set.exchange(true)) s->closed.set_value();
 }
 
 void on_disconnected(natsConnection*, void* closure) {
@@ -91,6 +99,7 @@ Status NatsRelay::start() {
   natsOptions_SetReconnectWait(opts, 500);
   natsOptions_SetDisconnectedCB(opts, on_disconnected, shared_.get());
   natsOptions_SetReconnectedCB(opts, on_reconnected, shared_.get());
+  natsOptions_SetClosedCB(opts, on_closed, shared_.get());
   natsOptions_SetRetryOnFailedConnect(opts, true, on_connected, shared_.get());
   s = natsConnection_Connect(&connection_, opts);
   natsOptions_Destroy(opts);
@@ -131,7 +140,12 @@ void NatsRelay::stop() {
   }
   if (connection_ != nullptr) {
     natsConnection_FlushTimeout(connection_, 500);  // the ends of this replica's sources
+    auto closed = shared_->closed.get_future();
     natsConnection_Close(connection_);
+    // Its last callback has returned once this is set: shared_ may go.
+    if (closed.wait_for(std::chrono::seconds(5)) != std::future_status::ready) {
+      spdlog::warn("nats: the connection did not report closed within 5 s");
+    }
     natsConnection_Destroy(connection_);
     connection_ = nullptr;
   }
