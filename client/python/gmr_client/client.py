@@ -14,6 +14,11 @@ decides when the socket is read: a game loop or Blender's timer calls
         sub = c.subscribe(view.id, max_frames=100, conventions="blender")
         for frame in sub:                           # frame.positions: (joints, 3)
             ...
+
+A client with the publish role is also a live source (docs/live.md):
+
+        pub = c.publish("lab/tracker", Skeleton.points(names), 1 / 120)
+        c.publish_frame(pub, positions)             # (joints, 3), one call per frame
 """
 
 import collections
