@@ -76,6 +76,16 @@ Fixture& fixture() {
   return f;
 }
 
+// One datagram of the payload to receiver `to`, described in `h` and `iov`.
+void describe(const Fixture& f, const sockaddr_in& to, msghdr& h, iovec& iov) {
+  iov = iovec{const_cast<char*>(f.payload.data()), f.payload.size()};
+  h = msghdr{};
+  h.msg_name = const_cast<sockaddr_in*>(&to);
+  h.msg_namelen = sizeof to;
+  h.msg_iov = &iov;
+  h.msg_iovlen = 1;
+}
+
 void count(benchmark::State& state, std::size_t sent, std::size_t failed) {
   state.SetItemsProcessed(static_cast<std::int64_t>(sent));
   state.counters["failed"] = static_cast<double>(failed);
@@ -103,12 +113,7 @@ void BM_SendMmsg(benchmark::State& state) {
   std::size_t sent = 0, failed = 0, next = 0;
   for (auto _ : state) {
     for (std::size_t i = 0; i < batch; ++i, next = (next + 1) % kReceivers) {
-      iovs[i] = iovec{f.payload.data(), f.payload.size()};
-      msgs[i].msg_hdr = msghdr{};
-      msgs[i].msg_hdr.msg_name = &f.to[next];
-      msgs[i].msg_hdr.msg_namelen = sizeof f.to[next];
-      msgs[i].msg_hdr.msg_iov = &iovs[i];
-      msgs[i].msg_hdr.msg_iovlen = 1;
+      describe(f, f.to[next], msgs[i].msg_hdr, iovs[i]);
     }
     for (std::size_t done = 0; done < batch;) {
       const int n = ::sendmmsg(f.sender, msgs.data() + done, static_cast<unsigned>(batch - done), MSG_DONTWAIT);
@@ -138,12 +143,7 @@ void BM_IoUring(benchmark::State& state) {
   std::size_t sent = 0, failed = 0, next = 0;
   for (auto _ : state) {
     for (std::size_t i = 0; i < batch; ++i, next = (next + 1) % kReceivers) {
-      iovs[i] = iovec{f.payload.data(), f.payload.size()};
-      msgs[i] = msghdr{};
-      msgs[i].msg_name = &f.to[next];
-      msgs[i].msg_namelen = sizeof f.to[next];
-      msgs[i].msg_iov = &iovs[i];
-      msgs[i].msg_iovlen = 1;
+      describe(f, f.to[next], msgs[i], iovs[i]);
       io_uring_sqe* sqe = io_uring_get_sqe(&ring);
       io_uring_prep_sendmsg(sqe, f.sender, &msgs[i], MSG_DONTWAIT);
     }
