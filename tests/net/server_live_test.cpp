@@ -273,6 +273,8 @@ TEST(LivePublish, SubscribersOfEveryViewGetThePositionsOfThePublishedFrames) {
     std::fprintf(stderr, "%s: %zu of %zu frames, %zu positions compared, worst %.3g\n", cases[i].what.c_str(),
                  w.indices.size(), n, w.compared, w.worst);
     if (cases[i].udp) {
+      // Datagrams may be lost, the last one too: it may also arrive after
+      // SubscriptionEnded (on TCP), when the client has let the subscription go.
       EXPECT_GE(w.indices.size(), n * 9 / 10);
     } else {
       // TCP: every frame arrives or is counted as dropped, in order.
@@ -284,9 +286,9 @@ TEST(LivePublish, SubscribersOfEveryViewGetThePositionsOfThePublishedFrames) {
         EXPECT_LT(w.indices[k - 1], w.indices[k]);
         EXPECT_EQ(w.indices[k] - w.indices[k - 1], w.sequences[k] - w.sequences[k - 1]);
       }
-    }
-    if (!w.indices.empty()) {
-      EXPECT_EQ(w.indices.back(), n - 1);
+      if (!w.indices.empty()) {
+        EXPECT_EQ(w.indices.back(), n - 1);
+      }
     }
   }
   // Gone from the list once ended.
