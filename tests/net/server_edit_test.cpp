@@ -37,7 +37,7 @@ std::shared_ptr<const Motion> long_walk(std::size_t frames) {
 }
 
 // Frames of the walk whose edit takes about half a second in this build,
-// at most 40,000 (about 0.4 s in Release): sanitizer builds edit 3 to 75
+// at most 40,000 (0.2-0.4 s in Release): sanitizer builds edit 3 to 75
 // times slower, and the test needs an edit long enough for other clients to
 // be answered meanwhile, yet short enough for the client's 5 s timeout.
 std::size_t long_frames() {
