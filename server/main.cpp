@@ -104,6 +104,12 @@ int main(int argc, char** argv) {
   app.add_option("--max-buffered-bytes", cfg.max_buffered_bytes,
                  "Bytes all connections may hold together (0: no server-wide limit)")
       ->capture_default_str();
+  std::size_t fk_cache_mb = cfg.fk_cache_bytes >> 20;
+  app.add_option("--fk-cache-mb", fk_cache_mb,
+                 "MiB of forward kinematics kept for streams to share, computed 16 frames at a time (0: none kept, "
+                 "each stream's frame computed on its own)")
+      ->capture_default_str()
+      ->check(CLI::Range(std::size_t{0}, std::size_t{1} << 20));
   std::string send_budget = "auto";
   app.add_option("--send-budget", send_budget,
                  "Frames/s all subscriptions together may ask for; past it a subscription is refused. auto: "
@@ -203,6 +209,7 @@ int main(int argc, char** argv) {
   }
   cfg.calibrate_send_budget = send_budget == "auto";
   if (!cfg.calibrate_send_budget) cfg.send_budget = std::strtod(send_budget.c_str(), nullptr);
+  cfg.fk_cache_bytes = fk_cache_mb << 20;
   cfg.idle_timeout = std::chrono::milliseconds(idle_ms);
   cfg.relay_timeout = std::chrono::milliseconds(relay_timeout_ms);
   cfg.heartbeat_interval = std::chrono::milliseconds(heartbeat_ms);

@@ -163,6 +163,12 @@ std::string Metrics::text(Server::Impl& s) const {
   // Frames: computed and encoded once per stream, then sent per subscriber.
   f.add("gmr_frames_computed_total", "Forward-kinematics runs for streams", T::Counter,
         static_cast<double>(s.counters.frames_computed));
+  f.add("gmr_fk_blocks_computed_total", "Float-path kinematics computed for streams, 16 frames at a time",
+        T::Counter, static_cast<double>(s.fk_blocks.blocks_computed()));
+  f.add("gmr_fk_block_hits_total", "Float-path frames streams read from kinematics already computed", T::Counter,
+        static_cast<double>(s.fk_blocks.hits()));
+  f.add("gmr_fk_block_bytes", "Bytes of float-path kinematics kept for streams to share", T::Gauge,
+        static_cast<double>(s.fk_blocks.bytes()));
   f.add("gmr_frames_encoded_total", "Frame encodings (one per stream and tick)", T::Counter,
         static_cast<double>(s.counters.frames_encoded));
   f.add("gmr_frames_skipped_total", "Frames skipped because the server was late (per subscriber)", T::Counter,

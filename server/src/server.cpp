@@ -202,6 +202,9 @@ ServerStats Server::Impl::snapshot() {
   st.streams = streams.active();
   st.frames_computed = counters.frames_computed;
   st.frames_computed_float = counters.frames_computed_float;
+  st.fk_blocks_computed = fk_blocks.blocks_computed();
+  st.fk_block_hits = fk_blocks.hits();
+  st.fk_block_bytes = fk_blocks.bytes();
   st.frames_encoded = counters.frames_encoded;
   st.frames_skipped = counters.frames_skipped;
   st.udp_rejected = udp.rejected();

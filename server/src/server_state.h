@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "connection.h"
+#include "fk_blocks.h"
 #include "http_server.h"
 #include "io_threads.h"
 #include "live.h"
@@ -104,7 +105,8 @@ struct Server::Impl {
   net::io_context io;
   tcp::acceptor acceptor{io};
   UdpPublisher udp{io, cfg.max_udp_datagrams_in_flight};
-  StreamCounters counters{.tick_lateness = &metrics.tick_lateness()};
+  FkBlocks fk_blocks{cfg.fk_cache_bytes};
+  StreamCounters counters{.tick_lateness = &metrics.tick_lateness(), .fk_blocks = &fk_blocks};
   StreamRegistry streams{io, counters};
   // After io: destroyed before it.
   std::unique_ptr<net::ip::udp::socket> beacon_socket;

@@ -8,6 +8,7 @@
 #include "gmr/fast/fast_fk.h"
 #include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
+#include "fk_blocks.h"
 #include "gmr/wire/frames.h"
 #include "live.h"
 #include "prometheus/histogram.h"
@@ -137,7 +138,7 @@ struct Scratch {
   std::vector<Eigen::Vector3d> all_positions;  // double path
   std::vector<Eigen::Matrix3d> all_orientations;
   std::vector<double> positions_f64, orientations_f64;
-  std::vector<float> fk_positions, fk_orientations, workspace;  // float path
+  std::vector<float> workspace;  // float path
   std::vector<float> positions_f32, orientations_f32;
   std::vector<Eigen::Quaterniond> local_rotations;  // local transforms
   std::vector<Eigen::Vector3d> local_translations;
@@ -148,6 +149,12 @@ struct Scratch {
 Scratch& scratch() {
   static thread_local Scratch s;
   return s;
+}
+
+// For streams made without the server's FkBlocks (each frame computed alone).
+FkBlocks& unkept_blocks() {
+  static thread_local FkBlocks none(0);
+  return none;
 }
 
 // The local transforms of `joints` from every joint's pose in w.all_*, as
@@ -191,14 +198,13 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame, std::uint
   if (cm != nullptr && cm->joint_count() == n && frame < cm->frame_count() && viewer < static_cast<int>(n)) {
     // The viewer's orientation is needed even when the client wants none.
     const bool orient = settings_.orientations || viewer >= 0 || settings_.local_transforms;
-    w.fk_positions.resize(n * 3);
-    w.fk_orientations.resize(orient ? n * 9 : 0);
     w.workspace.resize(std::max(w.workspace.size(), content_->compiled->workspace_floats()));
-    fast::FkFrameJob job{cm, frame, w.fk_positions, w.fk_orientations, w.workspace};
-    if (job.run()) {
+    FkBlocks& blocks = counters_.fk_blocks != nullptr ? *counters_.fk_blocks : unkept_blocks();
+    if (const auto pose = blocks.frame(content_->compiled, frame, orient, w.workspace)) {
+      const std::span<const float> fk_positions = pose->positions, fk_orientations = pose->orientations;
       w.positions_f32.resize(joints.size() * 3);
       w.orientations_f32.resize(settings_.orientations ? joints.size() * 4 : 0);
-      view_frame_float(w.fk_positions, w.fk_orientations, viewer, joints, w.positions_f32, w.orientations_f32,
+      view_frame_float(fk_positions, fk_orientations, viewer, joints, w.positions_f32, w.orientations_f32,
                        settings_.basis);
       c.positions = w.positions_f32;
       c.orientations = w.orientations_f32;
@@ -208,10 +214,10 @@ std::shared_ptr<const std::string> Stream::encode(std::uint64_t frame, std::uint
         w.all_positions.resize(n);
         w.all_orientations.resize(n);
         const Viewpoint from =
-            viewer < 0 ? Viewpoint() : Viewpoint::of_joint(w.fk_positions, w.fk_orientations, static_cast<std::size_t>(viewer));
+            viewer < 0 ? Viewpoint() : Viewpoint::of_joint(fk_positions, fk_orientations, static_cast<std::size_t>(viewer));
         for (std::size_t j = 0; j < n; ++j) {
-          const float* p = w.fk_positions.data() + 3 * j;
-          const float* o = w.fk_orientations.data() + 9 * j;
+          const float* p = fk_positions.data() + 3 * j;
+          const float* o = fk_orientations.data() + 9 * j;
           Eigen::Matrix3d r;
           r << o[0], o[1], o[2], o[3], o[4], o[5], o[6], o[7], o[8];
           w.all_positions[j] = settings_.basis.position(from.position(Eigen::Vector3d(p[0], p[1], p[2])));

@@ -1,9 +1,10 @@
 // Stream: one schedule and one view content, fanned out to its targets. Per
 // tick: one forward-kinematics pass, one encoding, the same bytes handed to
-// every target. Float32 streams run the float path (gmr::fast::FkFrameJob on
-// the content's compiled form, then gmr::view_frame_float straight into the
-// float encoding); float64 streams, and contents that do not compile, the
-// double reference path (gmr::view_frame).
+// every target. Float32 streams run the float path (the content's compiled
+// form, its frame read from the server's FkBlocks, which computes 16 frames at
+// a time for every stream playing them, then gmr::view_frame_float straight
+// into the float encoding); float64 streams, and contents that do not
+// compile, the double reference path (gmr::view_frame).
 //
 // Frame k of the schedule is due at base_time + k / rate (drift-free).
 //
@@ -53,7 +54,9 @@ class Target {
   virtual void ended(std::uint64_t sent, const std::string& reason) = 0;
 };
 
-// The server-wide counters streams add to.
+class FkBlocks;
+
+// The server-wide counters streams add to, and the FK blocks they share.
 struct StreamCounters {
   std::uint64_t frames_computed = 0;        // forward-kinematics runs
   std::uint64_t frames_computed_float = 0;  // of those, by the float path
@@ -61,6 +64,9 @@ struct StreamCounters {
   std::uint64_t frames_skipped = 0;         // ticks skipped because the server was late (per target)
   // Observes how late each tick ran after its due time (seconds); may be null.
   prometheus::Histogram* tick_lateness = nullptr;
+  // The float path's FK, kept 16 frames at a time (fk_blocks.h); null: each
+  // frame computed on its own.
+  FkBlocks* fk_blocks = nullptr;
 };
 
 class LiveSource;

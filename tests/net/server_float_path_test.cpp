@@ -1,7 +1,8 @@
-// Float32 streams are computed by the float path (gmr::fast::FkFrameJob on
-// the view's compiled motion), float64 streams and queries by the double
+// Float32 streams are computed by the float path (the range kernel,
+// gmr::fast::FkRangeJob, on the view's compiled motion, 16 frames at a time:
+// server/src/fk_blocks.h), float64 streams and queries by the double
 // reference path. A float32 stream's positions equal, bit for bit after the
-// float encoding, what FkFrameJob computes locally for the same view motion
+// float encoding, what FkRangeJob computes locally for the same view motion
 // (world, intrinsic, shifted root); the server's counters say which path ran.
 #include <gtest/gtest.h>
 
@@ -10,6 +11,7 @@
 #include "gmr/fast/compiled_motion.h"
 #include "gmr/fast/fast_fk.h"
 #include "gmr/kinematics/forward_kinematics.h"
+#include "fk_blocks.h"
 #include "gmr/server/view.h"
 #include "gmr/view/viewpoint.h"
 #include "net_test_util.h"
@@ -65,14 +67,22 @@ const std::vector<Case>& cases() {
   return c;
 }
 
-// What a float32 stream must carry for frame f: FkFrameJob's floats, seen
-// from the viewer in double (P' = W_v^T (P - P_v)), rounded to float.
+// What a float32 stream must carry for frame f: the range kernel's floats for
+// f's block of 16 (the server's FkBlocks), seen from the viewer in double
+// (P' = W_v^T (P - P_v)), rounded to float.
 std::vector<float> expected_float_positions(const fast::CompiledMotion& cm, std::size_t f, int relative_to,
                                             std::vector<float>& ws) {
   const std::size_t n = cm.joint_count();
-  std::vector<float> p(n * 3), w(n * 9);
-  fast::FkFrameJob job{&cm, f, p, w, ws};
+  const std::size_t begin = f / server::FkBlocks::kFrames * server::FkBlocks::kFrames;
+  const std::size_t count = std::min(server::FkBlocks::kFrames, cm.frame_count() - begin);
+  std::vector<float> block_p(count * n * 3), block_w(count * n * 9);
+  fast::FkRangeJob job{&cm, begin, begin + count, fast::Layout::kFrameMajor, 0, block_p, block_w, ws};
   EXPECT_TRUE(job.run()) << job.check().error().to_string();
+  const auto at = static_cast<std::ptrdiff_t>(f - begin);
+  const std::vector<float> p(block_p.begin() + at * static_cast<std::ptrdiff_t>(n * 3),
+                             block_p.begin() + (at + 1) * static_cast<std::ptrdiff_t>(n * 3));
+  const std::vector<float> w(block_w.begin() + at * static_cast<std::ptrdiff_t>(n * 9),
+                             block_w.begin() + (at + 1) * static_cast<std::ptrdiff_t>(n * 9));
   if (relative_to < 0) return p;
   std::vector<float> out(n * 3);
   const auto v = static_cast<std::size_t>(relative_to);
@@ -98,6 +108,8 @@ class FloatPath : public LibraryMotionTest {
     std::vector<ReceivedFrame> frames;
     std::uint64_t computed = 0;        // frames the server computed meanwhile
     std::uint64_t computed_float = 0;  // of those, by the float path
+    std::uint64_t blocks = 0;          // blocks of 16 frames the float path computed
+    std::uint64_t block_hits = 0;      // frames it read from blocks already computed
   };
   Streamed stream_case(const Case& k, bool float64, bool orientations) {
     const Picks p = pick(source_->skeleton);
@@ -121,12 +133,14 @@ class FloatPath : public LibraryMotionTest {
     EXPECT_FALSE(out.frames.empty());
     out.computed = after.frames_computed - before.frames_computed;
     out.computed_float = after.frames_computed_float - before.frames_computed_float;
+    out.blocks = after.fk_blocks_computed - before.fk_blocks_computed;
+    out.block_hits = after.fk_block_hits - before.fk_block_hits;
     EXPECT_GE(out.computed, out.frames.size());
     return out;
   }
 };
 
-TEST_P(FloatPath, Float32StreamEqualsFkFrameJobBitForBit) {
+TEST_P(FloatPath, Float32StreamEqualsTheRangeKernelBitForBit) {
   for (const auto& k : cases()) {
     SCOPED_TRACE(k.label);
     const Streamed s = stream_case(k, /*float64=*/false, /*orientations=*/false);
@@ -136,8 +150,12 @@ TEST_P(FloatPath, Float32StreamEqualsFkFrameJobBitForBit) {
     if (!kSlowBuild) {
       EXPECT_EQ(frames.size(), source_->frame_count);
     }
-    // Every frame of this (only) stream ran the float path.
+    // Every frame of this (only) stream ran the float path, one block of 16
+    // frames computed at most for 16 of them (none when an earlier case of the
+    // same motion left them kept).
     EXPECT_EQ(s.computed_float, s.computed);
+    EXPECT_EQ(s.blocks + s.block_hits, s.computed_float);
+    EXPECT_LE(s.blocks, (source_->frame_count + 15) / 16);
     auto cm = fast::CompiledMotion::compile(local.motion());
     ASSERT_TRUE(cm.ok()) << cm.error().to_string();
     std::vector<float> ws(fast::fk_workspace_size(*cm));
@@ -154,7 +172,7 @@ TEST_P(FloatPath, Float32StreamEqualsFkFrameJobBitForBit) {
           if (got != want[3 * j + static_cast<std::size_t>(a)]) {
             if (mismatches++ == 0) {
               first = "frame " + std::to_string(f.frame_index) + " joint " + std::to_string(j) + " axis " +
-                      std::to_string(a) + ": got " + std::to_string(got) + ", FkFrameJob " +
+                      std::to_string(a) + ": got " + std::to_string(got) + ", FkRangeJob " +
                       std::to_string(want[3 * j + static_cast<std::size_t>(a)]);
             }
           }

@@ -91,6 +91,15 @@ class Metrics(unittest.TestCase):
             self.assertGreaterEqual(sent, 30, transport)
         self.assertGreater(value(during, "gmr_frames_computed_total"), value(before, "gmr_frames_computed_total"))
         self.assertGreater(value(during, "gmr_frames_encoded_total"), value(before, "gmr_frames_encoded_total"))
+        # Both streams are float32: every frame they sent was read from a
+        # block of 16 frames computed for it or kept from before.
+        self.assertEqual(types.get("gmr_fk_blocks_computed"), "counter")
+        self.assertEqual(types.get("gmr_fk_block_bytes"), "gauge")
+        fk_frames = sum(value(during, name) - (value(before, name) or 0)
+                        for name in ("gmr_fk_blocks_computed_total", "gmr_fk_block_hits_total"))
+        self.assertGreaterEqual(fk_frames, 60)
+        self.assertGreater(value(during, "gmr_fk_blocks_computed_total"), 0)
+        self.assertGreater(value(during, "gmr_fk_block_bytes"), 0)
         self.assertGreater(value(during, "gmr_bytes_sent_total", transport="tcp"),
                            value(before, "gmr_bytes_sent_total", transport="tcp"))
         # UDP bytes too: every frame of the demo's wave (float32 positions of

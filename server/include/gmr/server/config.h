@@ -152,6 +152,11 @@ struct ServerConfig {
   // I/O thread held at p99 <= 2 ms on the reference 2-core machine
   // (docs/performance.md); measure yours with gmr-load.
   double send_budget = 30000;
+  // Bytes of float forward kinematics kept for streams to share
+  // (docs/performance.md, "FK blocks"): frames are computed 16 at a time, for
+  // every stream that plays them; past this the least recently used go.
+  // 0: none kept, each stream's frame computed on its own.
+  std::size_t fk_cache_bytes = std::size_t{32} << 20;
   // Measure the budget at start instead (gmr-server's default, --send-budget
   // auto): send_budget becomes the reference figure scaled by how fast this
   // machine sends (server/src/calibrate.h), logged with the measurement.

@@ -42,6 +42,9 @@ struct ServerStats {
   std::size_t streams = 0;
   std::uint64_t frames_computed = 0;  // forward-kinematics runs for streams
   std::uint64_t frames_computed_float = 0;  // of those, by the float path (float32 streams)
+  std::uint64_t fk_blocks_computed = 0;     // float path: blocks of 16 frames computed (FkBlocks)
+  std::uint64_t fk_block_hits = 0;          // float path: frames read from a kept block
+  std::size_t fk_block_bytes = 0;           // taken by the kept blocks
   std::uint64_t frames_encoded = 0;   // shared encodings
   std::uint64_t frames_skipped = 0;   // ticks skipped because the server was late, per subscriber
   std::uint64_t udp_rejected = 0;     // datagrams that were not a valid registration or confirm
