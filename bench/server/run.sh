@@ -31,14 +31,14 @@ here=$(dirname "$0")
 [ -x "$bin/gmr-server" ] && [ -x "$bin/gmr-load" ] || { echo "server bench: build gmr-server and gmr-load in $build first" >&2; exit 1; }
 [ -f "$motion_file" ] || { echo "server bench: no $motion_file (../shared/data, or set MOTION_FILE)" >&2; exit 1; }
 [ "$(nproc)" -ge 2 ] || { echo "server bench: needs two CPUs (server on 0, load on 1)" >&2; exit 1; }
-# A gmr-load process holds a socket per TCP client, two per UDP client: a
-# point that needs more than the open-files limit allows runs several
-# processes at once (all on CPU 1), whose results gmr-load --merge adds up.
+# A gmr-load client holds two sockets (its TCP connection and a UDP socket,
+# whatever the transport): a point that needs more than the open-files limit
+# allows runs several processes at once (all on CPU 1), whose results
+# gmr-load --merge adds up.
 ulimit -n "$(ulimit -Hn)"
-clients_per_process() {  # transport
+clients_per_process() {
   [ -n "${CLIENTS_PER_PROCESS:-}" ] && { echo "$CLIENTS_PER_PROCESS"; return; }
-  local fds=1; [ "$1" = udp ] && fds=2
-  echo $(( ($(ulimit -n) - 200) / fds ))
+  echo $(( ($(ulimit -n) - 200) / 2 ))
 }
 
 mkdir -p "$out/runs"
@@ -68,7 +68,7 @@ for n in $subscribers; do
         [ "$transport" = udp ] && flags+=(--udp)
         [ "$mode" = shared ] && flags+=(--shared)
         start_server
-        per_process=$(clients_per_process "$transport")
+        per_process=$(clients_per_process)
         processes=$(( (n + per_process - 1) / per_process ))
         pids=(); parts=()
         # Several processes share one window, opened after the slowest

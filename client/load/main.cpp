@@ -22,7 +22,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -147,6 +149,28 @@ int finish(const LoadResult& r, const std::string& json, const std::string& png)
   return rc;
 }
 
+// Raises this process's open-files limit to what `clients` need: two
+// descriptors each (its TCP connection, and the UDP socket every client
+// opens), and a margin for the process. Empty, or why it cannot.
+std::string fit_open_files(int clients) {
+  const auto need = static_cast<rlim_t>(clients) * 2 + 64;
+  rlimit lim{};
+  if (::getrlimit(RLIMIT_NOFILE, &lim) != 0 || lim.rlim_cur == RLIM_INFINITY || lim.rlim_cur >= need) return {};
+  if (lim.rlim_max != RLIM_INFINITY && lim.rlim_max < need) {
+    return std::to_string(clients) + " clients need about " + std::to_string(need) +
+           " open files (a TCP and a UDP socket each) and this process may open at most " +
+           std::to_string(lim.rlim_max) +
+           " (ulimit -Hn): run several gmr-load processes with the same --start-at and add up their --json "
+           "with --merge, or raise the hard limit";
+  }
+  lim.rlim_cur = need;
+  if (::setrlimit(RLIMIT_NOFILE, &lim) != 0) {
+    return "cannot raise the open-files limit to " + std::to_string(need) + " for " + std::to_string(clients) +
+           " clients: " + std::strerror(errno);
+  }
+  return {};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -219,6 +243,10 @@ int main(int argc, char** argv) {
   so.orientations = orientations;
   so.float64 = float64;
   so.max_staleness = std::chrono::milliseconds(max_staleness_ms);
+  if (const std::string why = fit_open_files(clients); !why.empty()) {
+    std::fprintf(stderr, "gmr-load: %s\n", why.c_str());
+    return 1;
+  }
   if (threads > 0) connect_options.loop = std::make_shared<gmr::client::EventLoop>(threads);
 
   const auto setup_started = std::chrono::steady_clock::now();

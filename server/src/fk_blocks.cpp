@@ -88,7 +88,6 @@ std::optional<FkBlocks::Pose> FkBlocks::frame(const std::shared_ptr<const Compil
   auto it = make_room(key, need);
   Block& b = *it;
   b.owner = form;
-  b.frames = count;
   b.orientations = orientations;
   b.positions.resize(count * joints * 3);
   b.rotations.resize(orientations ? count * joints * 9 : 0);

@@ -75,9 +75,8 @@ class FkBlocks {
   struct Block {
     Key key;
     std::weak_ptr<const CompiledForm> owner;
-    std::size_t frames = 0;  // kFrames, fewer for a motion's last block
     bool orientations = false;
-    std::vector<float> positions, rotations;
+    std::vector<float> positions, rotations;  // kFrames frames, fewer for a motion's last block
     std::size_t bytes() const { return (positions.size() + rotations.size()) * sizeof(float); }
   };
   using List = std::list<Block>;

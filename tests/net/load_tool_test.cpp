@@ -93,15 +93,17 @@ struct ToolRun {
   std::string out;
 };
 
-ToolRun run(const std::string& args) {
+ToolRun run_shell(const std::string& command) {
   ToolRun r;
-  FILE* p = ::popen((std::string(GMR_LOAD_PATH) + " " + args + " 2>&1").c_str(), "r");
+  FILE* p = ::popen(("(" + command + ") 2>&1").c_str(), "r");
   if (p == nullptr) return r;
   std::array<char, 4096> buf{};
   while (std::fgets(buf.data(), buf.size(), p) != nullptr) r.out += buf.data();
   r.status = ::pclose(p);
   return r;
 }
+
+ToolRun run(const std::string& args) { return run_shell(std::string(GMR_LOAD_PATH) + " " + args); }
 
 nlohmann::json read_json(const std::filesystem::path& p) {
   std::ifstream in(p);
@@ -169,6 +171,22 @@ TEST(LoadTool, MeasuresAWindowWritesJsonMergesAndPlots) {
   const ToolRun bad = run("--port 1 --clients 1 --seconds 1");
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.out.find("gmr-load: client 0"), std::string::npos) << bad.out;
+  // More clients than the open-files limit allows (two descriptors each) are
+  // refused before any connects, saying what to do; under the hard limit,
+  // the soft one is raised (here 200 clients need 464 of at most 500).
+  const ToolRun too_many = run_shell("ulimit -n 300 && " + std::string(GMR_LOAD_PATH) + " --port " +
+                                     std::to_string(server.port()) + " --clients 200 --seconds 1");
+  EXPECT_NE(too_many.status, 0);
+  EXPECT_NE(too_many.out.find("gmr-load: 200 clients need about 464 open files (a TCP and a UDP socket each) and "
+                              "this process may open at most 300"),
+            std::string::npos)
+      << too_many.out;
+  EXPECT_NE(too_many.out.find("--merge"), std::string::npos) << too_many.out;
+  const ToolRun fits = run_shell("ulimit -S -n 100 && ulimit -H -n 500 && " + std::string(GMR_LOAD_PATH) +
+                                 " --port " + std::to_string(server.port()) +
+                                 " --clients 200 --rate 20 --seconds 0.5 --warmup 0.2");
+  EXPECT_EQ(fits.status, 0) << fits.out;
+  EXPECT_NE(fits.out.find("200 clients"), std::string::npos) << fits.out;
   std::filesystem::remove_all(dir);
 }
 
