@@ -118,6 +118,12 @@ int main(int argc, char** argv) {
       for (int k = 0; k < 3; ++k) worst = fmax(worst, fabs(composed[3 * j + k] - pos[3 * j + k]));
     }
     CHECK(worst < 1e-9, "frame %llu: the locals compose %.3g off the positions", (unsigned long long)f.frame_index, worst);
+    /* On one host: encoded, then written to this subscriber, then parsed here. */
+    int64_t sent_ns = 0, written_ns = 0, received_ns = 0;
+    CHECK(gmr_last_frame_times(sub, &sent_ns, &written_ns, &received_ns) == GMR_OK, "times: %s", gmr_last_error());
+    CHECK(sent_ns == f.server_send_time_ns && sent_ns > 0 && sent_ns <= written_ns && written_ns <= received_ns,
+          "frame %llu: sent %lld, written %lld, received %lld", (unsigned long long)f.frame_index, (long long)sent_ns,
+          (long long)written_ns, (long long)received_ns);
     for (size_t j = 0; j < joints; ++j) {
       printf("frame %llu %s %.17g %.17g %.17g\n", (unsigned long long)f.frame_index, info[j].name, pos[3 * j],
              pos[3 * j + 1], pos[3 * j + 2]);
@@ -127,6 +133,8 @@ int main(int argc, char** argv) {
   CHECK(frames >= 5, "only %d frames polled", frames);
   uint64_t received = 0, replaced = 0;
   CHECK(gmr_subscription_counts(sub, &received, &replaced) == GMR_OK, "counts");
+  CHECK(gmr_last_frame_times(NULL, NULL, NULL, NULL) == GMR_ERROR_INVALID_ARGUMENT, "times of NULL");
+  CHECK(gmr_last_frame_times(sub, NULL, NULL, NULL) == GMR_OK, "times into NULL pointers");
   CHECK(received == 30 && received == (uint64_t)frames + replaced, "received %llu, replaced %llu, polled %d",
         (unsigned long long)received, (unsigned long long)replaced, frames);
   gmr_unsubscribe(sub);

@@ -153,6 +153,17 @@ GMR_C_API gmr_status gmr_poll_frame(gmr_subscription* subscription, gmr_frame* f
                                     double* orientations, double* local_rotations, double* local_translations,
                                     size_t capacity);
 
+/* When the frame the last gmr_poll_frame returned was encoded by the server
+ * (gmr_frame.server_send_time_ns), written by the server to this
+ * subscriber's socket, and parsed by this client: nanoseconds of the system
+ * clock, the first two the server's and the last this host's (compare them
+ * on one host, or with synchronised clocks). write - send is the time the
+ * frame waited in the server behind other subscribers' sends. 0: not known
+ * (nothing polled yet; a server that does not stamp writes). Any pointer
+ * may be NULL. */
+GMR_C_API gmr_status gmr_last_frame_times(gmr_subscription* subscription, int64_t* server_send_time_ns,
+                                          int64_t* server_write_time_ns, int64_t* receive_time_ns);
+
 /* Frames received, and of them replaced by a newer one before a poll. */
 GMR_C_API gmr_status gmr_subscription_counts(gmr_subscription* subscription, uint64_t* received, uint64_t* replaced);
 

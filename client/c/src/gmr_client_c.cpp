@@ -97,6 +97,8 @@ struct SubscriptionState {
   bool skeleton_changed = false;
   bool ended = false;
   std::string end_reason;
+  // The times of the frame the last poll returned (gmr_last_frame_times).
+  std::int64_t polled_send_ns = 0, polled_write_ns = 0, polled_receive_ns = 0;
 };
 
 struct gmr_subscription {
@@ -383,6 +385,9 @@ gmr_status gmr_poll_frame(gmr_subscription* s, gmr_frame* frame, double* positio
       f.swap(st.latest);
       changed = st.skeleton_changed;
       st.skeleton_changed = false;
+      st.polled_send_ns = f->server_send_time_ns;
+      st.polled_write_ns = f->server_write_time_ns;
+      st.polled_receive_ns = f->receive_time_ns;
     }
     const std::size_t n = f->positions.size();
     frame->frame_index = f->frame_index;
@@ -414,6 +419,19 @@ gmr_status gmr_poll_frame(gmr_subscription* s, gmr_frame* frame, double* positio
         }
       }
     }
+    return GMR_OK;
+  });
+}
+
+gmr_status gmr_last_frame_times(gmr_subscription* s, int64_t* server_send_time_ns, int64_t* server_write_time_ns,
+                                int64_t* receive_time_ns) {
+  return guarded([&] {
+    if (s == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_last_frame_times: subscription is NULL");
+    SubscriptionState& st = *s->state;
+    std::lock_guard lock(st.mutex);
+    if (server_send_time_ns != nullptr) *server_send_time_ns = st.polled_send_ns;
+    if (server_write_time_ns != nullptr) *server_write_time_ns = st.polled_write_ns;
+    if (receive_time_ns != nullptr) *receive_time_ns = st.polled_receive_ns;
     return GMR_OK;
   });
 }
