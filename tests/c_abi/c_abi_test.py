@@ -76,7 +76,68 @@ def load(path):
                                 ctypes.c_double, ctypes.POINTER(ctypes.c_uint32)]
     lib.gmr_publish_frame.argtypes = [P, ctypes.c_uint32, D, ctypes.c_size_t]
     lib.gmr_unpublish.argtypes = [P, ctypes.c_uint32]
+    lib.gmr_split.argtypes = [P, ctypes.c_uint32, ctypes.c_char_p]
+    lib.gmr_join.argtypes = [P, ctypes.c_uint32, ctypes.c_char_p]
     return lib
+
+
+def check_skeleton_changes(lib, port, udp, failures):
+    """A view edited 40 times (split and join back at the left knee) while a
+    1 kHz subscription streams it: every polled frame belongs to the skeleton
+    the subscription reports at that poll. A frame of a new version that
+    overtakes the change (UDP), or one of the old version still queued behind
+    it (TCP), is never handed out: the version of polled frames only changes
+    on a poll that says the skeleton changed, and then only upwards."""
+    label = "UDP" if udp else "TCP"
+    client = ctypes.c_void_p()
+    assert lib.gmr_connect(b"127.0.0.1", port, None, ctypes.byref(client)) == GMR_OK, lib.gmr_last_error()
+    view = ctypes.c_uint32()
+    assert lib.gmr_create_view(client, b"walk", ctypes.byref(view)) == GMR_OK, lib.gmr_last_error()
+    o = SubscribeOptions()
+    lib.gmr_subscribe_options_init(ctypes.byref(o))
+    o.loop, o.udp, o.rate_hz, o.local_transforms = 1, udp, 1000.0, 1
+    sub = ctypes.c_void_p()
+    assert lib.gmr_subscribe(client, view, ctypes.byref(o), ctypes.byref(sub)) == GMR_OK, lib.gmr_last_error()
+    positions = (ctypes.c_double * (3 * 64))()
+    rotations = (ctypes.c_double * (4 * 64))()
+    frame = Frame()
+    version, polled, changes, problems = None, 0, 0, []
+
+    def poll_for(seconds):
+        nonlocal version, polled, changes
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            s = lib.gmr_poll_frame(sub, ctypes.byref(frame), positions, None, rotations, None, 64)
+            if s == GMR_NO_FRAME:
+                time.sleep(0.0005)
+                continue
+            assert s == GMR_OK, lib.gmr_last_error()
+            polled += 1
+            n = ctypes.c_size_t()
+            lib.gmr_subscription_joint_count(sub, ctypes.byref(n))
+            if frame.joint_count != n.value:
+                problems.append(f"a frame of {frame.joint_count} joints for a skeleton of {n.value}")
+            if version is None or frame.skeleton_changed:
+                if version is not None and frame.skeleton_version <= version:
+                    problems.append(f"skeleton changed to version {frame.skeleton_version} after {version}")
+                changes += version is not None
+                version = frame.skeleton_version
+            elif frame.skeleton_version != version:
+                problems.append(f"a frame of version {frame.skeleton_version} polled under version {version}")
+
+    poll_for(0.1)
+    for k in range(40):
+        edit = lib.gmr_split if k % 2 == 0 else lib.gmr_join
+        assert edit(client, view, b"l_knee") == GMR_OK, lib.gmr_last_error()
+        poll_for(0.02)
+    poll_for(0.2)
+    if problems or polled < 100 or changes == 0:
+        failures.append(f"C ABI skeleton changes over {label}: {polled} frames polled, {changes} changes seen, "
+                        f"{len(problems)} problems: {problems[:5]}")
+    print(f"C ABI skeleton changes over {label}: {polled} frames polled across {changes} changes seen, "
+          "each under its own skeleton")
+    lib.gmr_unsubscribe(sub)
+    lib.gmr_disconnect(client)
 
 
 def check_publish(lib, port, failures):
@@ -253,6 +314,8 @@ def main():
                     failures.append(f"ctypes error path: {s} {lib.gmr_last_error()}")
                 lib.gmr_disconnect(client)
                 check_publish(lib, server.port, failures)
+                for udp in (0, 1):
+                    check_skeleton_changes(lib, server.port, udp, failures)
 
     if failures:
         print("\n".join(failures), file=sys.stderr)

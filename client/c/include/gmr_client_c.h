@@ -164,7 +164,11 @@ GMR_C_API gmr_status gmr_poll_frame(gmr_subscription* subscription, gmr_frame* f
 GMR_C_API gmr_status gmr_last_frame_times(gmr_subscription* subscription, int64_t* server_send_time_ns,
                                           int64_t* server_write_time_ns, int64_t* receive_time_ns);
 
-/* Frames received, and of them replaced by a newer one before a poll. */
+/* Frames received, and of them replaced by a newer one before a poll or
+ * dropped because they were not of the subscription's skeleton (a frame of a
+ * new version that came before the change, or of the old one after it):
+ * gmr_poll_frame only returns frames of the skeleton
+ * gmr_subscription_joint describes at that poll. */
 GMR_C_API gmr_status gmr_subscription_counts(gmr_subscription* subscription, uint64_t* received, uint64_t* replaced);
 
 /* Live sources (a 'publish' token; docs/protocol.md, "Live sources"). A

@@ -94,6 +94,11 @@ struct SubscriptionState {
   gmr::Skeleton skeleton;
   gmr::RestPose rest;
   std::vector<int> joints;  // joint indices of each frame's values
+  // The version of `skeleton` (0: not known yet, before subscribe() returns).
+  // Frames of another version are not this skeleton's: a frame of the new
+  // version can come before its SkeletonChanged (over UDP), one of the old
+  // version after it (already queued); both are dropped, counted as replaced.
+  std::uint32_t version = 0;
   bool skeleton_changed = false;
   bool ended = false;
   std::string end_reason;
@@ -278,9 +283,13 @@ gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscri
     auto on_frame = [state](const gmr::client::ReceivedFrame& f) {
       SubscriptionState* s = state.get();
       std::lock_guard lock(s->mutex);
+      ++s->received;
+      if (s->version != 0 && f.skeleton_version != s->version) {
+        ++s->replaced;
+        return;
+      }
       if (s->latest) ++s->replaced;
       s->latest = f;
-      ++s->received;
     };
     auto on_end = [state](const gmr::client::SubscriptionEnd& e) {
       SubscriptionState* s = state.get();
@@ -295,6 +304,11 @@ gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscri
       s->rest = c.rest;
       s->joints = c.joints;
       s->skeleton_changed = true;
+      s->version = c.skeleton_version;
+      if (s->latest && s->latest->skeleton_version != s->version) {
+        s->latest.reset();
+        ++s->replaced;
+      }
     };
     auto info = client->client->subscribe(view_id, o, on_frame, on_end, on_skeleton);
     if (!info.ok()) return status_of(info.error());
@@ -306,6 +320,11 @@ gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscri
         state->skeleton = info->skeleton;
         state->rest = info->rest;
         state->joints = info->joints;
+        state->version = info->skeleton_version;
+        if (state->latest && state->latest->skeleton_version != state->version) {
+          state->latest.reset();
+          ++state->replaced;
+        }
       }
       state->skeleton_changed = false;
     }
