@@ -285,10 +285,17 @@ std::uint64_t Stream::congested_ticks() const {
 }
 
 bool Stream::mark_ready(const std::vector<Entry>& targets) {
+  // Each target's liveness is read once a tick (its connection and handler
+  // are cold in the cache when a stream has thousands of them).
   ready_.assign(targets.size(), 0);
+  alive_.assign(targets.size(), 0);
+  saw_dead_ = false;
   bool anyone = false;
   for (std::size_t i = 0; i < targets.size(); ++i) {
-    ready_[i] = targets[i].target->alive() && !targets[i].target->congested();
+    const bool alive = targets[i].target->alive();
+    alive_[i] = alive;
+    saw_dead_ = saw_dead_ || !alive;
+    ready_[i] = alive && !targets[i].target->congested();
     anyone = anyone || ready_[i];
   }
   return anyone;
@@ -304,7 +311,7 @@ void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<co
     const std::size_t i = first + k < n ? first + k : first + k - n;
     if (ready_[i]) {
       targets[i].target->deliver(id_, body);
-    } else if (targets[i].target->alive()) {
+    } else if (alive_[i]) {
       targets[i].target->skipped(1);
     }
   }
@@ -312,6 +319,7 @@ void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<co
 
 void Stream::on_tick() {
   if (paused_ || targets_.empty()) return;
+  saw_dead_ = true;  // not known until mark_ready() runs
   if (counters_.tick_lateness != nullptr) {
     counters_.tick_lateness->Observe(std::chrono::duration<double>(Clock::now() - due(tick_)).count());
   }
@@ -341,8 +349,8 @@ void Stream::on_tick() {
       } else {
         ticks += congested_ticks();
         sequence_ += ticks;
-        for (const auto& e : targets) {
-          if (e.target->alive()) e.target->skipped(ticks);
+        for (std::size_t i = 0; i < targets.size(); ++i) {
+          if (alive_[i]) targets[i].target->skipped(ticks);
         }
         tick_ += ticks - 1;
       }
@@ -388,7 +396,8 @@ void Stream::on_tick() {
     remove(target.get());
     if (target->alive()) target->ended(sent, finished ? "end of motion" : "max_frames reached");
   }
-  std::erase_if(targets_, [](const Entry& e) { return !e.target->alive(); });
+  // The targets found gone; one that goes during this tick is found at the next.
+  if (saw_dead_) std::erase_if(targets_, [](const Entry& e) { return !e.target->alive(); });
   if (!targets_.empty() && !finished) arm();
 }
 
@@ -401,8 +410,8 @@ void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_
     fan_out(targets, encode(0, index));
   } else {
     ++sequence_;
-    for (const auto& e : targets) {
-      if (e.target->alive()) e.target->skipped(1);
+    for (std::size_t i = 0; i < targets.size(); ++i) {
+      if (alive_[i]) targets[i].target->skipped(1);
     }
   }
   std::vector<std::pair<std::shared_ptr<Target>, std::uint64_t>> ended;
@@ -415,7 +424,7 @@ void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_
     remove(target.get());
     if (target->alive()) target->ended(sent, "max_frames reached");
   }
-  std::erase_if(targets_, [](const Entry& e) { return !e.target->alive(); });
+  if (saw_dead_) std::erase_if(targets_, [](const Entry& e) { return !e.target->alive(); });
 }
 
 void Stream::live_skipped() {
