@@ -8,8 +8,8 @@
 #include "gmr/fast/fast_fk.h"
 #include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
-#include "fk_blocks.h"
 #include "gmr/wire/frames.h"
+#include "fk_blocks.h"
 #include "live.h"
 #include "prometheus/histogram.h"
 
