@@ -183,6 +183,12 @@ int main(int argc, char** argv) {
   double rate = 0.0;
   bool udp = false, shared = false, orientations = false, float64 = false;
   gmr::cli::add_connect_options(app, connect_options);
+  int timeout_ms = 30000;
+  app.add_option("--timeout-ms", timeout_ms,
+                 "How long a client waits to connect and for each reply (thousands subscribing to a server already "
+                 "busy with the first ones' frames wait behind them)")
+      ->capture_default_str()
+      ->check(CLI::Range(100, 600000));
   app.add_option("--clients", clients, "Connections, one subscription each")->capture_default_str()->check(CLI::Range(1, 20000));
   app.add_option("--motion", motion, "Motion to stream, looped (default: the first in the server's list)");
   app.add_option("--seconds", seconds, "Measurement time")->capture_default_str()->check(CLI::PositiveNumber);
@@ -247,6 +253,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "gmr-load: %s\n", why.c_str());
     return 1;
   }
+  connect_options.timeout = std::chrono::milliseconds(timeout_ms);
   if (threads > 0) connect_options.loop = std::make_shared<gmr::client::EventLoop>(threads);
 
   const auto setup_started = std::chrono::steady_clock::now();
