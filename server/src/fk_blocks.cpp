@@ -14,6 +14,14 @@ bool same_owner(const std::weak_ptr<const CompiledForm>& a, const std::shared_pt
   return !a.owner_before(b) && !b.owner_before(a);
 }
 
+// Frame `at` of a block's frame-major positions and (when wanted) orientations.
+FkBlocks::Pose pose_at(const std::vector<float>& positions, const std::vector<float>& rotations, std::size_t at,
+                       std::size_t joints, bool orientations) {
+  return {std::span<const float>(positions).subspan(at * joints * 3, joints * 3),
+          orientations ? std::span<const float>(rotations).subspan(at * joints * 9, joints * 9)
+                       : std::span<const float>()};
+}
+
 }  // namespace
 
 FkBlocks::List::iterator FkBlocks::make_room(const Key& key, std::size_t bytes_needed) {
@@ -59,9 +67,7 @@ std::optional<FkBlocks::Pose> FkBlocks::frame(const std::shared_ptr<const Compil
     if (same_owner(b.owner, form) && (b.orientations || !orientations)) {
       lru_.splice(lru_.begin(), lru_, found->second);
       ++hits_;
-      return Pose{std::span<const float>(b.positions).subspan(at * joints * 3, joints * 3),
-                  orientations ? std::span<const float>(b.rotations).subspan(at * joints * 9, joints * 9)
-                               : std::span<const float>()};
+      return pose_at(b.positions, b.rotations, at, joints, orientations);
     }
     // Another motion that took a freed one's address, or orientations now
     // wanted: computed again in place.
@@ -81,9 +87,7 @@ std::optional<FkBlocks::Pose> FkBlocks::frame(const std::shared_ptr<const Compil
                          workspace};
     if (!job.run()) return std::nullopt;
     ++computed_;
-    return Pose{std::span<const float>(alone_positions_).subspan(at * joints * 3, joints * 3),
-                orientations ? std::span<const float>(alone_rotations_).subspan(at * joints * 9, joints * 9)
-                             : std::span<const float>()};
+    return pose_at(alone_positions_, alone_rotations_, at, joints, orientations);
   }
   auto it = make_room(key, need);
   Block& b = *it;
@@ -99,9 +103,7 @@ std::optional<FkBlocks::Pose> FkBlocks::frame(const std::shared_ptr<const Compil
   }
   ++computed_;
   bytes_ += b.bytes();
-  return Pose{std::span<const float>(b.positions).subspan(at * joints * 3, joints * 3),
-              orientations ? std::span<const float>(b.rotations).subspan(at * joints * 9, joints * 9)
-                           : std::span<const float>()};
+  return pose_at(b.positions, b.rotations, at, joints, orientations);
 }
 
 }  // namespace gmr::server

@@ -104,6 +104,19 @@ struct SubscriptionState {
   std::string end_reason;
   // The times of the frame the last poll returned (gmr_last_frame_times).
   std::int64_t polled_send_ns = 0, polled_write_ns = 0, polled_receive_ns = 0;
+
+  // The skeleton of the frames from now on (mutex held): a newest frame of
+  // another version is dropped.
+  void adopt(gmr::Skeleton s, gmr::RestPose r, std::vector<int> j, std::uint32_t v) {
+    skeleton = std::move(s);
+    rest = std::move(r);
+    joints = std::move(j);
+    version = v;
+    if (latest && latest->skeleton_version != version) {
+      latest.reset();
+      ++replaced;
+    }
+  }
 };
 
 struct gmr_subscription {
@@ -300,15 +313,8 @@ gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscri
     auto on_skeleton = [state](const gmr::client::SkeletonChange& c) {
       SubscriptionState* s = state.get();
       std::lock_guard lock(s->mutex);
-      s->skeleton = c.skeleton;
-      s->rest = c.rest;
-      s->joints = c.joints;
+      s->adopt(c.skeleton, c.rest, c.joints, c.skeleton_version);
       s->skeleton_changed = true;
-      s->version = c.skeleton_version;
-      if (s->latest && s->latest->skeleton_version != s->version) {
-        s->latest.reset();
-        ++s->replaced;
-      }
     };
     auto info = client->client->subscribe(view_id, o, on_frame, on_end, on_skeleton);
     if (!info.ok()) return status_of(info.error());
@@ -316,16 +322,7 @@ gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscri
       // The callbacks may run before subscribe() returns: a skeleton change
       // that came first is newer than the reply's skeleton, and is kept.
       std::lock_guard lock(state->mutex);
-      if (!state->skeleton_changed) {
-        state->skeleton = info->skeleton;
-        state->rest = info->rest;
-        state->joints = info->joints;
-        state->version = info->skeleton_version;
-        if (state->latest && state->latest->skeleton_version != state->version) {
-          state->latest.reset();
-          ++state->replaced;
-        }
-      }
+      if (!state->skeleton_changed) state->adopt(info->skeleton, info->rest, info->joints, info->skeleton_version);
       state->skeleton_changed = false;
     }
     sub->id = info->id;
