@@ -168,6 +168,10 @@ int main(int argc, char** argv) {
                  "End another replica's live source after this long without word from it")
       ->capture_default_str()
       ->check(CLI::Range(100, 3600000));
+  app.add_option("--max-remote-sources", cfg.max_remote_sources,
+                 "Serve at most this many live sources of other replicas (the rest are refused and counted)")
+      ->capture_default_str()
+      ->check(CLI::Range(std::size_t{0}, std::size_t{1} << 20));
   app.add_option("--tls-cert", cfg.tls_certificate_file, "PEM certificate chain: the TCP port then speaks only TLS")
       ->check(CLI::ExistingFile);
   app.add_option("--tls-key", cfg.tls_key_file, "PEM private key of --tls-cert")->check(CLI::ExistingFile);

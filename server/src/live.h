@@ -13,15 +13,23 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "gmr/core/error.h"
 #include "gmr/motion/motion.h"
+#include "gmr/server/config.h"
 #include "gmr/server/view.h"
+#include "net.h"
 
 namespace gmr::server {
 
 class Stream;
+
+// What a Publish announces (name, skeleton, frame time, unit), checked the
+// same way whether a client publishes it or another replica relays it: the
+// skeleton, or the refusal saying what is wrong (publications.cpp).
+std::variant<Skeleton, Refusal> check_announcement(const pb::Publish& r, const ServerConfig& cfg);
 
 class LiveSource {
  public:

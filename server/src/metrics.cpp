@@ -211,6 +211,9 @@ std::string Metrics::text(Server::Impl& s) const {
         static_cast<double>(s.live_frames_received));
   f.add("gmr_live_frames_refused_total", "Frames published to live sources and refused (wrong size, not finite)",
         T::Counter, static_cast<double>(s.live_frames_refused));
+  f.add("gmr_relay_announces_refused_total",
+        "Live sources other replicas announced and this one refused (invalid, or past --max-remote-sources)",
+        T::Counter, static_cast<double>(s.relay_announces_refused));
   f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm",
         T::Counter, static_cast<double>(s.udp.rejected()));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,

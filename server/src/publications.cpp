@@ -62,22 +62,8 @@ std::shared_ptr<LiveSource> RequestHandler::find_live(std::string_view name) con
   return it == server_.live.end() || it->second->ended() ? nullptr : it->second;
 }
 
-Reply RequestHandler::publish(const pb::Publish& r) {
-  if (role_ < Role::kPublish) {
-    return Refusal{pb::ERROR_CODE_PERMISSION_DENIED,
-                   "this connection's role is '" + std::string(role_name(role_)) +
-                       "': publishing a live source needs a 'publish' token (docs/security.md)"};
-  }
-  const ServerConfig& cfg = server_.cfg;
+std::variant<Skeleton, Refusal> check_announcement(const pb::Publish& r, const ServerConfig& cfg) {
   if (const std::string why = bad_name(r.name()); !why.empty()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, why};
-  if (server_.by_name.contains(r.name()) || find_live(r.name())) {
-    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
-                   "a motion named '" + r.name() + "' is already served: publish under another name"};
-  }
-  if (publications_.size() >= cfg.max_publications_per_connection) {
-    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "at most " + std::to_string(cfg.max_publications_per_connection) +
-                                                          " live sources per connection"};
-  }
   if (static_cast<std::size_t>(r.skeleton().joints_size()) > cfg.max_live_joints) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "a skeleton of " + std::to_string(r.skeleton().joints_size()) +
                                                           " joints; live sources have at most " +
@@ -90,12 +76,31 @@ Reply RequestHandler::publish(const pb::Publish& r) {
   }
   const double ft = r.frame_time();
   if (!(std::isfinite(ft) && ft > 0.0 && 1.0 / ft >= kMinRateHz && 1.0 / ft <= kMaxRateHz)) {
-    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "frame time " + std::to_string(ft) + " s: the rate must be within [" +
-                                                   std::to_string(kMinRateHz) + ", " + std::to_string(kMaxRateHz) +
-                                                   "] Hz"};
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST,
+                   fmt::format("frame time {} s: the rate must be within [{}, {}] Hz", ft, kMinRateHz, kMaxRateHz)};
   }
   if (!(std::isfinite(r.metres_per_unit()) && r.metres_per_unit() >= 0.0)) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "metres per unit must be 0 (unknown) or positive"};
+  }
+  return std::move(skeleton).value();
+}
+
+Reply RequestHandler::publish(const pb::Publish& r) {
+  if (role_ < Role::kPublish) {
+    return Refusal{pb::ERROR_CODE_PERMISSION_DENIED,
+                   "this connection's role is '" + std::string(role_name(role_)) +
+                       "': publishing a live source needs a 'publish' token (docs/security.md)"};
+  }
+  const ServerConfig& cfg = server_.cfg;
+  auto checked = check_announcement(r, cfg);
+  if (auto* refusal = std::get_if<Refusal>(&checked)) return std::move(*refusal);
+  if (server_.by_name.contains(r.name()) || find_live(r.name())) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "a motion named '" + r.name() + "' is already served: publish under another name"};
+  }
+  if (publications_.size() >= cfg.max_publications_per_connection) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "at most " + std::to_string(cfg.max_publications_per_connection) +
+                                                          " live sources per connection"};
   }
   std::string recording;
   if (r.record()) {
@@ -105,8 +110,8 @@ Reply RequestHandler::publish(const pb::Publish& r) {
     }
     recording = recording_path(cfg.record_dir, r.name()).string();
   }
-  auto source = std::make_shared<LiveSource>(r.name(), server_.next_live_serial++, std::move(skeleton).value(), ft,
-                                             r.metres_per_unit());
+  auto source = std::make_shared<LiveSource>(r.name(), server_.next_live_serial++,
+                                             std::move(std::get<Skeleton>(checked)), r.frame_time(), r.metres_per_unit());
   if (!recording.empty()) {
     source->record(cfg.max_record_bytes);
     recordings_[source.get()] = recording;
@@ -116,7 +121,7 @@ Reply RequestHandler::publish(const pb::Publish& r) {
   publications_[id] = source;
   server_.relay_announce(*source);
   spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", connection_id_,
-               printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(), 1.0 / ft);
+               printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(), 1.0 / r.frame_time());
   pb::ServerMessage out;
   out.mutable_published()->set_publication_id(id);
   out.mutable_published()->set_motion(r.name());

@@ -27,6 +27,11 @@ std::string random_origin() {
 
 std::string key_of(const std::string& origin, std::uint64_t serial) { return origin + "#" + std::to_string(serial); }
 
+// The tail of a rate-limited log line: how many were left out before it.
+std::string suppressed(std::uint64_t n) {
+  return n ? " (" + std::to_string(n) + " more such lines not logged)" : std::string();
+}
+
 }  // namespace
 
 void Server::Impl::start_relay() {
@@ -105,25 +110,36 @@ void Server::Impl::on_relay(relay_pb::LiveRelay m) {
         it->second.heard = Clock::now();
         return;
       }
+      if (remote_sources.size() >= cfg.max_remote_sources) {
+        ++relay_announces_refused;
+        if (std::uint64_t more = 0; relay_log_limit.allow(more)) {
+          spdlog::warn("replica {}: live {} not served here: {} sources of other replicas are (--max-remote-sources){}",
+                       printable(m.origin(), 64), printable(m.announce().name(), 200), remote_sources.size(),
+                       suppressed(more));
+        }
+        return;
+      }
       const auto& a = m.announce();
       RemoteSource r{nullptr, Clock::now()};
-      auto skeleton = wire::from_proto(a.skeleton());
-      const double ft = a.frame_time();
-      const bool valid = skeleton.ok() && skeleton->size() > 0 && skeleton->size() <= cfg.max_live_joints &&
-                         std::isfinite(ft) && ft > 0.0 && std::isfinite(a.metres_per_unit()) &&
-                         a.metres_per_unit() >= 0.0 && !a.name().empty();
-      if (!valid) {
-        spdlog::warn("replica {}: live {} announced with a skeleton or frame time this replica refuses: ignored",
-                     m.origin(), printable(a.name(), 200));
+      auto checked = check_announcement(a, cfg);
+      if (const auto* refusal = std::get_if<Refusal>(&checked)) {
+        ++relay_announces_refused;
+        if (std::uint64_t more = 0; relay_log_limit.allow(more)) {
+          spdlog::warn("replica {}: live {} refused: {}{}", printable(m.origin(), 64), printable(a.name(), 200),
+                       printable(refusal->message, 300), suppressed(more));
+        }
       } else if (by_name.contains(a.name()) || live.contains(a.name())) {
-        spdlog::warn("replica {}: live {} has a name this replica serves already: ignored here", m.origin(),
-                     printable(a.name(), 200));
+        if (std::uint64_t more = 0; relay_log_limit.allow(more)) {
+          spdlog::warn("replica {}: live {} has a name this replica serves already: ignored here{}",
+                       printable(m.origin(), 64), printable(a.name(), 200), suppressed(more));
+        }
       } else {
-        r.source = std::make_shared<LiveSource>(a.name(), next_live_serial++, std::move(skeleton).value(), ft,
-                                                a.metres_per_unit());
+        r.source = std::make_shared<LiveSource>(a.name(), next_live_serial++, std::move(std::get<Skeleton>(checked)),
+                                                a.frame_time(), a.metres_per_unit());
         r.source->set_origin(m.origin());
         live[a.name()] = r.source;
-        spdlog::info("live {}: published on replica {}, served here too", printable(a.name(), 200), m.origin());
+        spdlog::info("live {}: published on replica {}, served here too", printable(a.name(), 200),
+                     printable(m.origin(), 64));
       }
       remote_sources.emplace(key, std::move(r));
       return;

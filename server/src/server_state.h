@@ -79,7 +79,9 @@ struct Server::Impl {
     std::shared_ptr<LiveSource> source;  // null: ignored (its name is taken here)
     Clock::time_point heard;
   };
-  std::map<std::string, RemoteSource> remote_sources;
+  std::map<std::string, RemoteSource> remote_sources;  // at most cfg.max_remote_sources
+  std::uint64_t relay_announces_refused = 0;  // invalid, or past max_remote_sources
+  LogLimiter relay_log_limit;                 // lines other replicas' messages may put in the log
   void start_relay();
   void relay_tick();
   void on_relay(relay_pb::LiveRelay m);

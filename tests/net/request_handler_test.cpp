@@ -9,6 +9,8 @@
 #include <deque>
 #include <limits>
 
+#include "gmr/relay/v1/relay.pb.h"
+#include "gmr/wire/convert.h"
 #include "gmr/wire/framing.h"
 #include "gmr/wire/frames.h"
 #include "net_test_util.h"
@@ -187,6 +189,76 @@ TEST_F(RequestHandlerTest, AnotherProtocolVersionClosesAfterTheReply) {
   m.mutable_hello()->set_protocol_version(wire::kProtocolVersion + 1);
   EXPECT_EQ(ask(m, 1).error().code(), pb::ERROR_CODE_VERSION_MISMATCH);
   EXPECT_TRUE(outbox_->closing());
+}
+
+// Another replica's announces over NATS get the checks a client's Publish
+// gets (the same function): a bad name, no joints, a rate out of range or a
+// negative unit is refused and counted, and at most max_remote_sources are
+// tracked. A valid one is served, and its frames are checked as published
+// frames are.
+TEST_F(RequestHandlerTest, RelayedAnnouncesAreCheckedAsPublishesAreAndBounded) {
+  server_.cfg.max_remote_sources = 4;
+  const Motion& m = walk();
+  pb::Publish good;
+  good.set_name("remote/walk");
+  wire::to_proto(m.skeleton, *good.mutable_skeleton());
+  good.set_frame_time(1.0 / 60);
+  good.set_metres_per_unit(0.01);
+  std::uint64_t serial = 0;
+  auto announce = [&](const pb::Publish& p, const std::string& origin) {
+    gmr::relay::v1::LiveRelay r;
+    r.set_origin(origin);
+    r.set_serial(++serial);
+    *r.mutable_announce() = p;
+    server_.on_relay(r);
+    return serial;
+  };
+
+  std::vector<pb::Publish> bad(4, good);
+  bad[0].set_name("bad\nname");
+  bad[1].mutable_skeleton()->clear_joints();
+  bad[2].set_frame_time(1e-9);  // 1 GHz
+  bad[3].set_metres_per_unit(-1);
+  for (std::size_t i = 0; i < bad.size(); ++i) {
+    bad[i].set_name(bad[i].name() + std::to_string(i));
+    announce(bad[i], "replica-a");
+    EXPECT_FALSE(server_.live.contains(bad[i].name())) << i;
+    EXPECT_EQ(server_.relay_announces_refused, i + 1);
+  }
+  // Refusing a publish from a client says the same.
+  server_.cfg.anonymous = server::Role::kPublish;
+  hello();
+  pb::ClientMessage publish;
+  *publish.mutable_publish() = bad[2];
+  const auto refused = ask(publish, 30);
+  EXPECT_EQ(refused.error().code(), pb::ERROR_CODE_BAD_REQUEST);
+  EXPECT_NE(refused.error().message().find("frame time 1e-09 s: the rate must be within [0.01, 10000] Hz"),
+            std::string::npos)
+      << refused.DebugString();
+
+  // Four tracked (the refused ones count until they time out): the next is refused.
+  EXPECT_EQ(server_.remote_sources.size(), 4u);
+  announce(good, "replica-b");
+  EXPECT_FALSE(server_.live.contains("remote/walk"));
+  EXPECT_EQ(server_.relay_announces_refused, 5u);
+
+  // With room, it is served; a frame of the wrong size is refused, a right one accepted.
+  server_.cfg.max_remote_sources = 5;
+  const std::uint64_t s = announce(good, "replica-b");
+  ASSERT_TRUE(server_.live.contains("remote/walk"));
+  EXPECT_EQ(server_.live.at("remote/walk")->origin(), "replica-b");
+  gmr::relay::v1::LiveRelay frame;
+  frame.set_origin("replica-b");
+  frame.set_serial(s);
+  frame.mutable_frame()->set_index(0);
+  frame.mutable_frame()->add_values(1.0);
+  server_.on_relay(frame);
+  EXPECT_EQ(server_.live_frames_refused, 1u);
+  frame.mutable_frame()->clear_values();
+  for (double v : m.frame(0)) frame.mutable_frame()->add_values(v);
+  server_.on_relay(frame);
+  EXPECT_EQ(server_.live_frames_received, 1u);
+  EXPECT_EQ(server_.live.at("remote/walk")->frames(), 1u);
 }
 
 }  // namespace

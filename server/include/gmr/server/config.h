@@ -95,6 +95,10 @@ struct ServerConfig {
   // A source of another replica not heard of for this long has ended (its
   // replica went away without saying so).
   std::chrono::milliseconds relay_timeout{3000};
+  // At most this many sources of other replicas are tracked (served, or
+  // refused and remembered); an announce past it is refused, as is one that
+  // fails the checks a client's Publish gets.
+  std::size_t max_remote_sources = 1024;
   // A connection that sends nothing (not even a heartbeat) for this long is closed.
   std::chrono::milliseconds idle_timeout{30000};
   // The server sends a heartbeat when it wrote nothing for this long.
