@@ -19,18 +19,20 @@ cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_CO
 cmake --build "$BUILD" -j "$JOBS" --target gmr_fuzzers
 
 harnesses=("$@")
-[ ${#harnesses[@]} -eq 0 ] && harnesses=(bvh gmr gmrb asf amc c3d trc model wire)
+[ ${#harnesses[@]} -eq 0 ] && harnesses=(bvh gmr gmrb asf amc c3d trc csv model wire requests)
 if [ ! -d "$DATA" ]; then
   if [ "${CI:-}" = true ]; then echo "fuzz: $DATA is missing (needed for the seed corpora in CI)" >&2; exit 1; fi
   echo "fuzz: $DATA not found: starting from empty corpora" >&2
 fi
 mkdir -p "$BUILD/artifacts" "$BUILD/logs"
 
-# Seeds: files of the harness's kind (the wire harness starts from nothing).
+# Seeds: files of the harness's kind (the wire harness starts from nothing;
+# the request harness from the sessions its seed program writes).
 seed() {
   local name=$1 dir=$BUILD/corpus/$1
   mkdir -p "$dir"
   if [ -d "fuzz/seeds/$name" ]; then cp -n fuzz/seeds/"$name"/* "$dir"/ 2>/dev/null || true; fi
+  if [ "$name" = requests ]; then "$BUILD/fuzz/gmr_fuzz_requests_seeds" "$dir" >/dev/null; fi
   [ -d "$DATA" ] || return 0
   local exts
   case $name in
