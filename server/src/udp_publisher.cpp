@@ -8,6 +8,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
+#include <limits>
 #include <array>
 #include <atomic>
 #include <cerrno>
@@ -66,7 +68,10 @@ class UdpPublisher::Sender {
     std::lock_guard lock(m_);
     if (closed_ || !to->endpoint) return false;
     if (to->in_flight + wire::fragment_count(head.size() + body.size()) > max_in_flight_) return false;
-    if (filling_.entries.empty()) filling_since_ = Clock::now();
+    if (filling_.entries.empty()) {
+      filling_since_ = Clock::now();
+      if (!sending_active_) oldest_.store(filling_since_.time_since_epoch().count(), std::memory_order_relaxed);
+    }
     std::size_t at = filling_.bytes.size();
     const std::size_t appended = wire::append_fragments(filling_.bytes, to->next_message_id++, head, body);
     const std::size_t end = filling_.bytes.size();
@@ -114,12 +119,12 @@ class UdpPublisher::Sender {
   }
 
   // How long the oldest datagram not yet handed to the kernel has waited
-  // (zero: none waits).
-  Clock::duration backlog() {
-    std::lock_guard lock(m_);
-    const auto now = Clock::now();
-    if (sending_active_) return now - sending_since_;
-    return filling_.entries.empty() ? Clock::duration::zero() : now - filling_since_;
+  // (zero: none waits). Read for every UDP subscriber of every tick: no lock,
+  // and no clock when nothing waits.
+  Clock::duration backlog() const {
+    const Clock::rep since = oldest_.load(std::memory_order_relaxed);
+    if (since == kNoneWaits) return Clock::duration::zero();
+    return std::max(Clock::duration::zero(), Clock::now() - Clock::time_point(Clock::duration(since)));
   }
 
   std::uint64_t send_calls() const { return send_calls_.load(std::memory_order_relaxed); }
@@ -166,6 +171,7 @@ class UdpPublisher::Sender {
           sending_.clear();
           filling_.clear();
           sent_ = 0;
+          oldest_.store(kNoneWaits, std::memory_order_relaxed);
           return;
         }
         if (sent_ == sending_.entries.size()) {
@@ -174,11 +180,12 @@ class UdpPublisher::Sender {
           sending_active_ = false;
           if (filling_.entries.empty()) {
             flush_posted_ = false;
+            oldest_.store(kNoneWaits, std::memory_order_relaxed);
             return;
           }
           std::swap(filling_, sending_);
           sending_active_ = true;
-          sending_since_ = filling_since_;
+          oldest_.store(filling_since_.time_since_epoch().count(), std::memory_order_relaxed);
         }
       }
       if (!send_some()) return;
@@ -284,7 +291,11 @@ class UdpPublisher::Sender {
   Batch filling_;
   Clock::time_point filling_since_{};  // its first entry's
   bool sending_active_ = false;        // sending_ holds entries the lane is sending
-  Clock::time_point sending_since_{};  // when its first entry was batched
+  // When the oldest entry not yet sent was batched (sending_'s first when
+  // the lane is sending, else filling_'s), as Clock ticks; kNoneWaits when
+  // none waits. Written under m_, read by backlog() without it.
+  static constexpr Clock::rep kNoneWaits = std::numeric_limits<Clock::rep>::min();
+  std::atomic<Clock::rep> oldest_{kNoneWaits};
   bool flush_posted_ = false;
   bool closed_ = false;
   // The lane's alone:

@@ -119,7 +119,6 @@ class UdpPublisher {
   udp::endpoint sender_;
   std::uint64_t rejected_ = 0;
   std::uint64_t challenges_ = 0;
-  std::uint64_t rejected_sends_ = 0;
 
   std::vector<std::unique_ptr<Sender>> senders_;  // one per lane
   Clock::duration congested_after_ = std::chrono::milliseconds(50);

@@ -104,5 +104,35 @@ TEST(UdpPublisher, BoundsDatagramsInFlightPerRegistration) {
   EXPECT_FALSE(publisher.send(to, "one"));
 }
 
+// A registration's lane is congested while a datagram batched for it has
+// waited longer than set_congested_after without reaching the kernel (the
+// stream then skips computing its frames); not before, and not once sent.
+TEST(UdpPublisher, CongestedWhileTheOldestUnsentDatagramWaitsTooLong) {
+  net::io_context io;
+  UdpPublisher publisher(io, 1000);
+  publisher.set_congested_after(std::chrono::milliseconds(20));
+  publisher.open(net::ip::make_address("127.0.0.1"), 0);
+  udp::socket receiver(io, udp::endpoint(net::ip::make_address("127.0.0.1"), 0));
+  auto to = std::make_shared<UdpPublisher::Registration>();
+  to->endpoint = receiver.local_endpoint();
+  EXPECT_FALSE(publisher.congested(*to)) << "nothing waits";
+  for (int round = 0; round < 2; ++round) {
+    ASSERT_TRUE(publisher.send(to, "a frame"));
+    EXPECT_FALSE(publisher.congested(*to)) << "it has just been batched";
+    std::this_thread::sleep_for(std::chrono::milliseconds(40));
+    ASSERT_TRUE(publisher.send(to, "a later frame"));  // the oldest one counts
+    EXPECT_TRUE(publisher.congested(*to)) << "round " << round;
+    io.restart();
+    io.poll();  // the lane sends the batch
+    EXPECT_EQ(to->in_flight, 0u);
+    EXPECT_FALSE(publisher.congested(*to)) << "round " << round;
+  }
+  ASSERT_TRUE(publisher.send(to, "unsent"));
+  publisher.close();
+  io.restart();
+  io.poll();
+  EXPECT_FALSE(publisher.congested(*to)) << "closing gives back what waited";
+}
+
 }  // namespace
 }  // namespace gmr::server
