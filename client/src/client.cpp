@@ -156,6 +156,13 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     std::int64_t max_age_ns = 0;  // 0: no staleness bound
     std::uint64_t stream_id = 0;  // multicast: frames carry the stream's id, not the subscription's
     bool multicast = false;
+    // The skeleton version the callbacks were last told of (the Subscribed
+    // reply, then each SkeletonChanged). A frame of another version is not
+    // that skeleton's (a UDP frame of the new version can overtake its
+    // SkeletonChanged, a queued TCP frame of the old one can follow it): it
+    // is dropped and counted, so on_frame only sees frames of the skeleton
+    // it knows. Under mutex.
+    std::uint32_t skeleton_version = 0;
   };
   // The multicast group's socket (the first multicast subscription opens it).
   std::optional<udp::socket> multicast_socket;
@@ -343,6 +350,10 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
         (via_udp ? counters.frames_udp : counters.frames_tcp)++;
         if (auto it = subs.find(f.subscription_id()); it != subs.end()) {
           sub = it->second;
+          if (f.skeleton_version() != sub->skeleton_version) {
+            ++counters.frames_other_skeleton;
+            return;
+          }
         } else if (subscribes_in_flight > 0) {
           if (early_frames.size() == kMaxEarlyFrames) early_frames.pop_front();
           early_frames.emplace_back(m, via_udp);
@@ -409,6 +420,10 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
         if (auto it = subs.find(c.subscription_id()); it != subs.end()) sub = it->second;
       }
       auto sk = wire::from_proto(c.skeleton());
+      if (sub && sk.ok()) {
+        std::lock_guard lock(mutex);
+        sub->skeleton_version = c.skeleton_version();
+      }
       if (sub && sub->on_skeleton && sk.ok()) {
         SkeletonChange change;
         change.subscription_id = c.subscription_id();
@@ -886,6 +901,7 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
       --impl->subscribes_in_flight;
       if (reply.has_subscribed()) {
         sub->stream_id = reply.subscribed().stream_id();
+        sub->skeleton_version = reply.subscribed().skeleton_version();
         sub->multicast = !reply.subscribed().multicast_group().empty();
         impl->subs[reply.subscribed().subscription_id()] = sub;
       }

@@ -388,71 +388,87 @@ TEST(Streaming, AStructureChangeMidStreamBumpsTheSkeletonVersion) {
 
 // A structure change mid-stream: the subscription gets the new skeleton (its
 // version, joints and the order of the values) before any frame of that
-// version; an edit that changes nothing sends none.
+// version, and no frame of the old one after it (frames still queued behind
+// the notice, or over UDP of the new version overtaking it, are dropped and
+// counted); an edit that changes nothing sends none.
 TEST(Streaming, TheNewSkeletonComesBeforeItsFrames) {
-  TestServer s;
-  std::mutex mutex;
-  std::vector<std::uint32_t> versions_seen;  // frames' versions, in arrival order
-  std::vector<client::SkeletonChange> changes;
-  std::vector<std::size_t> change_at;  // frames received before each change
-  Latch<bool> reached;
-  std::uint32_t wanted = 0;
-  auto c = s.connect();
-  ASSERT_NE(c, nullptr);
-  auto v = c->create_view("walk");
-  ASSERT_TRUE(v.ok());
-  client::SubscribeOptions o;
-  o.loop = true;
-  o.rate_hz = 300;
-  o.joints = {"l_hand", "head"};
-  auto sub = c->subscribe(
-      v->id, o,
-      [&](const ReceivedFrame& f) {
+  for (const bool udp : {false, true}) {
+    SCOPED_TRACE(udp ? "udp" : "tcp");
+    TestServer s;
+    std::mutex mutex;
+    std::vector<std::uint32_t> versions_seen;  // frames' versions, in arrival order
+    std::vector<std::size_t> sizes_seen;       // and how many positions each held
+    std::vector<client::SkeletonChange> changes;
+    std::vector<std::size_t> change_at;  // frames received before each change
+    Latch<bool> reached;
+    std::uint32_t wanted = 0;
+    auto c = s.connect();
+    ASSERT_NE(c, nullptr);
+    auto v = c->create_view("walk");
+    ASSERT_TRUE(v.ok());
+    client::SubscribeOptions o;
+    o.loop = true;
+    o.rate_hz = 1000;
+    o.udp = udp;
+    auto sub = c->subscribe(
+        v->id, o,
+        [&](const ReceivedFrame& f) {
+          std::lock_guard lock(mutex);
+          versions_seen.push_back(f.skeleton_version);
+          sizes_seen.push_back(f.positions.size());
+          if (wanted != 0 && f.skeleton_version == wanted) reached.set(true);
+        },
+        {},
+        [&](const client::SkeletonChange& ch) {
+          std::lock_guard lock(mutex);
+          changes.push_back(ch);
+          change_at.push_back(versions_seen.size());
+        });
+    ASSERT_TRUE(sub.ok());
+    const auto root = v->skeleton.joint(v->skeleton.roots().front()).name;
+    ASSERT_TRUE(c->shift_root(v->id, root).ok());  // changes nothing: no notice
+    // Edits that change the number of joints too (a split adds the cut
+    // joint's twin): a frame of the wrong version would not fit.
+    // Each edit waits for a frame of its version: every version streams.
+    std::vector<client::ViewState> states;
+    auto edited = [&](Result<client::ViewState> r) {
+      ASSERT_TRUE(r.ok()) << r.error().to_string();
+      states.push_back(*r);
+      {
         std::lock_guard lock(mutex);
-        versions_seen.push_back(f.skeleton_version);
-        if (wanted != 0 && f.skeleton_version == wanted) reached.set(true);
-      },
-      {},
-      [&](const client::SkeletonChange& ch) {
-        std::lock_guard lock(mutex);
-        changes.push_back(ch);
-        change_at.push_back(versions_seen.size());
-      });
-  ASSERT_TRUE(sub.ok());
-  const auto root = v->skeleton.joint(v->skeleton.roots().front()).name;
-  ASSERT_TRUE(c->shift_root(v->id, root).ok());  // changes nothing: no notice
-  auto shifted = c->shift_root(v->id, "l_hand");
-  ASSERT_TRUE(shifted.ok());
-  {
-    std::lock_guard lock(mutex);
-    wanted = shifted->skeleton_version;
-  }
-  ASSERT_TRUE(reached.wait().has_value());
-  EXPECT_TRUE(c->unsubscribe(sub->id).ok());
-  std::lock_guard lock(mutex);
-  ASSERT_EQ(changes.size(), 1u);
-  const client::SkeletonChange& ch = changes[0];
-  EXPECT_EQ(ch.subscription_id, sub->id);
-  EXPECT_EQ(ch.skeleton_version, shifted->skeleton_version);
-  ASSERT_EQ(ch.skeleton.size(), shifted->skeleton.size());
-  EXPECT_EQ(ch.skeleton.joint(ch.skeleton.roots().front()).name, "l_hand");
-  ASSERT_EQ(ch.joints.size(), 2u);
-  EXPECT_EQ(ch.skeleton.joint(ch.joints[0]).name, "l_hand");
-  EXPECT_EQ(ch.skeleton.joint(ch.joints[1]).name, "head");
-  // No frame of the new version before the notice; after it, frames that
-  // were already waiting may still carry the old one, never after a new one.
-  bool seen_new = false;
-  for (std::size_t i = 0; i < versions_seen.size(); ++i) {
-    if (i < change_at[0]) {
-      EXPECT_EQ(versions_seen[i], v->skeleton_version) << i;
-    } else if (versions_seen[i] == shifted->skeleton_version) {
-      seen_new = true;
-    } else {
-      EXPECT_FALSE(seen_new) << "an old frame after a new one, at " << i;
-      EXPECT_EQ(versions_seen[i], v->skeleton_version) << i;
+        wanted = r->skeleton_version;
+        reached.reset();
+      }
+      ASSERT_TRUE(reached.wait().has_value()) << "no frame of version " << r->skeleton_version;
+    };
+    for (int round = 0; round < 3; ++round) {
+      edited(c->split(v->id, "l_hand"));
+      edited(c->join(v->id, "l_hand"));
     }
+    edited(c->shift_root(v->id, "l_hand"));
+    ASSERT_FALSE(HasFatalFailure());
+    const client::ViewState shifted = states.back();
+    EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+    std::lock_guard lock(mutex);
+    ASSERT_EQ(changes.size(), states.size());
+    const client::SkeletonChange& ch = changes.back();
+    EXPECT_EQ(ch.subscription_id, sub->id);
+    EXPECT_EQ(ch.skeleton_version, shifted.skeleton_version);
+    ASSERT_EQ(ch.skeleton.size(), shifted.skeleton.size());
+    EXPECT_EQ(ch.skeleton.joint(ch.skeleton.roots().front()).name, "l_hand");
+    // Between two notices, only frames of the first one's version, of its size.
+    for (std::size_t i = 0; i < versions_seen.size(); ++i) {
+      std::size_t told = 0;  // notices before frame i
+      while (told < change_at.size() && change_at[told] <= i) ++told;
+      const std::uint32_t version = told == 0 ? v->skeleton_version : changes[told - 1].skeleton_version;
+      const std::size_t joints = told == 0 ? v->skeleton.size() : changes[told - 1].joints.size();
+      ASSERT_EQ(versions_seen[i], version) << "frame " << i << " after " << told << " notices";
+      ASSERT_EQ(sizes_seen[i], joints) << "frame " << i;
+    }
+    EXPECT_GT(versions_seen.size(), change_at.back());
+    std::printf("%s: %zu frames, %llu of another skeleton version dropped\n", udp ? "udp" : "tcp",
+                versions_seen.size(), static_cast<unsigned long long>(c->counters().frames_other_skeleton));
   }
-  EXPECT_TRUE(seen_new);
 }
 
 // The skeleton version moves only when the structure or the coordinate frame

@@ -186,6 +186,36 @@ class DemoLibrary(unittest.TestCase):
         self.assertIsNotNone(sub.ended)
         c.close_view(v.id)
 
+    def test_frames_handed_out_are_of_the_skeleton_the_subscription_has(self):
+        # Split/join edits under a 1 kHz subscription change the joint count;
+        # a UDP frame of a new version can overtake its SkeletonChanged, a TCP
+        # frame of the old one can follow it: neither is handed out.
+        c = self.client
+        for udp in (False, True):
+            with self.subTest(udp=udp):
+                v = c.create_view("turn")
+                sub = c.subscribe(v.id, loop=True, rate_hz=1000, udp=udp)
+                versions = {sub.skeleton_version}
+                checked = 0
+                for edit in range(6):
+                    state = c.split(v.id, "l_hand") if edit % 2 == 0 else c.join(v.id, "l_hand")
+                    versions.add(state.skeleton_version)
+                    deadline = time.monotonic() + 10
+                    seen_new = 0
+                    while seen_new < 3 and time.monotonic() < deadline:
+                        for f in sub.frames():
+                            self.assertEqual(f.skeleton_version, sub.skeleton_version)
+                            self.assertEqual(len(f.positions), len(sub.joints))
+                            checked += 1
+                            seen_new += f.skeleton_version == state.skeleton_version
+                        c.poll(0.002)
+                    self.assertGreaterEqual(seen_new, 3, f"frames of version {state.skeleton_version}")
+                self.assertEqual(len(versions), 7)
+                self.assertGreaterEqual(checked, 18)
+                print(f"udp={udp}: {checked} frames checked, {sub.frames_other_skeleton} of another version dropped")
+                c.unsubscribe(sub.id)
+                c.close_view(v.id)
+
     def test_a_listening_client_outlives_the_idle_timeout(self):
         # This server closes connections silent for 0.6 s (and would send its
         # own heartbeats only after 5 s): a client that only reads 2 s of

@@ -269,8 +269,11 @@ class Subscription:
     """A running subscription. Iterate it for its frames (blocking until the
     next one, ending when the server ends it), or call `latest()` from a loop
     that must not block. `skeleton`, `joints` and `skeleton_version` follow
-    the server's SkeletonChanged pushes: each frame's values follow the
-    skeleton of the version it carries."""
+    the server's SkeletonChanged pushes, and every frame handed out is of
+    that version: a frame of another one (a UDP frame of the new version
+    overtaking its SkeletonChanged, an old one still queued behind it, or
+    waiting here unread when the skeleton changed) is dropped and counted in
+    `frames_other_skeleton`."""
 
     def __init__(self, client: "Client", reply):
         self._client = client
@@ -288,9 +291,13 @@ class Subscription:
         self.frames_overflowed = 0  # frames this client queued but nobody read in time
         self.frames_stale = 0       # frames that arrived older than max_staleness (dropped)
         self.max_age_ns = 0         # 0: no staleness bound
+        self.frames_other_skeleton = 0  # frames of another skeleton version than `skeleton_version` (dropped)
         self._frames = collections.deque()
 
     def _push(self, frame: Frame) -> None:
+        if frame.skeleton_version != self.skeleton_version:
+            self.frames_other_skeleton += 1
+            return
         if len(self._frames) >= _MAX_QUEUED_FRAMES:
             self._frames.popleft()
             self.frames_overflowed += 1
@@ -302,6 +309,9 @@ class Subscription:
         self.joints = np.array(c.joints, dtype=np.int32)
         self.relative_to = c.relative_to
         self.skeleton_changes += 1
+        kept = [f for f in self._frames if f.skeleton_version == self.skeleton_version]
+        self.frames_other_skeleton += len(self._frames) - len(kept)
+        self._frames = collections.deque(kept)
 
     def __iter__(self):
         while True:

@@ -274,6 +274,10 @@ struct ClientCounters {
   std::uint64_t udp_malformed = 0;
   std::uint64_t frames_malformed = 0;        // frames whose values did not decode (dropped)
   std::uint64_t frames_stale = 0;            // frames that arrived older than their max_staleness (dropped)
+  // Frames of another skeleton version than the subscription's latest
+  // (Subscribed, then each SkeletonChange): dropped, so a FrameCallback
+  // only gets frames whose values follow the skeleton it was last given.
+  std::uint64_t frames_other_skeleton = 0;
 };
 
 class Client {
@@ -311,7 +315,9 @@ class Client {
   // frames too), `on_end` when the server ends the subscription. With
   // options.udp the client first registers its UDP endpoint.
   // `on_skeleton` runs on the I/O thread when the view's skeleton version
-  // changes, before the first frame of the new version.
+  // changes, before the first frame of the new version. `on_frame` gets only
+  // frames of the version it was last told of (the reply's, then each
+  // on_skeleton's); others are dropped and counted (frames_other_skeleton).
   Result<SubscriptionInfo> subscribe(std::uint32_t view, const SubscribeOptions& options, FrameCallback on_frame,
                                      EndCallback on_end = {}, SkeletonCallback on_skeleton = {});
   Status unsubscribe(std::uint32_t subscription);
