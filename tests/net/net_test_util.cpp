@@ -207,6 +207,10 @@ std::vector<client::ReceivedFrame> stream_all(client::Client& c, const client::V
   o.float64 = float64;
   o.orientations = orientations;
   o.speed = rate_hz * v.frame_time;  // rate = speed / frame_time, one frame per tick
+  // No staleness bound: a frame is delivered or counted in out_dropped,
+  // however slow the build (a late frame would otherwise vanish uncounted
+  // into the client's frames_stale).
+  o.max_staleness = std::chrono::milliseconds(0);
   auto sub = c.subscribe(
       v.id, o,
       [col](const client::ReceivedFrame& f) {

@@ -111,7 +111,8 @@ class Latch {
 pb::ClientMessage request(std::uint64_t id);
 
 // Streams every frame of the view once, one frame per tick at `rate_hz`, and
-// returns the frames in arrival order (out_dropped: the server's drop count).
+// returns the frames in arrival order (out_dropped: the server's drop count;
+// no staleness bound, so every frame arrives or is counted there).
 std::vector<client::ReceivedFrame> stream_all(client::Client& c, const client::ViewState& v, bool udp, bool float64,
                                               bool orientations, double rate_hz = 2000.0,
                                               std::uint64_t* out_dropped = nullptr);

@@ -272,13 +272,22 @@ TEST(Tls, AClientThatTrustsTheCertificateGetsWhatAPlainClientGets) {
       ASSERT_EQ(tq->positions[i], pq->positions[i]) << i;
       ASSERT_EQ(tq->orientations[i].coeffs(), pq->orientations[i].coeffs()) << i;
     }
-    // Every frame streamed over TLS, in order, equals the query.
-    const auto frames = stream_all(**c, *tv, false, true, false);
-    ASSERT_EQ(frames.size(), n);
+    // Every frame streamed over TLS, in order, equals the query. A sanitizer
+    // build may fall behind 2 kHz: frames it replaced (counted) may be missing.
+    std::uint64_t dropped = 0;
+    const auto frames = stream_all(**c, *tv, false, true, false, 2000.0, &dropped);
+    if (!kSlowBuild) {
+      EXPECT_EQ(dropped, 0u);
+    }
+    ASSERT_EQ(frames.size() + dropped, n);
     const std::size_t joints = tq->joints.size();
-    for (std::size_t f = 0; f < n; ++f) {
-      ASSERT_EQ(frames[f].frame_index, f);
-      for (std::size_t j = 0; j < joints; ++j) ASSERT_EQ(frames[f].positions[j], tq->positions[f * joints + j]);
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      const std::uint64_t f = frames[i].frame_index;
+      ASSERT_LT(f, n);
+      if (i > 0) {
+        ASSERT_GT(f, frames[i - 1].frame_index) << "in order";
+      }
+      for (std::size_t j = 0; j < joints; ++j) ASSERT_EQ(frames[i].positions[j], tq->positions[f * joints + j]);
     }
   }
 }
