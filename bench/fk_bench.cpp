@@ -165,6 +165,10 @@ void BM_ServerFrame(benchmark::State& state) {
   const Motion& m = bvh();
   auto cm = CompiledMotion::compile(m).value();
   const std::size_t n = cm.joint_count();
+  if (n == 0 || n > (std::size_t{1} << 20)) {  // (also bounds n for GCC's allocation-size check)
+    state.SkipWithError("the benchmark motion has no joints, or too many");
+    return;
+  }
   std::vector<float> ws(fast::fk_workspace_size(cm)), pos(n * 3), rot(n * 9), out_p(n * 3), out_q(n * 4);
   std::vector<int> joints(n);
   for (std::size_t j = 0; j < n; ++j) joints[j] = static_cast<int>(j);
