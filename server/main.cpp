@@ -51,6 +51,7 @@ int main(int argc, char** argv) {
   long long idle_ms = cfg.idle_timeout.count();
   long long heartbeat_ms = cfg.heartbeat_interval.count();
   long long write_ms = cfg.write_timeout.count();
+  long long congested_ms = cfg.congested_after.count();
   long long handshake_ms = cfg.handshake_timeout.count();
   app.add_option("--library", library_dir, "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library)");
   app.add_option("--port", cfg.port, "TCP port (0: any free port)")->capture_default_str();
@@ -135,6 +136,10 @@ int main(int argc, char** argv) {
   app.add_option("--idle-timeout-ms", idle_ms, "Close a connection silent for this long")->capture_default_str();
   app.add_option("--heartbeat-ms", heartbeat_ms, "Send a heartbeat after this long without writing")->capture_default_str();
   app.add_option("--write-timeout-ms", write_ms, "Close a connection whose write stalls this long")->capture_default_str();
+  app.add_option("--congested-after-ms", congested_ms,
+                 "Compute no frames for a subscription whose frames have waited this long behind a stalled write "
+                 "(or UDP lane)")
+      ->capture_default_str();
   app.add_option("--load-threads", threads, "Threads loading the library (0: one per core)");
   std::string auth_file, anonymous;
   app.add_option("--auth-file", auth_file,
@@ -201,7 +206,7 @@ int main(int argc, char** argv) {
   const bool http_port_given = http_port_option->count() > 0;
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e %^%l%$ %v");
-  if (idle_ms <= 0 || heartbeat_ms <= 0 || write_ms <= 0 || handshake_ms <= 0) {
+  if (idle_ms <= 0 || heartbeat_ms <= 0 || write_ms <= 0 || handshake_ms <= 0 || congested_ms <= 0) {
     std::fprintf(stderr, "gmr-server: timeouts must be positive\n");
     return 1;
   }
@@ -218,6 +223,7 @@ int main(int argc, char** argv) {
   cfg.relay_timeout = std::chrono::milliseconds(relay_timeout_ms);
   cfg.heartbeat_interval = std::chrono::milliseconds(heartbeat_ms);
   cfg.write_timeout = std::chrono::milliseconds(write_ms);
+  cfg.congested_after = std::chrono::milliseconds(congested_ms);
   cfg.handshake_timeout = std::chrono::milliseconds(handshake_ms);
 
   // The auth file, at start and on SIGHUP; a readable-by-others warning is logged.

@@ -51,6 +51,7 @@ ConnectionLimits Server::Impl::connection_limits() const {
   l.handshake_timeout = cfg.handshake_timeout;
   l.heartbeat_interval = cfg.heartbeat_interval;
   l.write_timeout = cfg.write_timeout;
+  l.congested_after = cfg.congested_after;
   l.socket_send_buffer = cfg.socket_send_buffer;
   l.socket_unsent_bytes = cfg.socket_unsent_bytes;
   return l;
@@ -319,6 +320,7 @@ void Server::start() {
                                  : d.cfg.port == 0   ? std::uint16_t{0}
                                                      : d.tcp_port;
   d.lanes = std::make_unique<IoThreads>(d.io, io_thread_count(d.cfg.io_threads));
+  d.udp.set_congested_after(d.cfg.congested_after);
   d.udp.open(address, udp_port, d.lanes.get());
   if (!d.cfg.multicast_group.empty()) {
     d.multicast = d.udp.open_multicast(d.cfg.multicast_group, d.cfg.multicast_port, d.cfg.multicast_ttl);

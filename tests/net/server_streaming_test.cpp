@@ -285,6 +285,40 @@ TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {
   EXPECT_EQ(good_stats.frames_dropped, 0u);
 }
 
+// A subscriber that never reads is congested once its frames have waited
+// --congested-after-ms behind its stalled write: its stream then computes
+// (encodes) nothing for it. With the bound set past the test's length, the
+// same stream goes on encoding at its rate.
+TEST(Streaming, ANeverReadingSubscriberCostsNothingOnceCongestedAfterItsBound) {
+  auto encoded_while_stalled = [](std::chrono::milliseconds congested_after) {
+    server::ServerConfig cfg;
+    cfg.socket_send_buffer = 8192;  // fill the kernel quickly
+    cfg.congested_after = congested_after;
+    TestServer s(cfg);
+    RawConnection slow(s.port(), 4096);
+    slow.handshake();
+    const auto view = slow.create_view(2, "walk");
+    EXPECT_TRUE(view);
+    auto sub = request(3);
+    sub.mutable_subscribe()->set_view_id(view.value_or(0));
+    sub.mutable_subscribe()->set_loop(true);
+    sub.mutable_subscribe()->set_rate_hz(1000);
+    sub.mutable_subscribe()->set_orientations(true);
+    sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
+    slow.send(sub);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the kernel's buffers fill, the write stalls
+    const std::uint64_t before = s.server.stats().frames_encoded;
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    return s.server.stats().frames_encoded - before;
+  };
+  const std::uint64_t congested = encoded_while_stalled(std::chrono::milliseconds(50));
+  const std::uint64_t unbounded = encoded_while_stalled(std::chrono::hours(1));
+  std::printf("frames encoded in 500 ms for a stalled 1 kHz subscriber: %llu (congested after 50 ms), %llu (after 1 h)\n",
+              static_cast<unsigned long long>(congested), static_cast<unsigned long long>(unbounded));
+  EXPECT_GT(unbounded, 100u);
+  EXPECT_LT(congested * 5, unbounded);
+}
+
 // A server that falls behind says so: the ticks it skips to catch up advance
 // the sequence numbers and are counted (SubscriptionEnded, Stats) apart from
 // the frames a slow client did not read, so every gap is accounted for.

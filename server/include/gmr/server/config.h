@@ -105,6 +105,11 @@ struct ServerConfig {
   std::chrono::milliseconds heartbeat_interval{5000};
   // A write that makes no progress for this long means a dead client: closed.
   std::chrono::milliseconds write_timeout{20000};
+  // A subscription whose frames wait this long behind a write in flight (TCP,
+  // WebSocket), or whose UDP lane has not handed a datagram to the kernel for
+  // this long, is congested: its stream computes nothing for it
+  // (docs/protocol.md, "Slow clients").
+  std::chrono::milliseconds congested_after{50};
   // Memory (docs/protocol.md, "Memory budget"). Replies held for a
   // connection (waiting or being written): above this the server stops
   // reading that connection's requests until they drain.
