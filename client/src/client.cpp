@@ -163,7 +163,16 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     // is dropped and counted, so on_frame only sees frames of the skeleton
     // it knows. Under mutex.
     std::uint32_t skeleton_version = 0;
+    // Frames that came for it, whatever became of them (under mutex), and
+    // its end notice when that came before frames it counts (a UDP frame
+    // can be overtaken by the TCP notice): held until they are all here or
+    // kEndGrace passed, so on_end is the last callback and the last frames
+    // are not lost.
+    std::uint64_t arrived = 0;
+    std::optional<SubscriptionEnd> ending{};
+    std::shared_ptr<net::steady_timer> ending_timer{};
   };
+  static constexpr auto kEndGrace = std::chrono::milliseconds(100);
   // The multicast group's socket (the first multicast subscription opens it).
   std::optional<udp::socket> multicast_socket;
   udp::endpoint multicast_sender;
@@ -341,48 +350,76 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     });
   }
 
+  // A held end notice (Sub::ending) is given to on_end once every frame it
+  // counts arrived, or (`now`) when its grace is over.
+  void finish_ending(std::uint32_t id, const std::shared_ptr<Sub>& sub, bool now) {
+    std::optional<SubscriptionEnd> end;
+    {
+      std::lock_guard lock(mutex);
+      if (!sub->ending || (!now && sub->arrived < sub->ending->frames_sent)) return;
+      end = std::move(sub->ending);
+      sub->ending.reset();
+      if (auto it = subs.find(id); it != subs.end() && it->second == sub) subs.erase(it);
+      if (sub->ending_timer) sub->ending_timer->cancel();
+    }
+    if (sub->on_end) sub->on_end(*end);
+  }
+
   void on_message(const pb::ServerMessage& m, bool via_udp) {
     if (m.has_frame()) {
-      const auto& f = m.frame();
-      std::shared_ptr<Sub> sub;
-      {
-        std::lock_guard lock(mutex);
-        (via_udp ? counters.frames_udp : counters.frames_tcp)++;
-        if (auto it = subs.find(f.subscription_id()); it != subs.end()) {
-          sub = it->second;
-          if (f.skeleton_version() != sub->skeleton_version) {
-            ++counters.frames_other_skeleton;
-            return;
-          }
-        } else if (subscribes_in_flight > 0) {
-          if (early_frames.size() == kMaxEarlyFrames) early_frames.pop_front();
-          early_frames.emplace_back(m, via_udp);
-          (via_udp ? counters.frames_udp : counters.frames_tcp)--;  // counted when replayed
-          return;
-        }
-      }
-      if (!sub || !sub->on_frame) return;
-      const std::int64_t received = now_ns();
-      // Older than its bound (it waited in the kernel's buffers while this
-      // client was not reading): dropped, counted.
-      if (sub->max_age_ns > 0 && received + hello.clock_offset_ns - f.server_send_time_ns() > sub->max_age_ns) {
-        std::lock_guard lock(mutex);
-        ++counters.frames_stale;
-        return;
-      }
-      auto decoded = wire::decode_frame(f);
-      if (!decoded.ok()) {
-        std::lock_guard lock(mutex);
-        ++counters.frames_malformed;
-        return;
-      }
-      ReceivedFrame r;
-      static_cast<wire::FrameValues&>(r) = std::move(decoded).value();
-      r.receive_time_ns = received;
-      r.udp = via_udp;
-      sub->on_frame(r);
+      if (auto sub = deliver_frame(m.frame(), via_udp)) finish_ending(m.frame().subscription_id(), sub, false);
       return;
     }
+    on_reply_or_push(m);
+  }
+
+  // Hands a frame to its subscription's on_frame (or drops and counts it);
+  // the subscription it was for, or null.
+  std::shared_ptr<Sub> deliver_frame(const pb::Frame& f, bool via_udp) {
+    std::shared_ptr<Sub> sub;
+    {
+      std::lock_guard lock(mutex);
+      (via_udp ? counters.frames_udp : counters.frames_tcp)++;
+      if (auto it = subs.find(f.subscription_id()); it != subs.end()) {
+        sub = it->second;
+        ++sub->arrived;
+        if (f.skeleton_version() != sub->skeleton_version) {
+          ++counters.frames_other_skeleton;
+          return sub;
+        }
+      } else if (subscribes_in_flight > 0) {
+        if (early_frames.size() == kMaxEarlyFrames) early_frames.pop_front();
+        pb::ServerMessage held;
+        *held.mutable_frame() = f;
+        early_frames.emplace_back(std::move(held), via_udp);
+        (via_udp ? counters.frames_udp : counters.frames_tcp)--;  // counted when replayed
+        return nullptr;
+      }
+    }
+    if (!sub || !sub->on_frame) return sub;
+    const std::int64_t received = now_ns();
+    // Older than its bound (it waited in the kernel's buffers while this
+    // client was not reading): dropped, counted.
+    if (sub->max_age_ns > 0 && received + hello.clock_offset_ns - f.server_send_time_ns() > sub->max_age_ns) {
+      std::lock_guard lock(mutex);
+      ++counters.frames_stale;
+      return sub;
+    }
+    auto decoded = wire::decode_frame(f);
+    if (!decoded.ok()) {
+      std::lock_guard lock(mutex);
+      ++counters.frames_malformed;
+      return sub;
+    }
+    ReceivedFrame r;
+    static_cast<wire::FrameValues&>(r) = std::move(decoded).value();
+    r.receive_time_ns = received;
+    r.udp = via_udp;
+    sub->on_frame(r);
+    return sub;
+  }
+
+  void on_reply_or_push(const pb::ServerMessage& m) {
     if (m.request_id() != 0) {
       Pending p;
       {
@@ -403,15 +440,31 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
       return;
     }
     if (m.has_subscription_ended()) {
+      const std::uint32_t id = m.subscription_ended().subscription_id();
+      SubscriptionEnd end = end_of(m.subscription_ended());
       std::shared_ptr<Sub> sub;
+      bool held = false;
       {
         std::lock_guard lock(mutex);
-        if (auto it = subs.find(m.subscription_ended().subscription_id()); it != subs.end()) {
+        if (auto it = subs.find(id); it != subs.end() && !it->second->ending) {
           sub = it->second;
-          subs.erase(it);
+          if (sub->arrived < end.frames_sent) {
+            // Frames it counts are still on their way (UDP): wait for them.
+            sub->ending = std::move(end);
+            sub->ending_timer = std::make_shared<net::steady_timer>(strand, kEndGrace);
+            held = true;
+          } else {
+            subs.erase(it);
+          }
         }
       }
-      if (sub && sub->on_end) sub->on_end(end_of(m.subscription_ended()));
+      if (held) {
+        sub->ending_timer->async_wait([self = shared_from_this(), id, sub](const boost::system::error_code& ec) {
+          if (!ec) self->finish_ending(id, sub, true);
+        });
+      } else if (sub && sub->on_end) {
+        sub->on_end(end);
+      }
     } else if (m.has_skeleton_changed()) {
       const auto& c = m.skeleton_changed();
       std::shared_ptr<Sub> sub;

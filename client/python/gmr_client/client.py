@@ -37,6 +37,7 @@ PROTOCOL_VERSION = 1
 DEFAULT_PORT = 7400
 _DEFAULT_MAX_MESSAGE_BYTES = 4 << 20
 _MAX_QUEUED_FRAMES = 1024  # per subscription; older frames give way (counted)
+_END_GRACE_S = 0.1  # how long an end notice waits for the frames it counts (UDP)
 _CHANNELS = ["Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"]
 
 
@@ -292,6 +293,12 @@ class Subscription:
         self.frames_stale = 0       # frames that arrived older than max_staleness (dropped)
         self.max_age_ns = 0         # 0: no staleness bound
         self.frames_other_skeleton = 0  # frames of another skeleton version than `skeleton_version` (dropped)
+        self.arrived = 0  # frames that came for it, whatever became of them
+        # The end notice, held while frames it counts are still on their way
+        # (a UDP frame can be overtaken by the TCP notice), until they come or
+        # the grace period is over: `ended` is set after the last frame.
+        self._ending = None
+        self._ending_deadline = 0.0
         self._frames = collections.deque()
 
     def _push(self, frame: Frame) -> None:
@@ -320,7 +327,10 @@ class Subscription:
             elif self.ended is not None:
                 return
             else:
-                self._client._pump(self._client.timeout)
+                wait = self._client.timeout
+                if self._ending is not None:
+                    wait = min(wait, max(0.0, self._ending_deadline - time.monotonic()))
+                self._client._pump(wait)
 
     def frames(self) -> List[Frame]:
         """Every frame that arrived and was not read yet (reads the sockets first, without blocking)."""
@@ -512,6 +522,8 @@ class Client:
     def unsubscribe(self, subscription: int) -> None:
         self._ask("unsubscribe", "ack", subscription_id=subscription)
         sub = self._subs.pop(subscription, None)
+        if sub is not None and sub._ending is not None:
+            sub.ended, sub._ending = sub._ending, None
         if sub is not None and sub.ended is None:
             sub.ended = {"reason": "unsubscribed", "frames_sent": 0, "frames_dropped": 0, "frames_skipped": 0,
                          "frames_stale": 0}
@@ -662,8 +674,26 @@ class Client:
         return View(v.view_id, v.motion, v.skeleton_version, Skeleton.from_proto(v.skeleton), v.relative_to,
                     v.frame_count, v.frame_time, list(v.removed), v.join_offset_spread)
 
+    def _end(self, sub: "Subscription") -> None:
+        """Gives a held end notice to its subscription (`ended`), which leaves."""
+        sub.ended, sub._ending = sub._ending, None
+        if self._subs.get(sub.id) is sub:
+            del self._subs[sub.id]
+
+    def _expire_endings(self) -> None:
+        now = time.monotonic()
+        for sub in [s for s in self._subs.values() if s._ending is not None and now >= s._ending_deadline]:
+            self._end(sub)
+
     def _pump(self, timeout: float, udp_handshake=None) -> bool:
-        """Waits up to `timeout` for data and handles one batch of it. True if anything was read."""
+        """Waits up to `timeout` for data and handles one batch of it, then ends
+        the subscriptions whose held end notice's grace is over. True if
+        anything was read."""
+        got = self._read_some(timeout, udp_handshake)
+        self._expire_endings()
+        return got
+
+    def _read_some(self, timeout: float, udp_handshake) -> bool:
         if self._sock is None:
             raise GmrError("CONNECTION", "the client is closed")
         interval = 0.0
@@ -753,18 +783,24 @@ class Client:
                 return
             sub = self._subs.get(frame.subscription_id)
             if sub is not None:
+                sub.arrived += 1
                 if sub.max_age_ns and frame.receive_time_ns + self.clock_offset_ns - frame.server_send_time_ns > sub.max_age_ns:
                     sub.frames_stale += 1  # waited in the kernel's buffers while we were not reading
-                    return
-                sub._push(frame)
+                else:
+                    sub._push(frame)
+                if sub._ending is not None and sub.arrived >= sub._ending["frames_sent"]:
+                    self._end(sub)
             elif self._subscribing and len(self._early[frame.subscription_id]) < _MAX_QUEUED_FRAMES:
                 self._early[frame.subscription_id].append(frame)
         elif which == "subscription_ended":
             e = msg.subscription_ended
-            sub = self._subs.pop(e.subscription_id, None)
-            if sub is not None:
-                sub.ended = {"reason": e.reason, "frames_sent": e.frames_sent, "frames_dropped": e.frames_dropped,
-                             "frames_skipped": e.frames_skipped, "frames_stale": e.frames_stale}
+            sub = self._subs.get(e.subscription_id)
+            if sub is not None and sub._ending is None:
+                sub._ending = {"reason": e.reason, "frames_sent": e.frames_sent, "frames_dropped": e.frames_dropped,
+                               "frames_skipped": e.frames_skipped, "frames_stale": e.frames_stale}
+                sub._ending_deadline = time.monotonic() + _END_GRACE_S
+                if sub.arrived >= e.frames_sent:
+                    self._end(sub)
         elif which == "skeleton_changed":
             sub = self._subs.get(msg.skeleton_changed.subscription_id)
             if sub is not None:
