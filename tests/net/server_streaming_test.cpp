@@ -229,22 +229,30 @@ TEST(Streaming, SharedStreamsNeverMixSkeletonVersions) {
   EXPECT_TRUE(b->unsubscribe(subb->id).ok());
 }
 
+// A connection that subscribes to a heavy stream (looping walk with float64
+// orientations at `rate_hz`) and then never reads; false when its view could
+// not be made.
+bool subscribe_and_never_read(RawConnection& slow, double rate_hz) {
+  slow.handshake();
+  const auto view = slow.create_view(2, "walk");
+  if (!view) return false;
+  auto sub = request(3);
+  sub.mutable_subscribe()->set_view_id(*view);
+  sub.mutable_subscribe()->set_loop(true);
+  sub.mutable_subscribe()->set_rate_hz(rate_hz);
+  sub.mutable_subscribe()->set_orientations(true);
+  sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
+  slow.send(sub);
+  return true;
+}
+
 TEST(Streaming, AClientThatNeverReadsStaysBoundedAndDoesNotDelayOthers) {
   server::ServerConfig cfg;
   cfg.socket_send_buffer = 8192;  // fill the kernel quickly
   TestServer s(cfg);
   // The slow client: subscribes to a heavy stream, then never reads.
   RawConnection slow(s.port(), 4096);
-  slow.handshake();
-  const auto view = slow.create_view(2, "walk");
-  ASSERT_TRUE(view);
-  auto sub = request(3);
-  sub.mutable_subscribe()->set_view_id(*view);
-  sub.mutable_subscribe()->set_loop(true);
-  sub.mutable_subscribe()->set_rate_hz(2000);
-  sub.mutable_subscribe()->set_orientations(true);
-  sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
-  slow.send(sub);
+  ASSERT_TRUE(subscribe_and_never_read(slow, 2000));
 
   // A normal client meanwhile gets every frame of its own stream, in order.
   auto c = s.connect();
@@ -296,16 +304,7 @@ TEST(Streaming, ANeverReadingSubscriberCostsNothingOnceCongestedAfterItsBound) {
     cfg.congested_after = congested_after;
     TestServer s(cfg);
     RawConnection slow(s.port(), 4096);
-    slow.handshake();
-    const auto view = slow.create_view(2, "walk");
-    EXPECT_TRUE(view);
-    auto sub = request(3);
-    sub.mutable_subscribe()->set_view_id(view.value_or(0));
-    sub.mutable_subscribe()->set_loop(true);
-    sub.mutable_subscribe()->set_rate_hz(1000);
-    sub.mutable_subscribe()->set_orientations(true);
-    sub.mutable_subscribe()->set_precision(pb::PRECISION_FLOAT64);
-    slow.send(sub);
+    EXPECT_TRUE(subscribe_and_never_read(slow, 1000));
     std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the kernel's buffers fill, the write stalls
     const std::uint64_t before = s.server.stats().frames_encoded;
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
