@@ -66,6 +66,14 @@ ServerHello hello_of(const pb::HelloReply& h) {
   return s;
 }
 
+// How many frames an ended subscription's client gets: those the server
+// counted against it, less those it dropped (slow client, staleness) or
+// skipped (late server).
+std::uint64_t frames_to_come(const SubscriptionEnd& e) {
+  const std::uint64_t gone = e.frames_dropped + e.frames_skipped;
+  return e.frames_sent > gone ? e.frames_sent - gone : 0;
+}
+
 SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
   return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason(), e.frames_skipped(),
                          e.frames_stale()};
@@ -356,7 +364,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     std::optional<SubscriptionEnd> end;
     {
       std::lock_guard lock(mutex);
-      if (!sub->ending || (!now && sub->arrived < sub->ending->frames_sent)) return;
+      if (!sub->ending || (!now && sub->arrived < frames_to_come(*sub->ending))) return;
       end = std::move(sub->ending);
       sub->ending.reset();
       if (auto it = subs.find(id); it != subs.end() && it->second == sub) subs.erase(it);
@@ -448,7 +456,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
         std::lock_guard lock(mutex);
         if (auto it = subs.find(id); it != subs.end() && !it->second->ending) {
           sub = it->second;
-          if (sub->arrived < end.frames_sent) {
+          if (sub->arrived < frames_to_come(end)) {
             // Frames it counts are still on their way (UDP): wait for them.
             sub->ending = std::move(end);
             sub->ending_timer = std::make_shared<net::steady_timer>(strand, kEndGrace);

@@ -38,6 +38,14 @@ DEFAULT_PORT = 7400
 _DEFAULT_MAX_MESSAGE_BYTES = 4 << 20
 _MAX_QUEUED_FRAMES = 1024  # per subscription; older frames give way (counted)
 _END_GRACE_S = 0.1  # how long an end notice waits for the frames it counts (UDP)
+
+
+def _frames_to_come(end: dict) -> int:
+    """How many frames an ended subscription's client gets: those the server
+    counted against it, less those it dropped or skipped."""
+    return max(0, end["frames_sent"] - end["frames_dropped"] - end["frames_skipped"])
+
+
 _CHANNELS = ["Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"]
 
 
@@ -356,6 +364,9 @@ class Client:
         self._replies = {}
         self._subs = {}
         self._early = collections.defaultdict(list)  # frames that came before their Subscribed reply
+        # Pushes about a subscription read in the same batch as its Subscribed
+        # reply (a short one's end notice), before subscribe() registered it.
+        self._early_pushes = []
         self._subscribing = False
         self._buffer = bytearray()
         self._udp = None
@@ -515,8 +526,12 @@ class Client:
         sub.max_age_ns = max_staleness_ms * 1_000_000 if max_staleness_ms > 0 else 0
         self._subs[sub.id] = sub
         for frame in self._early.pop(sub.id, []):
+            sub.arrived += 1
             sub._push(frame)
         self._early.clear()
+        pushes, self._early_pushes = self._early_pushes, []
+        for msg in pushes:
+            self._on_message(msg, udp=False)
         return sub
 
     def unsubscribe(self, subscription: int) -> None:
@@ -788,10 +803,14 @@ class Client:
                     sub.frames_stale += 1  # waited in the kernel's buffers while we were not reading
                 else:
                     sub._push(frame)
-                if sub._ending is not None and sub.arrived >= sub._ending["frames_sent"]:
+                if sub._ending is not None and sub.arrived >= _frames_to_come(sub._ending):
                     self._end(sub)
             elif self._subscribing and len(self._early[frame.subscription_id]) < _MAX_QUEUED_FRAMES:
                 self._early[frame.subscription_id].append(frame)
+        elif which in ("subscription_ended", "skeleton_changed") and self._subscribing and \
+                getattr(msg, which).subscription_id not in self._subs:
+            if len(self._early_pushes) < _MAX_QUEUED_FRAMES:
+                self._early_pushes.append(msg)
         elif which == "subscription_ended":
             e = msg.subscription_ended
             sub = self._subs.get(e.subscription_id)
@@ -799,7 +818,7 @@ class Client:
                 sub._ending = {"reason": e.reason, "frames_sent": e.frames_sent, "frames_dropped": e.frames_dropped,
                                "frames_skipped": e.frames_skipped, "frames_stale": e.frames_stale}
                 sub._ending_deadline = time.monotonic() + _END_GRACE_S
-                if sub.arrived >= e.frames_sent:
+                if sub.arrived >= _frames_to_come(sub._ending):
                     self._end(sub)
         elif which == "skeleton_changed":
             sub = self._subs.get(msg.skeleton_changed.subscription_id)
