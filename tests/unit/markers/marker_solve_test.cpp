@@ -593,10 +593,10 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
 }
 
 // 02_01's own skeleton (02.asf) is not in the corpus: its AMC is played on
-// subject 12's, whose bones differ by up to 12 cm (femur 336 mm against the
-// 460 mm these markers give), so joint positions agree only as far as those
-// bones allow (bounds from docs/markers.md's table); bone directions agree
-// as for 01_01.
+// subject 12's, whose femur is 336 mm where these markers give 421 mm
+// (docs/markers.md), so joint positions agree only as far as those bones
+// allow (bounds from docs/markers.md's table); bone directions agree as for
+// 01_01.
 TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
   GMR_REQUIRE_DATA();
   const TakeComparison c = compare_take("c3d/cmu_02_01.c3d", {"asfamc/02/02_01.amc", "asfamc/02/12.asf"});
