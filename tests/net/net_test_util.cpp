@@ -230,6 +230,11 @@ std::vector<client::ReceivedFrame> stream_all(client::Client& c, const client::V
   return col->frames;
 }
 
+void expect_delivered_or_counted(std::size_t delivered, std::uint64_t dropped, std::size_t total) {
+  EXPECT_EQ(delivered + dropped, total) << "every frame delivered, or replaced and counted";
+  EXPECT_GE(delivered * 2, total) << "most frames delivered";
+}
+
 void LibraryMotionTest::SetUp() {
   if (GetParam() != "walk") GMR_REQUIRE_DATA();
   server_ = std::make_unique<TestServer>();

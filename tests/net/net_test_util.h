@@ -116,6 +116,12 @@ pb::ClientMessage request(std::uint64_t id);
 std::vector<client::ReceivedFrame> stream_all(client::Client& c, const client::ViewState& v, bool udp, bool float64,
                                               bool orientations, double rate_hz = 2000.0,
                                               std::uint64_t* out_dropped = nullptr);
+// What a stream_all over TCP may miss: frames the server replaced (latest
+// wins) while this process's reading thread was not scheduled, on a loaded
+// machine or a sanitizer build; each is counted. Every frame was delivered
+// or counted, and most were delivered. (A frame count at 2 kHz is a timing
+// expectation: a test of content does not assert that none was replaced.)
+void expect_delivered_or_counted(std::size_t delivered, std::uint64_t dropped, std::size_t total);
 
 // A test per library motion (the parameter: "walk", or "cmu/02_01", which
 // needs the shared data): a server, a connected client and the motion.

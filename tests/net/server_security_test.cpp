@@ -127,8 +127,9 @@ void expect_role(client::Client& c, bool control) {
   denied(c.stats());
   // Streaming is everyone's (at a rate a sanitizer build keeps up with:
   // there a 2 kHz stream skips ticks, which this test is not about).
-  const auto frames = stream_all(c, *v, false, true, true, kSlowBuild ? 120.0 : 2000.0);
-  EXPECT_EQ(frames.size(), v->frame_count);
+  std::uint64_t dropped = 0;
+  const auto frames = stream_all(c, *v, false, true, true, kSlowBuild ? 120.0 : 2000.0, &dropped);
+  expect_delivered_or_counted(frames.size(), dropped, v->frame_count);
   EXPECT_TRUE(c.connected());
 }
 
@@ -272,14 +273,11 @@ TEST(Tls, AClientThatTrustsTheCertificateGetsWhatAPlainClientGets) {
       ASSERT_EQ(tq->positions[i], pq->positions[i]) << i;
       ASSERT_EQ(tq->orientations[i].coeffs(), pq->orientations[i].coeffs()) << i;
     }
-    // Every frame streamed over TLS, in order, equals the query. A sanitizer
-    // build may fall behind 2 kHz: frames it replaced (counted) may be missing.
+    // Every frame streamed over TLS, in order, equals the query (frames
+    // replaced while this process was not reading are counted).
     std::uint64_t dropped = 0;
     const auto frames = stream_all(**c, *tv, false, true, false, 2000.0, &dropped);
-    if (!kSlowBuild) {
-      EXPECT_EQ(dropped, 0u);
-    }
-    ASSERT_EQ(frames.size() + dropped, n);
+    expect_delivered_or_counted(frames.size(), dropped, n);
     const std::size_t joints = tq->joints.size();
     for (std::size_t i = 0; i < frames.size(); ++i) {
       const std::uint64_t f = frames[i].frame_index;
