@@ -1,5 +1,5 @@
 // What the server pays to accept one frame of a live source
-// (server/src/live.h, LiveSource::push: checked, kept as the newest frame,
+// (server/src/live/live_source.h, LiveSource::push: checked, kept as the newest frame,
 // handed to the source's streams), with no stream attached: the cost every
 // published frame has before any subscriber. CMU 01_01's skeleton (38 joints,
 // 96 channels) as a publisher would announce it, and the same skeleton with
@@ -11,7 +11,7 @@
 #include "bench_data.h"
 #include "gmr/ops/convert.h"
 #include "gmr/ops/set_roots.h"
-#include "live.h"
+#include "live/live_source.h"
 
 namespace {
 

@@ -1,4 +1,4 @@
-// What a server's streams pay for forward kinematics (server/src/fk_blocks.h):
+// What a server's streams pay for forward kinematics (server/src/streams/fk_blocks.h):
 // N streams of CMU 01_01 at 120 Hz, each its own distance into the take (as
 // clients subscribing at different times are), ticking together. Per tick
 // every stream asks for its frame and reads it (here: sums its positions,
@@ -10,7 +10,7 @@
 #include <benchmark/benchmark.h>
 
 #include "bench_data.h"
-#include "fk_blocks.h"
+#include "streams/fk_blocks.h"
 #include "gmr/fast/compiled_motion.h"
 #include "gmr/fast/fast_fk.h"
 #include "gmr/server/view.h"

@@ -23,7 +23,8 @@
 #include "fuzz_util.h"
 #include "gmr/relay/v1/relay.pb.h"
 #include "gmr/server/library.h"
-#include "request_handler.h"
+#include "requests/request_handler.h"
+#include "server_parts.h"
 
 namespace {
 
@@ -91,9 +92,9 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  server::Server::Impl impl(config(), library(), true);
+  gmr::test::ServerParts impl(config(), library());
   auto outbox = std::make_shared<NullOutbox>();
-  auto handler = std::make_shared<server::RequestHandler>(impl, outbox);
+  auto handler = std::make_shared<server::RequestHandler>(impl.services, outbox);
   handler->start();
   static const char* const kOrigins[] = {"replica-a", "replica-b", "replica-c", "replica-d"};
   for (std::size_t i = 0; i + 3 <= size;) {
@@ -108,15 +109,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       gmr::relay::v1::LiveRelay m;
       if (!m.ParseFromString(body)) continue;
       m.set_origin(kOrigins[kind / 2 % 4]);
-      impl.on_relay(std::move(m));
+      impl.replicas.on_relay(std::move(m));
     }
     impl.io.poll();  // what the requests posted (no timer is due: time is not an input)
   }
   handler->on_stop();
   impl.io.poll();
-  require(impl.view_bytes == 0, "a closed connection's views give their bytes back");
-  require(impl.committed_mhz == 0, "a closed connection's subscriptions give their send budget back");
-  for (const auto& [name, source] : impl.live) {
+  require(impl.admission.view_bytes() == 0, "a closed connection's views give their bytes back");
+  require(impl.admission.committed_mhz() == 0, "a closed connection's subscriptions give their send budget back");
+  for (const auto& [name, source] : impl.catalog.live_sources()) {
     require(!source->origin().empty(), "a closed connection's live sources end");
   }
   return 0;

@@ -8,74 +8,71 @@
 
 #include <spdlog/spdlog.h>
 
-#include "calibrate.h"
 #include "gmr/wire/framing.h"
-#include "request_handler.h"
-#include "server_state.h"
+#include "server_impl.h"
+#include "transport/calibrate.h"
+#include "transport/tls_context.h"
+#include "transport/ws_connection.h"
 
 namespace gmr::server {
 
 Server::Impl::Impl(ServerConfig config, std::vector<LibraryEntry> entries, bool is_ready)
-    : cfg(std::move(config)), library(std::move(entries)), ready(is_ready) {
-  for (std::size_t i = 0; i < library.size(); ++i) by_name.emplace(library[i].name, i);
-}
+    : cfg(std::move(config)), catalog(std::move(entries)), ready(is_ready) {}
 
 void Server::Impl::install_library(std::vector<LibraryEntry> entries) {
   if (ready || stopping) return;
-  library = std::move(entries);
-  by_name.clear();
-  for (std::size_t i = 0; i < library.size(); ++i) by_name.emplace(library[i].name, i);
+  catalog.set_library(std::move(entries));
   ready = true;
-  spdlog::info("ready: {} motions", library.size());
+  spdlog::info("ready: {} motions", catalog.library().size());
   accept_loop();
 }
 
 std::shared_ptr<RequestHandler> Server::Impl::add_connection(const std::shared_ptr<Outbox>& outbox,
                                                              const std::string& address) {
-  auto handler = std::make_shared<RequestHandler>(*this, outbox);
+  auto handler = std::make_shared<RequestHandler>(services, outbox);
   handler->start();
-  connections[outbox->id()] = ConnectionEntry{outbox, handler, address};
-  pending_hello[outbox->id()] = outbox;
-  ++per_address[address];
-  ++accepted[outbox->transport()];
+  admission.add(outbox, handler, address);
   return handler;
 }
 
-ConnectionLimits Server::Impl::connection_limits() const {
-  ConnectionLimits l;
-  l.max_message_bytes = cfg.max_message_bytes;
-  l.max_reply_queue_bytes = cfg.max_reply_queue_bytes;
-  l.max_frame_bytes = cfg.max_frame_bytes_per_connection;
-  l.frames_per_key = cfg.frames_per_subscription;
-  l.idle_timeout = cfg.idle_timeout;
-  l.handshake_timeout = cfg.handshake_timeout;
-  l.heartbeat_interval = cfg.heartbeat_interval;
-  l.write_timeout = cfg.write_timeout;
-  l.congested_after = cfg.congested_after;
-  l.socket_send_buffer = cfg.socket_send_buffer;
-  l.socket_unsent_bytes = cfg.socket_unsent_bytes;
-  return l;
+HttpServices Server::Impl::http_services() {
+  return HttpServices{
+      .cfg = cfg,
+      .metrics = metrics,
+      .status =
+          [this] {
+            return HttpServices::Status{stopping ? HttpServices::State::kStopping
+                                        : ready  ? HttpServices::State::kReady
+                                                 : HttpServices::State::kLoading,
+                                        catalog.library().size()};
+          },
+      .metrics_text = [this] { return metrics.text(metrics_snapshot()); },
+      .admit =
+          [this](const std::string& address) {
+            std::string why = admission.admit(address);
+            if (!why.empty()) admission.refused(why, false);
+            return why;
+          },
+      .open_websocket =
+          [this](tcp::socket socket, http::request<http::string_body> upgrade, WsConnection::Format format,
+                 const std::string& address) { open_websocket(std::move(socket), std::move(upgrade), format, address); },
+  };
 }
 
-std::shared_ptr<const CompiledForm> Server::Impl::compiled_form(std::size_t entry) {
-  if (compiled_forms.size() != library.size()) compiled_forms.resize(library.size());
-  auto c = compiled_forms[entry].lock();
-  if (!c) {
-    c = std::make_shared<const CompiledForm>(library[entry].motion);
-    compiled_forms[entry] = c;
-  }
-  return c;
+void Server::Impl::open_websocket(tcp::socket socket, http::request<http::string_body> upgrade,
+                                  WsConnection::Format format, const std::string& address) {
+  auto c = std::make_shared<WsConnection>(io, std::move(socket), admission.next_id(), connection_limits(cfg),
+                                          &admission.buffers);
+  c->set_frame_wait_histogram(&metrics.frame_wait(c->transport()));
+  c->start(std::move(upgrade), format, add_connection(c, address),
+           [this](std::uint64_t closed) { connection_closed(closed); });
 }
 
 void Server::Impl::connection_closed(std::uint64_t id) {
-  auto it = connections.find(id);
-  if (it == connections.end()) return;
-  if (it->second.counted_on_lane) lanes->release(it->second.lane);
-  if (auto c = it->second.connection.lock()) closed_counters[c->transport()].add_totals(c->counters());
-  if (auto n = per_address.find(it->second.address); n != per_address.end() && --n->second == 0) per_address.erase(n);
-  connections.erase(it);
-  pending_hello.erase(id);
-  if (stopping && connections.empty() && grace_timer) grace_timer->cancel();
+  const auto entry = admission.remove(id);
+  if (!entry) return;
+  if (entry->counted_on_lane) lanes->release(entry->lane);
+  if (stopping && admission.connections().empty() && grace_timer) grace_timer->cancel();
 }
 
 
@@ -90,7 +87,7 @@ void Server::Impl::accept_loop() {
       boost::system::error_code peer_ec;
       const auto peer = socket.remote_endpoint(peer_ec);
       const std::string address = peer_ec ? std::string("?") : peer.address().to_string();
-      if (std::string why = admit(address); !why.empty()) {
+      if (std::string why = admission.admit(address); !why.empty()) {
         refuse(std::move(socket), why);
       } else {
         accept_connection(std::move(socket), address);
@@ -103,102 +100,76 @@ void Server::Impl::accept_loop() {
 void Server::Impl::accept_connection(tcp::socket socket, const std::string& address) {
   const std::size_t lane = lanes->assign();
   if (lane != 0) {
-    // The descriptor moves to the lane's io_context: its reads, writes and
-    // timers run on that thread from now on.
     boost::system::error_code ec;
-    const auto protocol = socket.local_endpoint(ec).protocol();
-    tcp::socket moved(lanes->io(lane));
-    if (!ec) {
-      const auto fd = socket.release(ec);
-      if (!ec) {
-        moved.assign(protocol, fd, ec);
-        if (ec) ::close(fd);
-      }
-    }
+    socket = lanes->adopt(std::move(socket), lane, ec);
     if (ec) {
       spdlog::warn("cannot move a connection to I/O thread {}: {}", lane, ec.message());
       lanes->release(lane);
       return;
     }
-    socket = std::move(moved);
   }
-  const std::uint64_t id = next_connection_id++;
-  auto c = std::make_shared<Connection>(lanes->io(lane), std::move(socket), id, connection_limits(), &buffers,
-                                        tls.get(), ConnectionPlacement{&io, lane, lanes.get()});
+  const std::uint64_t id = admission.next_id();
+  auto c = std::make_shared<Connection>(lanes->io(lane), std::move(socket), id, connection_limits(cfg),
+                                        &admission.buffers, tls.get(), ConnectionPlacement{&io, lane, lanes.get()});
   c->set_frame_wait_histogram(&metrics.frame_wait(c->transport()));
   auto handler = add_connection(c, address);
-  auto& entry = connections[id];
-  entry.lane = lane;
-  entry.counted_on_lane = true;
+  Admission::Entry* entry = admission.find(id);
+  entry->lane = lane;
+  entry->counted_on_lane = true;
   c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
 }
 
-std::string Server::Impl::admit(const std::string& address) {
-  if (cfg.max_connections_per_address != 0) {
-    auto it = per_address.find(address);
-    if (it != per_address.end() && it->second >= cfg.max_connections_per_address) {
-      return "the server's limit of " + std::to_string(cfg.max_connections_per_address) +
-             " connections from one address (--max-connections-per-address)";
-    }
-  }
-  // Connections still waiting for their Hello: past the cap, the oldest of
-  // them gives way (it had its chance; a real client says Hello at once).
-  while (!pending_hello.empty() && pending_hello.size() >= cfg.max_pending_handshakes) {
-    const std::weak_ptr<Outbox> oldest = pending_hello.begin()->second;
-    pending_hello.erase(pending_hello.begin());  // before stop(), whose connection_closed erases by id
-    if (auto c = oldest.lock(); c && !c->stopped()) c->stop("made room for a new connection: no Hello yet");
-  }
-  if (connections.size() >= cfg.max_connections) {
-    return "the server's limit of " + std::to_string(cfg.max_connections) + " connections (--max-connections)";
-  }
-  return {};
-}
-
 void Server::Impl::refuse(tcp::socket socket, const std::string& why) {
-  ++connections_refused;
-  if (std::uint64_t suppressed = 0; refusal_log.allow(suppressed)) {
-    spdlog::warn("refusing a connection: {}{}", why,
-                 suppressed ? " (" + std::to_string(suppressed) + " more refusals not logged)" : std::string());
-  }
-  auto bytes = std::make_shared<std::string>(
-      wire::frame_message(error_message(0, pb::ERROR_CODE_RESOURCE_EXHAUSTED, "refused: " + why)).value());
-  auto sock = std::make_shared<tcp::socket>(std::move(socket));
-  net::async_write(*sock, net::buffer(*bytes), [sock, bytes](const boost::system::error_code&, std::size_t) {
-    boost::system::error_code ignored;
-    sock->shutdown(tcp::socket::shutdown_both, ignored);
-    sock->close(ignored);
-  });
+  admission.refused(why, true);
+  refuse_socket(std::move(socket), error_message(0, pb::ERROR_CODE_RESOURCE_EXHAUSTED, "refused: " + why));
 }
 
 void Server::Impl::begin_stop() {
   if (stopping) return;
   stopping = true;
-  spdlog::info("stopping: {} connections, {} streams", connections.size(), streams.live());
+  spdlog::info("stopping: {} connections, {} streams", admission.connections().size(), streams.live());
   boost::system::error_code ec;
   acceptor.close(ec);
   http.close();
   udp.close();
   streams.stop_all();
-  if (relay_timer) relay_timer->cancel();
-  if (beacon_timer) beacon_timer->cancel();
-  auto open = connections;
+  replicas.stop();
+  beacon.stop();
+  auto open = admission.connections();
   for (auto& [id, entry] : open) {
     if (auto c = entry.connection.lock()) c->finish();
   }
   // Whatever has not drained by the deadline is closed; the io_context then runs out of work.
-  if (connections.empty()) return;
+  if (admission.connections().empty()) return;
   grace_timer = std::make_unique<net::steady_timer>(io, cfg.shutdown_grace);
   grace_timer->async_wait([this](const boost::system::error_code&) {
-    auto left = connections;
+    auto left = admission.connections();
     for (auto& [id, entry] : left) {
       if (auto c = entry.connection.lock()) c->stop("server shutdown");
     }
   });
 }
 
+pb::Beacon Server::Impl::describe() const {
+  pb::Beacon b;
+  b.set_protocol_version(wire::kProtocolVersion);
+  b.set_server_name(cfg.server_name);
+  b.set_tcp_port(tcp_port);
+  b.set_udp_port(udp.port());
+  b.set_http_port(http.port());
+  b.set_tls(tls != nullptr);
+  b.set_motions(static_cast<std::uint32_t>(catalog.library().size()));
+  b.set_live_sources(static_cast<std::uint32_t>(catalog.live_sources().size()));
+  if (multicast.group) {
+    const auto& group = *multicast.group->endpoint;
+    b.set_multicast_group(group.address().to_string() + ":" + std::to_string(group.port()));
+  }
+  return b;
+}
+
 ServerStats Server::Impl::snapshot() {
   ServerStats st;
-  st.connections = connections.size();
+  st.connections = admission.connections().size();
   st.io_threads = lanes ? lanes->size() : 1;
   st.streams = streams.active();
   st.frames_computed = counters.frames_computed;
@@ -210,31 +181,51 @@ ServerStats Server::Impl::snapshot() {
   st.frames_skipped = counters.frames_skipped;
   st.udp_rejected = udp.rejected();
   st.udp_challenges = udp.challenges();
-  st.connections_refused = connections_refused;
-  st.hellos_refused = auth_refused;
-  st.committed_frames_per_second = static_cast<double>(committed_mhz) / 1000.0;
+  st.connections_refused = admission.connections_refused();
+  st.hellos_refused = admission.hellos_refused();
+  st.committed_frames_per_second = admission.committed_frames_per_second();
   st.send_budget = cfg.send_budget;
-  st.subscriptions_refused = subscriptions_refused;
-  st.buffered_bytes = buffers.held.load();
-  st.max_buffered_bytes = buffers.max_held.load();
-  st.view_bytes = view_bytes;
-  for (auto& [id, entry] : connections) {
-    auto c = entry.connection.lock();
-    if (!c) continue;
-    const ConnectionCounters k = c->counters();
-    SessionStats s;
-    s.id = id;
-    s.frames_sent = k.frames_sent;
-    s.frames_dropped = k.frames_dropped;
-    s.frames_skipped = k.frames_skipped;
-    s.queued_bytes = k.queued_bytes;
-    s.max_queued_bytes = k.max_queued_bytes;
-    s.io_thread = entry.lane;
-    auto h = entry.handler.lock();
-    s.udp_registered = h && h->udp()->endpoint.has_value();
-    st.sessions.push_back(s);
-  }
+  st.subscriptions_refused = admission.subscriptions_refused();
+  st.buffered_bytes = admission.buffers.held.load();
+  st.max_buffered_bytes = admission.buffers.max_held.load();
+  st.view_bytes = admission.view_bytes();
+  st.sessions = admission.session_stats();
   return st;
+}
+
+MetricsSnapshot Server::Impl::metrics_snapshot() {
+  MetricsSnapshot s;
+  s.ready = ready && !stopping;
+  s.library_motions = catalog.library().size();
+  const Admission::Holdings held = admission.holdings();
+  s.open_connections = held.connections;
+  s.views = held.views;
+  s.subscriptions = held.subscriptions;
+  s.accepted_connections = admission.accepted();
+  s.connection_totals = admission.totals_by_transport();
+  if (lanes) {
+    for (std::size_t lane = 0; lane < lanes->size(); ++lane) s.lane_connections.push_back(lanes->connections(lane));
+  }
+  s.connections_refused = admission.connections_refused();
+  s.hellos_refused = admission.hellos_refused();
+  s.subscriptions_refused = admission.subscriptions_refused();
+  s.streams = streams.active();
+  s.committed_frames_per_second = admission.committed_frames_per_second();
+  s.send_budget = cfg.send_budget;
+  s.frames = counters;
+  s.fk_blocks_computed = fk_blocks.blocks_computed();
+  s.fk_block_hits = fk_blocks.hits();
+  s.fk_block_bytes = fk_blocks.bytes();
+  s.udp_bytes_sent = udp.bytes_sent();
+  s.udp_rejected = udp.rejected();
+  s.multicast_frames_sent = multicast.frames_sent;
+  s.live_sources = catalog.live_sources().size();
+  s.live_frames_received = catalog.live_frames_received();
+  s.live_frames_refused = catalog.live_frames_refused();
+  s.relay_announces_refused = replicas.announces_refused();
+  s.buffered_bytes = admission.buffers.held.load();
+  s.view_bytes = admission.view_bytes();
+  return s;
 }
 
 // ---------------------------------------------------------------------------
@@ -247,9 +238,7 @@ Server::Server(ServerConfig config) : impl_(std::make_shared<Impl>(std::move(con
 void Server::set_library(std::vector<LibraryEntry> library) {
   auto& d = *impl_;
   if (!d.started) {
-    d.library = std::move(library);
-    d.by_name.clear();
-    for (std::size_t i = 0; i < d.library.size(); ++i) d.by_name.emplace(d.library[i].name, i);
+    d.catalog.set_library(std::move(library));
     d.ready = true;
     return;
   }
@@ -261,34 +250,6 @@ void Server::set_library(std::vector<LibraryEntry> library) {
 std::uint16_t Server::http_port() const { return impl_->http.port(); }
 
 Server::~Server() { stop(); }
-
-namespace {
-
-// The TLS context of the server's certificate and key: TLS 1.2 or newer.
-std::unique_ptr<net::ssl::context> make_tls_context(const ServerConfig& cfg) {
-  if (cfg.tls_certificate_file.empty() && cfg.tls_key_file.empty()) return nullptr;
-  if (cfg.tls_certificate_file.empty() || cfg.tls_key_file.empty()) {
-    throw std::runtime_error("TLS needs both a certificate (--tls-cert) and its private key (--tls-key)");
-  }
-  auto ctx = std::make_unique<net::ssl::context>(net::ssl::context::tls_server);
-  ctx->set_options(net::ssl::context::default_workarounds | net::ssl::context::no_sslv2 |
-                   net::ssl::context::no_sslv3 | net::ssl::context::no_tlsv1 | net::ssl::context::no_tlsv1_1 |
-                   net::ssl::context::single_dh_use);
-  boost::system::error_code ec;
-  ctx->use_certificate_chain_file(cfg.tls_certificate_file, ec);
-  if (ec) {
-    throw std::runtime_error("cannot use the TLS certificate " + cfg.tls_certificate_file + ": " + ec.message() +
-                             " (a PEM certificate chain is expected)");
-  }
-  ctx->use_private_key_file(cfg.tls_key_file, net::ssl::context::pem, ec);
-  if (ec) {
-    throw std::runtime_error("cannot use the TLS private key " + cfg.tls_key_file + ": " + ec.message() +
-                             " (a PEM private key matching the certificate is expected)");
-  }
-  return ctx;
-}
-
-}  // namespace
 
 void Server::start() {
   auto& d = *impl_;
@@ -323,7 +284,7 @@ void Server::start() {
   d.udp.set_congested_after(d.cfg.congested_after);
   d.udp.open(address, udp_port, d.lanes.get());
   if (!d.cfg.multicast_group.empty()) {
-    d.multicast = d.udp.open_multicast(d.cfg.multicast_group, d.cfg.multicast_port, d.cfg.multicast_ttl);
+    d.multicast.group = d.udp.open_multicast(d.cfg.multicast_group, d.cfg.multicast_port, d.cfg.multicast_ttl);
     spdlog::info("shared streams may go to multicast {}:{} (TTL {})", d.cfg.multicast_group, d.cfg.multicast_port,
                  d.cfg.multicast_ttl);
   }
@@ -346,14 +307,14 @@ void Server::start() {
                    d.http.port(), d.cfg.bind_address);
     }
   }
-  d.start_relay();
-  d.start_beacon(address);
+  d.replicas.start();
+  d.beacon.start(address);
   d.started = true;
   if (d.ready) d.accept_loop();
   d.udp.start();
   d.http.start();
   spdlog::info("serving {} on tcp{} {}:{} and udp {}:{}{}{} ({} I/O thread{})",
-               d.ready ? std::to_string(d.library.size()) + " motions" : std::string("(library loading)"),
+               d.ready ? std::to_string(d.catalog.library().size()) + " motions" : std::string("(library loading)"),
                d.tls ? " (TLS)" : "", d.cfg.bind_address, d.tcp_port, d.cfg.bind_address, d.udp.port(),
                d.http.port() != 0 ? ", http " + d.cfg.bind_address + ":" + std::to_string(d.http.port()) : std::string(),
                d.cfg.credentials ? ", " + std::to_string(d.cfg.credentials->size()) + " tokens, anonymous clients " +
@@ -391,9 +352,8 @@ void Server::wait() {
   if (d.thread.joinable()) d.thread.join();
   if (d.lanes) d.lanes->join();  // their connections closed with the control loop's last work
   d.edit_pool.join();  // an edit still running finishes; its answer has no loop to run in
-  if (d.relay) d.relay->stop();
-  for (auto& r : d.recordings) r.wait();  // the I/O thread is done: nobody adds one
-  d.recordings.clear();
+  d.replicas.close();
+  d.recordings.wait();  // the I/O thread is done: nobody adds one
 }
 
 void Server::set_credentials(std::shared_ptr<const Credentials> credentials) {

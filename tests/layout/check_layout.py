@@ -8,6 +8,15 @@
    header of folder B" (public gmr/B/... or private B/... from lib/src) over
    lib/include/gmr and lib/src is acyclic.
 3. The client's public headers include no generated protobuf header.
+4. The server's folders depend one way (docs/architecture.md, "The server
+   in rooms"): a file of server/src includes server headers only of its own
+   layer or those below, in the order transport < streams < live < the
+   top-level owners (catalog, admission) < requests < http < the
+   composition root (server.cpp, server_impl.h); server_impl.h is included
+   by server/src/server.cpp alone, anywhere in the repository.
+5. No server/src file is over 400 lines, but those listed in
+   SERVER_FILES_OVER_LIMIT, each held to the size it has (they may shrink,
+   never grow).
 
 Usage: check_layout.py REPO_ROOT. Prints what it checked and every
 violation; exits 1 when there is one. check_layout.py --self-test builds a
@@ -18,6 +27,69 @@ import re
 import sys
 
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+
+# The server's layers, lowest first (rule 4).
+SERVER_LAYERS = ["transport", "streams", "live", "owners", "requests", "http", "root"]
+SERVER_ROOT_FILES = {"server.cpp", "server_impl.h"}
+SERVER_MAX_LINES = 400
+# Files still over the limit, with the size each may not pass (rule 5).
+SERVER_FILES_OVER_LIMIT = {
+    "transport/connection.cpp": 587,
+    "transport/udp_publisher.cpp": 501,
+    "transport/ws_connection.cpp": 488,
+    "streams/stream.cpp": 447,
+}
+
+
+def server_layer(rel):
+    """The layer of a server/src file, from its path relative to server/src."""
+    if len(rel.parts) > 1:
+        return rel.parts[0]
+    return "root" if rel.name in SERVER_ROOT_FILES else "owners"
+
+
+def check_server(root, problems):
+    """Rules 4 and 5 on server/src; the summary lines."""
+    src = root / "server" / "src"
+    files = sorted(src.rglob("*.h")) + sorted(src.rglob("*.cpp"))
+    edges = set()
+    for f in files:
+        rel = f.relative_to(src)
+        here = server_layer(rel)
+        if here not in SERVER_LAYERS:
+            problems.append(f"server/src/{rel}: in no layer ({', '.join(SERVER_LAYERS[:-2])}, or the top level)")
+            continue
+        text = f.read_text()
+        for target in INCLUDE.findall(text):
+            if not (src / target).is_file():
+                continue
+            there = server_layer(pathlib.Path(target))
+            if there == "root" and rel.as_posix() != "server.cpp" and target != rel.as_posix():
+                problems.append(f"server/src/{rel} includes {target}: only server.cpp includes the composition root")
+            elif there in SERVER_LAYERS and SERVER_LAYERS.index(there) > SERVER_LAYERS.index(here):
+                problems.append(f"server/src/{rel} ({here}) includes {target} ({there}): a lower layer includes a higher one")
+            elif there != here:
+                edges.add((here, there))
+        lines = text.count("\n")
+        limit = SERVER_FILES_OVER_LIMIT.get(rel.as_posix(), SERVER_MAX_LINES)
+        if lines > limit:
+            problems.append(f"server/src/{rel}: {lines} lines, over {limit}")
+    for listed in SERVER_FILES_OVER_LIMIT:
+        if not (src / listed).is_file():
+            problems.append(f"SERVER_FILES_OVER_LIMIT names server/src/{listed}, which is gone: take it off the list")
+    # Nobody but server.cpp includes the root, in tests, fuzzing or benchmarks either.
+    for folder in ("tests", "fuzz", "bench", "client"):
+        for f in sorted((root / folder).rglob("*")):
+            if f.suffix not in (".h", ".cpp") or "node_modules" in f.parts:
+                continue
+            if any(t.endswith("server_impl.h") for t in INCLUDE.findall(f.read_text(errors="replace"))):
+                problems.append(f"{f.relative_to(root)} includes server_impl.h: only server.cpp includes the composition root")
+    summary = [f"checked {len(files)} server files in {len(SERVER_LAYERS)} layers "
+               f"({' < '.join(SERVER_LAYERS)}); {len(SERVER_FILES_OVER_LIMIT)} still over {SERVER_MAX_LINES} lines"]
+    for layer in SERVER_LAYERS:
+        below = sorted({there for here, there in edges if here == layer}, key=SERVER_LAYERS.index)
+        summary.append(f"  server {layer} -> {', '.join(below) or '(nothing)'}")
+    return summary
 
 
 def lib_folder(path, lib):
@@ -113,6 +185,8 @@ def check(root):
     summary = [f"checked {len(headers)} public lib headers, {len(files)} lib files in {len(graph)} folders, "
                f"{len(client_headers)} client headers"]
     summary += [f"  {folder} -> {', '.join(sorted(graph[folder])) or '(nothing)'}" for folder in sorted(graph)]
+    if (root / "server" / "src").is_dir():
+        summary += check_server(root, problems)
     return problems, summary
 
 
@@ -134,15 +208,32 @@ def self_test():
         write("lib/src/b/helper.cpp", '#include "gmr/a/x.h"\n')  # b -> a while a -> b
         write("client/include/gmr/client/c.h", '#include "gmr/wire/w.h"\n')
         write("proto/wire/include/gmr/wire/w.h", '#include "gmr/stream/v1/stream.pb.h"\n')
+        write("server/src/transport/t.h", '#pragma once\n#include "requests/r.h"\n')  # upward
+        write("server/src/requests/r.h", '#pragma once\n#include "transport/t.h"\n')
+        write("server/src/server_impl.h", '#pragma once\n#include "requests/r.h"\n')
+        write("server/src/server.cpp", '#include "server_impl.h"\n')
+        write("server/src/http/h.cpp", '#include "server_impl.h"\n')  # the root, outside server.cpp
+        write("tests/t.cpp", '#include "server_impl.h"\n')
+        write("server/src/streams/long.cpp", "//\n" * 401)
         problems, _ = check(root)
         expected = ["lib/include/gmr/b/y.h: no implementation", "include loop between lib folders: a -> b -> a",
-                    "includes the generated gmr/stream/v1/stream.pb.h (through proto/wire/include/gmr/wire/w.h)"]
+                    "includes the generated gmr/stream/v1/stream.pb.h (through proto/wire/include/gmr/wire/w.h)",
+                    "server/src/transport/t.h (transport) includes requests/r.h (requests): a lower layer",
+                    "server/src/http/h.cpp includes server_impl.h: only server.cpp",
+                    "tests/t.cpp includes server_impl.h", "server/src/streams/long.cpp: 401 lines, over 400",
+                    "SERVER_FILES_OVER_LIMIT names server/src/transport/connection.cpp, which is gone"]
         missing = [e for e in expected if not any(e in p for p in problems)]
         for e in missing:
             print(f"SELF-TEST: not reported: {e}")
         write("lib/src/b/y.cpp", '#include "gmr/b/y.h"\n')
         (root / "lib/src/b/helper.cpp").unlink()
         write("client/include/gmr/client/c.h", "#pragma once\n")
+        write("server/src/transport/t.h", "#pragma once\n")
+        (root / "server/src/http/h.cpp").unlink()
+        (root / "tests/t.cpp").unlink()
+        write("server/src/streams/long.cpp", "//\n" * 400)
+        for listed, lines in SERVER_FILES_OVER_LIMIT.items():
+            write("server/src/" + listed, "//\n" * lines)
         mended, _ = check(root)
         for p in mended:
             print(f"SELF-TEST: reported in a correct tree: {p}")

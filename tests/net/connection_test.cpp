@@ -2,7 +2,7 @@
 // a handler that echoes every message back; on one thread, or with the
 // socket on a lane thread and the handler on a control thread of its own, as
 // gmr-server runs it (io_threads.h).
-#include "connection.h"
+#include "transport/connection.h"
 
 #include <gtest/gtest.h>
 

@@ -4,7 +4,7 @@
 // again, or computed for a frame alone; the positions agree with the double
 // reference path; blocks are computed once for all readers while they fit the
 // budget; a freed motion is neither kept alive nor mistaken for another.
-#include "fk_blocks.h"
+#include "streams/fk_blocks.h"
 
 #include <gtest/gtest.h>
 

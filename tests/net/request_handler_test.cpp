@@ -1,7 +1,7 @@
 // RequestHandler without sockets: requests go in as bytes, replies and
 // frames come out of a recording Outbox. What a client sees over TCP is
 // tested in the other server_*_test files; here the handler alone.
-#include "request_handler.h"
+#include "requests/request_handler.h"
 
 #include <gtest/gtest.h>
 #include <spdlog/spdlog.h>
@@ -14,6 +14,7 @@
 #include "gmr/wire/framing.h"
 #include "gmr/wire/frames.h"
 #include "net_test_util.h"
+#include "server_parts.h"
 
 namespace gmr::test {
 namespace {
@@ -59,9 +60,9 @@ class RecordingOutbox final : public server::Outbox {
 
 class RequestHandlerTest : public ::testing::Test {
  protected:
-  RequestHandlerTest() : server_(config(), test_library(), true) {
+  RequestHandlerTest() : server_(config(), test_library()) {
     spdlog::set_level(spdlog::level::warn);  // the handler logs every hello
-    handler_ = std::make_shared<server::RequestHandler>(server_, outbox_);
+    handler_ = std::make_shared<server::RequestHandler>(server_.services, outbox_);
     handler_->start();
   }
 
@@ -97,9 +98,9 @@ class RequestHandlerTest : public ::testing::Test {
     return r.view().view_id();
   }
 
-  const Motion& walk() const { return *server_.library[server_.by_name.find("walk")->second].motion; }
+  const Motion& walk() const { return *server_.catalog.find("walk").entry->motion; }
 
-  server::Server::Impl server_;
+  ServerParts server_;
   std::shared_ptr<RecordingOutbox> outbox_ = std::make_shared<RecordingOutbox>();
   std::shared_ptr<server::RequestHandler> handler_;
 };
@@ -114,7 +115,7 @@ TEST_F(RequestHandlerTest, RefusesEverythingButHelloFirstThenAnswers) {
   EXPECT_NE(h.hello().udp_token(), std::string(16, '\0'));
   const auto r = ask(list, 6);
   ASSERT_TRUE(r.has_motions());
-  EXPECT_EQ(static_cast<std::size_t>(r.motions().motions_size()), server_.library.size());
+  EXPECT_EQ(static_cast<std::size_t>(r.motions().motions_size()), server_.catalog.library().size());
   handler_->on_message("\xff\xff\xff");  // not a message: an error reply, not an exception
   ASSERT_EQ(outbox_->replies.size(), 1u);
   EXPECT_EQ(outbox_->replies.back().error().code(), pb::ERROR_CODE_BAD_REQUEST);
@@ -210,7 +211,7 @@ TEST_F(RequestHandlerTest, RelayedAnnouncesAreCheckedAsPublishesAreAndBounded) {
     r.set_origin(origin);
     r.set_serial(++serial);
     *r.mutable_announce() = p;
-    server_.on_relay(r);
+    server_.replicas.on_relay(r);
     return serial;
   };
 
@@ -222,8 +223,8 @@ TEST_F(RequestHandlerTest, RelayedAnnouncesAreCheckedAsPublishesAreAndBounded) {
   for (std::size_t i = 0; i < bad.size(); ++i) {
     bad[i].set_name(bad[i].name() + std::to_string(i));
     announce(bad[i], "replica-a");
-    EXPECT_FALSE(server_.live.contains(bad[i].name())) << i;
-    EXPECT_EQ(server_.relay_announces_refused, i + 1);
+    EXPECT_FALSE(server_.catalog.live_sources().contains(bad[i].name())) << i;
+    EXPECT_EQ(server_.replicas.announces_refused(), i + 1);
   }
   // Refusing a publish from a client says the same.
   server_.cfg.anonymous = server::Role::kPublish;
@@ -237,28 +238,28 @@ TEST_F(RequestHandlerTest, RelayedAnnouncesAreCheckedAsPublishesAreAndBounded) {
       << refused.DebugString();
 
   // Four tracked (the refused ones count until they time out): the next is refused.
-  EXPECT_EQ(server_.remote_sources.size(), 4u);
+  EXPECT_EQ(server_.replicas.remote_sources(), 4u);
   announce(good, "replica-b");
-  EXPECT_FALSE(server_.live.contains("remote/walk"));
-  EXPECT_EQ(server_.relay_announces_refused, 5u);
+  EXPECT_FALSE(server_.catalog.live_sources().contains("remote/walk"));
+  EXPECT_EQ(server_.replicas.announces_refused(), 5u);
 
   // With room, it is served; a frame of the wrong size is refused, a right one accepted.
   server_.cfg.max_remote_sources = 5;
   const std::uint64_t s = announce(good, "replica-b");
-  ASSERT_TRUE(server_.live.contains("remote/walk"));
-  EXPECT_EQ(server_.live.at("remote/walk")->origin(), "replica-b");
+  ASSERT_TRUE(server_.catalog.live_sources().contains("remote/walk"));
+  EXPECT_EQ(server_.catalog.live_sources().at("remote/walk")->origin(), "replica-b");
   gmr::relay::v1::LiveRelay frame;
   frame.set_origin("replica-b");
   frame.set_serial(s);
   frame.mutable_frame()->set_index(0);
   frame.mutable_frame()->add_values(1.0);
-  server_.on_relay(frame);
-  EXPECT_EQ(server_.live_frames_refused, 1u);
+  server_.replicas.on_relay(frame);
+  EXPECT_EQ(server_.catalog.live_frames_refused(), 1u);
   frame.mutable_frame()->clear_values();
   for (double v : m.frame(0)) frame.mutable_frame()->add_values(v);
-  server_.on_relay(frame);
-  EXPECT_EQ(server_.live_frames_received, 1u);
-  EXPECT_EQ(server_.live.at("remote/walk")->frames(), 1u);
+  server_.replicas.on_relay(frame);
+  EXPECT_EQ(server_.catalog.live_frames_received(), 1u);
+  EXPECT_EQ(server_.catalog.live_sources().at("remote/walk")->frames(), 1u);
 }
 
 }  // namespace

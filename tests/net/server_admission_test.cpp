@@ -17,7 +17,7 @@
 
 #include "gmr/wire/framing.h"
 
-#include "calibrate.h"
+#include "transport/calibrate.h"
 #include "net_test_util.h"
 
 namespace gmr::test {

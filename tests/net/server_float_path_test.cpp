@@ -11,7 +11,7 @@
 #include "gmr/fast/compiled_motion.h"
 #include "gmr/fast/fast_fk.h"
 #include "gmr/kinematics/forward_kinematics.h"
-#include "fk_blocks.h"
+#include "streams/fk_blocks.h"
 #include "gmr/server/view.h"
 #include "gmr/view/viewpoint.h"
 #include "net_test_util.h"

@@ -10,7 +10,7 @@
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/view/view.h"
 #include "gmr/wire/framing.h"
-#include "io_threads.h"
+#include "transport/io_threads.h"
 #include "net_test_util.h"
 #include "test_data.h"
 

@@ -9,7 +9,7 @@
 #include <thread>
 
 #include "gmr/wire/udp.h"
-#include "udp_publisher.h"
+#include "transport/udp_publisher.h"
 
 namespace gmr::server {
 namespace {

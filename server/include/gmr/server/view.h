@@ -111,8 +111,10 @@ class View {
   // the same library motion); null: the view makes its own, compiled on first use.
   View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion,
        std::shared_ptr<const CompiledForm> compiled = {});
-  // A view of live source `source`, starting from its newest frame.
-  View(std::uint32_t id, const std::shared_ptr<LiveSource>& source);
+  // A view of live source `source` named `motion_name`, starting from its
+  // newest frame `newest` (a one-frame motion).
+  View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> newest,
+       std::weak_ptr<LiveSource> source);
 
   std::uint32_t id() const { return id_; }
   const std::string& motion_name() const { return motion_name_; }

@@ -1,0 +1,139 @@
+#include "admission.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstdio>
+
+namespace gmr::server {
+
+Admission::Admission(const ServerConfig& cfg)
+    : buffers(cfg.max_buffered_bytes, cfg.max_buffered_bytes / std::max<std::size_t>(1, cfg.max_connections)),
+      cfg_(cfg) {}
+
+std::string Admission::admit(const std::string& address) {
+  if (cfg_.max_connections_per_address != 0) {
+    auto it = per_address_.find(address);
+    if (it != per_address_.end() && it->second >= cfg_.max_connections_per_address) {
+      return "the server's limit of " + std::to_string(cfg_.max_connections_per_address) +
+             " connections from one address (--max-connections-per-address)";
+    }
+  }
+  // Connections still waiting for their Hello: past the cap, the oldest of
+  // them gives way (it had its chance; a real client says Hello at once).
+  while (!pending_hello_.empty() && pending_hello_.size() >= cfg_.max_pending_handshakes) {
+    const std::weak_ptr<Outbox> oldest = pending_hello_.begin()->second;
+    pending_hello_.erase(pending_hello_.begin());  // before stop(), whose remove() erases by id
+    if (auto c = oldest.lock(); c && !c->stopped()) c->stop("made room for a new connection: no Hello yet");
+  }
+  if (connections_.size() >= cfg_.max_connections) {
+    return "the server's limit of " + std::to_string(cfg_.max_connections) + " connections (--max-connections)";
+  }
+  return {};
+}
+
+void Admission::refused(const std::string& why, bool log) {
+  ++connections_refused_;
+  if (std::uint64_t suppressed = 0; log && refusal_log_.allow(suppressed)) {
+    spdlog::warn("refusing a connection: {}{}", why,
+                 suppressed ? " (" + std::to_string(suppressed) + " more refusals not logged)" : std::string());
+  }
+}
+
+Admission::Entry& Admission::add(const std::shared_ptr<Outbox>& connection, std::weak_ptr<SessionInfo> session,
+                                 const std::string& address) {
+  auto& entry = connections_[connection->id()];
+  entry = Entry{connection, std::move(session), address};
+  pending_hello_[connection->id()] = connection;
+  ++per_address_[address];
+  ++accepted_[connection->transport()];
+  return entry;
+}
+
+std::optional<Admission::Entry> Admission::remove(std::uint64_t id) {
+  auto it = connections_.find(id);
+  if (it == connections_.end()) return std::nullopt;
+  Entry entry = std::move(it->second);
+  if (auto c = entry.connection.lock()) closed_counters_[c->transport()].add_totals(c->counters());
+  if (auto n = per_address_.find(entry.address); n != per_address_.end() && --n->second == 0) per_address_.erase(n);
+  connections_.erase(it);
+  pending_hello_.erase(id);
+  return entry;
+}
+
+std::map<std::string, ConnectionCounters, std::less<>> Admission::totals_by_transport() const {
+  auto totals = closed_counters_;
+  for (const auto& [id, entry] : connections_) {
+    if (auto c = entry.connection.lock()) totals[c->transport()].add_totals(c->counters());
+  }
+  return totals;
+}
+
+ConnectionCounters Admission::totals() const {
+  ConnectionCounters all;
+  for (const auto& [transport, closed] : closed_counters_) all.add_totals(closed);
+  for (const auto& [id, entry] : connections_) {
+    if (auto open = entry.connection.lock()) all.add_totals(open->counters());
+  }
+  return all;
+}
+
+Admission::Holdings Admission::holdings() const {
+  Holdings h;
+  for (const auto& [id, entry] : connections_) {
+    auto c = entry.connection.lock();
+    if (!c) continue;
+    const std::string transport = c->transport();
+    ++h.connections[transport];
+    if (auto session = entry.session.lock()) {
+      h.views += session->view_count();
+      const auto [stream_subs, udp_subs] = session->subscription_count();
+      h.subscriptions[transport] += stream_subs;
+      h.subscriptions["udp"] += udp_subs;
+    }
+  }
+  return h;
+}
+
+std::vector<SessionStats> Admission::session_stats() const {
+  std::vector<SessionStats> out;
+  for (const auto& [id, entry] : connections_) {
+    auto c = entry.connection.lock();
+    if (!c) continue;
+    const ConnectionCounters k = c->counters();
+    SessionStats s;
+    s.id = id;
+    s.frames_sent = k.frames_sent;
+    s.frames_dropped = k.frames_dropped;
+    s.frames_skipped = k.frames_skipped;
+    s.queued_bytes = k.queued_bytes;
+    s.max_queued_bytes = k.max_queued_bytes;
+    s.io_thread = entry.lane;
+    auto session = entry.session.lock();
+    s.udp_registered = session && session->has_udp_endpoint();
+    out.push_back(s);
+  }
+  return out;
+}
+
+bool Admission::hello_refused(std::uint64_t& suppressed) {
+  ++hellos_refused_;
+  return hello_log_.allow(suppressed);
+}
+
+std::optional<std::string> Admission::commit_rate(double rate_hz, std::uint64_t rate_mhz) {
+  if (cfg_.send_budget > 0 && static_cast<double>(committed_mhz_ + rate_mhz) > cfg_.send_budget * 1000.0) {
+    ++subscriptions_refused_;
+    char text[320];
+    std::snprintf(text, sizeof text,
+                  "the server's subscriptions already ask for %.0f of the %.0f frames/s it can send "
+                  "(--send-budget); %.1f Hz more would pass it: subscribe at a lower rate, or connect to "
+                  "another replica",
+                  static_cast<double>(committed_mhz_) / 1000.0, cfg_.send_budget, rate_hz);
+    return std::string(text);
+  }
+  committed_mhz_ += rate_mhz;
+  return std::nullopt;
+}
+
+}  // namespace gmr::server

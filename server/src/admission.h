@@ -1,0 +1,127 @@
+// Admission: who may connect and what the connected may hold. The
+// per-address and total connection limits, the connections still waiting
+// for their Hello, the registry of open connections (and the counters of
+// closed ones), the bytes every connection buffers, the frames per second
+// subscriptions commit against the send budget, and the motion bytes views
+// own. On the control loop, but `buffers`, which connections on every I/O
+// thread settle into.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "gmr/server/config.h"
+#include "gmr/server/server.h"
+#include "transport/connection.h"
+#include "transport/outbox.h"
+
+namespace gmr::server {
+
+// What a client's session shows of itself to snapshots and metrics.
+class SessionInfo {
+ public:
+  virtual ~SessionInfo() = default;
+  virtual std::size_t view_count() const = 0;
+  // Subscriptions whose frames go through the connection, and over UDP.
+  virtual std::pair<std::size_t, std::size_t> subscription_count() const = 0;
+  virtual bool has_udp_endpoint() const = 0;
+};
+
+class Admission {
+ public:
+  explicit Admission(const ServerConfig& cfg);
+
+  // The bytes all connections hold, against cfg.max_buffered_bytes.
+  BufferBudget buffers;
+
+  // --- Connections -------------------------------------------------------
+  struct Entry {
+    std::weak_ptr<Outbox> connection;
+    std::weak_ptr<SessionInfo> session;
+    std::string address;           // the client's IP address
+    std::size_t lane = 0;          // its I/O thread (WebSocket clients are on the control loop)
+    bool counted_on_lane = false;  // IoThreads::assign counted it (TCP)
+  };
+  // Why a new connection from `address` is refused (empty: admit it). May
+  // close the oldest connection still waiting for its Hello to make room.
+  std::string admit(const std::string& address);
+  // A connection refused for `why` (counted; logged at a bounded rate when `log`).
+  void refused(const std::string& why, bool log);
+  std::uint64_t next_id() { return next_id_++; }
+  // Registers an accepted connection; it waits for its Hello from now on.
+  Entry& add(const std::shared_ptr<Outbox>& connection, std::weak_ptr<SessionInfo> session, const std::string& address);
+  // Connection `id` said Hello (the pending cap no longer counts it).
+  void established(std::uint64_t id) { pending_hello_.erase(id); }
+  // Forgets connection `id`, which closed: its counters join the closed
+  // ones. Returns its entry (nullopt: unknown).
+  std::optional<Entry> remove(std::uint64_t id);
+  const std::map<std::uint64_t, Entry>& connections() const { return connections_; }
+  Entry* find(std::uint64_t id) {
+    auto it = connections_.find(id);
+    return it == connections_.end() ? nullptr : &it->second;
+  }
+  // Frames and bytes of every connection, open or closed, by transport.
+  std::map<std::string, ConnectionCounters, std::less<>> totals_by_transport() const;
+  ConnectionCounters totals() const;
+  const std::map<std::string, std::uint64_t, std::less<>>& accepted() const { return accepted_; }
+  std::uint64_t connections_refused() const { return connections_refused_; }
+  // What the open connections hold: connections by transport, views, and
+  // subscriptions by the transport their frames take.
+  struct Holdings {
+    std::map<std::string, std::size_t, std::less<>> connections;
+    std::size_t views = 0;
+    std::map<std::string, std::size_t, std::less<>> subscriptions;
+  };
+  Holdings holdings() const;
+  // Each open connection's figures (Server::stats).
+  std::vector<SessionStats> session_stats() const;
+
+  // --- Hello ---------------------------------------------------------------
+  // A Hello refused for its token; true when it may be logged now (then
+  // `suppressed` says how many were not).
+  bool hello_refused(std::uint64_t& suppressed);
+  std::uint64_t hellos_refused() const { return hellos_refused_; }
+
+  // --- The send budget (docs/protocol.md, "Admission") --------------------
+  // Commits `rate_hz` (in millihertz, `rate_mhz`) of frames per second, or
+  // says why the budget refuses it (counted).
+  std::optional<std::string> commit_rate(double rate_hz, std::uint64_t rate_mhz);
+  void release_rate(std::uint64_t rate_mhz) { committed_mhz_ -= rate_mhz; }
+  double committed_frames_per_second() const { return static_cast<double>(committed_mhz_) / 1000.0; }
+  std::uint64_t committed_mhz() const { return committed_mhz_; }
+  std::uint64_t subscriptions_refused() const { return subscriptions_refused_; }
+
+  // --- View bytes: motion bytes views own (edited copies) -----------------
+  std::uint64_t view_bytes() const { return view_bytes_; }
+  void set_view_bytes(std::uint64_t bytes) { view_bytes_ = bytes; }
+  void release_view_bytes(std::uint64_t bytes) { view_bytes_ -= bytes; }
+
+ private:
+  const ServerConfig& cfg_;
+  std::uint64_t next_id_ = 1;
+  std::map<std::uint64_t, Entry> connections_;
+  std::map<std::string, std::size_t> per_address_;  // open connections by IP address
+  // Connections waiting for their Hello, by id: ids grow, so the first is
+  // the oldest (admit() pushes it out past max_pending_handshakes).
+  std::map<std::uint64_t, std::weak_ptr<Outbox>> pending_hello_;
+  // Connections accepted, by transport, and the counters of those closed,
+  // for lifetime totals.
+  std::map<std::string, std::uint64_t, std::less<>> accepted_;
+  std::map<std::string, ConnectionCounters, std::less<>> closed_counters_;
+  std::uint64_t connections_refused_ = 0;
+  LogLimiter refusal_log_{5, std::chrono::seconds(10)};
+  std::uint64_t hellos_refused_ = 0;
+  LogLimiter hello_log_{5, std::chrono::seconds(10)};
+  // Frames per second the subscriptions ask for, in millihertz (integers:
+  // no drift however many come and go), against cfg.send_budget.
+  std::uint64_t committed_mhz_ = 0;
+  std::uint64_t subscriptions_refused_ = 0;
+  std::uint64_t view_bytes_ = 0;
+};
+
+}  // namespace gmr::server

@@ -1,0 +1,77 @@
+// Catalog: every motion the server serves, by name: the library's, and the
+// live sources being published here or on other replicas. "Is this name a
+// library motion or a live source?" is answered here alone, and the by-name
+// index is built here alone. Also the float forms that unedited views of a
+// library motion share. On the control loop.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "gmr/server/library.h"
+#include "gmr/server/view.h"
+#include "live/live_directory.h"
+#include "live/live_source.h"
+
+namespace gmr::server {
+
+class Catalog final : public LiveDirectory {
+ public:
+  explicit Catalog(std::vector<LibraryEntry> library = {});
+
+  // Replaces the library (a server made without one gets it later).
+  void set_library(std::vector<LibraryEntry> library);
+  const std::vector<LibraryEntry>& library() const { return library_; }
+
+  // What a name is: a library motion (`entry`, at `index`), a live source
+  // that has not ended (`live`), or nothing (both null).
+  struct Found {
+    const LibraryEntry* entry = nullptr;
+    std::size_t index = 0;
+    std::shared_ptr<LiveSource> live;
+    explicit operator bool() const { return entry != nullptr || live != nullptr; }
+  };
+  Found find(std::string_view name) const;
+  // The live source named `name` that has not ended, or null.
+  std::shared_ptr<LiveSource> live(std::string_view name) const;
+  // Every live source listed, by name.
+  const std::map<std::string, std::shared_ptr<LiveSource>, std::less<>>& live_sources() const { return live_; }
+
+  // The unit of the motion a view shows (0: unknown): the library's word, or
+  // the live source's.
+  double metres_per_unit(const View& view) const;
+  // Bytes of motion `view` owns beyond the library's (an edited copy, and
+  // the float form a float32 stream makes of it); a live view owns none.
+  std::uint64_t owned_bytes(const View& view) const;
+  // The float form unedited views of library entry `index` share (made when
+  // no view holds one: memory follows what is being streamed).
+  std::shared_ptr<const CompiledForm> compiled_form(std::size_t index);
+
+  // LiveDirectory.
+  bool serves(std::string_view name) const override;
+  std::shared_ptr<LiveSource> add_live(const std::string& name, Skeleton skeleton, double frame_time,
+                                       double metres_per_unit) override;
+  void remove_live(const std::shared_ptr<LiveSource>& source) override;
+  std::vector<std::shared_ptr<LiveSource>> local_sources() const override;
+  void count_live_frame(bool accepted) override;
+
+  std::uint64_t live_frames_received() const { return live_frames_received_; }
+  std::uint64_t live_frames_refused() const { return live_frames_refused_; }
+
+ private:
+  std::vector<LibraryEntry> library_;
+  std::map<std::string, std::size_t, std::less<>> by_name_;
+  std::vector<std::weak_ptr<const CompiledForm>> compiled_forms_;
+  // Live sources (docs/protocol.md, "Live sources"), by name; a source
+  // leaves when its publication ends.
+  std::map<std::string, std::shared_ptr<LiveSource>, std::less<>> live_;
+  std::uint64_t next_live_serial_ = 1;
+  std::uint64_t live_frames_received_ = 0;  // frames published and accepted, all sources
+  std::uint64_t live_frames_refused_ = 0;   // refused (wrong size, not finite, unknown publication)
+};
+
+}  // namespace gmr::server

@@ -1,0 +1,213 @@
+#include "http/metrics.h"
+
+#include <prometheus/client_metric.h>
+#include <prometheus/metric_family.h>
+#include <prometheus/text_serializer.h>
+
+#include <map>
+#include <sstream>
+
+
+namespace gmr::server {
+
+namespace {
+
+using prometheus::ClientMetric;
+using prometheus::MetricFamily;
+using prometheus::MetricType;
+
+// Seconds: from 10 us (a request, a frame on an idle loopback) to 1 s.
+const prometheus::Histogram::BucketBoundaries kLatencyBuckets = {
+    1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 2.5e-2, 5e-2, 0.1, 0.25, 1.0};
+
+// Families built from the server's state at scrape time.
+class Families {
+ public:
+  // One sample of family `name` (made on first use, with `help` and `type`).
+  void add(const std::string& name, const std::string& help, MetricType type, double value,
+           std::vector<ClientMetric::Label> labels = {}) {
+    auto [it, fresh] = index_.try_emplace(name, families_.size());
+    if (fresh) families_.push_back(MetricFamily{name, help, type, {}});
+    ClientMetric m;
+    m.label = std::move(labels);
+    if (type == MetricType::Counter) {
+      m.counter.value = value;
+    } else {
+      m.gauge.value = value;
+    }
+    families_[it->second].metric.push_back(std::move(m));
+  }
+  std::vector<MetricFamily>& families() { return families_; }
+
+ private:
+  std::vector<MetricFamily> families_;
+  std::map<std::string, std::size_t> index_;
+};
+
+std::string code_label(pb::ErrorCode code) {
+  std::string name = pb::ErrorCode_Name(code);
+  constexpr std::string_view kPrefix = "ERROR_CODE_";
+  if (name.rfind(kPrefix, 0) == 0) name.erase(0, kPrefix.size());
+  return name.empty() ? std::to_string(static_cast<int>(code)) : name;
+}
+
+}  // namespace
+
+Metrics::Metrics() : registry_(std::make_shared<prometheus::Registry>()) {
+  requests_ = &prometheus::BuildCounter()
+                   .Name("gmr_requests_total")
+                   .Help("Requests answered, by kind (heartbeats not counted)")
+                   .Register(*registry_);
+  request_errors_ = &prometheus::BuildCounter()
+                         .Name("gmr_request_errors_total")
+                         .Help("Requests refused, by the protocol's error code")
+                         .Register(*registry_);
+  http_responses_ = &prometheus::BuildCounter()
+                         .Name("gmr_http_responses_total")
+                         .Help("HTTP responses (the viewer's files, /metrics, /healthz, /readyz), by status")
+                         .Register(*registry_);
+  request_seconds_ = &prometheus::BuildHistogram()
+                          .Name("gmr_request_duration_seconds")
+                          .Help("Time the server took to answer a request")
+                          .Register(*registry_)
+                          .Add({}, kLatencyBuckets);
+  tick_lateness_ = &prometheus::BuildHistogram()
+                        .Name("gmr_tick_lateness_seconds")
+                        .Help("How late a stream's tick ran after it was due")
+                        .Register(*registry_)
+                        .Add({}, kLatencyBuckets);
+  auto& wait = prometheus::BuildHistogram()
+                   .Name("gmr_frame_wait_seconds")
+                   .Help("From a frame queued for a connection to the end of the write that carried it "
+                         "(the oldest frame of each write)")
+                   .Register(*registry_);
+  frame_wait_tcp_ = &wait.Add({{"transport", "tcp"}}, kLatencyBuckets);
+  frame_wait_ws_ = &wait.Add({{"transport", "websocket"}}, kLatencyBuckets);
+}
+
+void Metrics::request(std::string_view kind, Clock::duration took, pb::ErrorCode code) {
+  requests_->Add({{"request", std::string(kind)}}).Increment();
+  request_seconds_->Observe(std::chrono::duration<double>(took).count());
+  if (code != pb::ERROR_CODE_UNSPECIFIED) request_errors_->Add({{"code", code_label(code)}}).Increment();
+}
+
+void Metrics::unparsable_request() { request_errors_->Add({{"code", code_label(pb::ERROR_CODE_BAD_REQUEST)}}).Increment(); }
+
+void Metrics::http_response(unsigned status) { http_responses_->Add({{"status", std::to_string(status)}}).Increment(); }
+
+prometheus::Histogram& Metrics::frame_wait(std::string_view transport) {
+  return transport == "websocket" ? *frame_wait_ws_ : *frame_wait_tcp_;
+}
+
+std::string Metrics::text(const MetricsSnapshot& s) const {
+  Families f;
+  using T = MetricType;
+  f.add("gmr_ready", "1 once the library has loaded and the server takes clients", T::Gauge, s.ready ? 1 : 0);
+  f.add("gmr_library_motions", "Motions in the library", T::Gauge, static_cast<double>(s.library_motions));
+
+  // Connections and what their clients hold.
+  auto count = [](const auto& map, std::string_view key) -> double {
+    const auto it = map.find(key);
+    return it == map.end() ? 0.0 : static_cast<double>(it->second);
+  };
+  for (const char* transport : {"tcp", "websocket"}) {
+    f.add("gmr_connections", "Open client connections", T::Gauge, count(s.open_connections, transport),
+          {{"transport", transport}});
+  }
+  for (const char* transport : {"tcp", "websocket"}) {
+    f.add("gmr_connections_accepted_total", "Client connections accepted", T::Counter,
+          count(s.accepted_connections, transport), {{"transport", transport}});
+  }
+  if (!s.lane_connections.empty()) {
+    f.add("gmr_io_threads", "Threads the sockets' work runs on, the control loop included (--io-threads)", T::Gauge,
+          static_cast<double>(s.lane_connections.size()));
+    for (std::size_t lane = 0; lane < s.lane_connections.size(); ++lane) {
+      f.add("gmr_io_thread_connections", "TCP connections whose socket work runs on each I/O thread (0: the control loop)",
+            T::Gauge, static_cast<double>(s.lane_connections[lane]), {{"thread", std::to_string(lane)}});
+    }
+  }
+  f.add("gmr_connections_refused_total", "Connections refused for a connection limit (TCP and WebSocket)", T::Counter,
+        static_cast<double>(s.connections_refused));
+  f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter, static_cast<double>(s.hellos_refused));
+  f.add("gmr_views", "Views clients hold", T::Gauge, static_cast<double>(s.views));
+  for (const char* transport : {"tcp", "udp", "websocket"}) {
+    f.add("gmr_subscriptions", "Subscriptions, by the transport their frames take", T::Gauge,
+          count(s.subscriptions, transport), {{"transport", transport}});
+  }
+  f.add("gmr_subscriptions_refused_total", "Subscriptions refused for the send budget", T::Counter,
+        static_cast<double>(s.subscriptions_refused));
+  f.add("gmr_streams", "Streams (one kinematics and one encoding per tick, shared by their subscribers)", T::Gauge,
+        static_cast<double>(s.streams));
+  f.add("gmr_committed_frames_per_second", "Frames per second all subscriptions ask for (against the send budget)",
+        T::Gauge, s.committed_frames_per_second);
+  f.add("gmr_send_budget_frames_per_second", "Frames per second subscriptions may ask for in all (0: no limit)",
+        T::Gauge, s.send_budget);
+
+  // Frames: computed and encoded once per stream, then sent per subscriber.
+  f.add("gmr_frames_computed_total", "Forward-kinematics runs for streams", T::Counter,
+        static_cast<double>(s.frames.frames_computed));
+  f.add("gmr_fk_blocks_computed_total", "Float-path kinematics computed for streams, 16 frames at a time",
+        T::Counter, static_cast<double>(s.fk_blocks_computed));
+  f.add("gmr_fk_block_hits_total", "Float-path frames streams read from kinematics already computed", T::Counter,
+        static_cast<double>(s.fk_block_hits));
+  f.add("gmr_fk_block_bytes", "Bytes of float-path kinematics kept for streams to share", T::Gauge,
+        static_cast<double>(s.fk_block_bytes));
+  f.add("gmr_frames_encoded_total", "Frame encodings (one per stream and tick)", T::Counter,
+        static_cast<double>(s.frames.frames_encoded));
+  f.add("gmr_frames_skipped_total", "Frames skipped because the server was late (per subscriber)", T::Counter,
+        static_cast<double>(s.frames.frames_skipped));
+  std::map<std::string, ConnectionCounters> by_transport;
+  for (const auto& [transport, t] : s.connection_totals) {
+    auto& own = by_transport[transport];
+    own.frames_sent = t.frames_sent - t.udp_frames_sent;
+    own.frames_dropped = t.frames_dropped - t.udp_frames_dropped;
+    own.frames_stale = t.frames_stale;
+    own.bytes_sent = t.bytes_sent;
+    own.bytes_received = t.bytes_received;
+    by_transport["udp"].frames_sent += t.udp_frames_sent;
+    by_transport["udp"].frames_dropped += t.udp_frames_dropped;
+  }
+  for (const char* transport : {"tcp", "udp", "websocket"}) {
+    const ConnectionCounters& t = by_transport[transport];
+    f.add("gmr_frames_sent_total", "Frames sent to subscribers", T::Counter, static_cast<double>(t.frames_sent),
+          {{"transport", transport}});
+    f.add("gmr_frames_dropped_total",
+          "Frames given up for a subscriber (a newer one replaced it, a bound, or its age)", T::Counter,
+          static_cast<double>(t.frames_dropped), {{"transport", transport}});
+  }
+  for (const char* transport : {"tcp", "websocket"}) {
+    const ConnectionCounters& t = by_transport[transport];
+    f.add("gmr_frames_stale_total", "Of the frames dropped: waited past their subscriber's staleness bound",
+          T::Counter, static_cast<double>(t.frames_stale), {{"transport", transport}});
+    f.add("gmr_bytes_sent_total", "Bytes written to client connections", T::Counter,
+          static_cast<double>(t.bytes_sent), {{"transport", transport}});
+    f.add("gmr_bytes_received_total", "Bytes read from client connections", T::Counter,
+          static_cast<double>(t.bytes_received), {{"transport", transport}});
+  }
+  f.add("gmr_bytes_sent_total", "Bytes written to client connections", T::Counter,
+        static_cast<double>(s.udp_bytes_sent), {{"transport", "udp"}});  // with multicast: one UDP port
+  f.add("gmr_multicast_frames_sent_total", "Frames sent to the multicast group (once each, whatever the receivers)",
+        T::Counter, static_cast<double>(s.multicast_frames_sent));
+  f.add("gmr_live_sources", "Live sources: motions published by clients or relayed from replicas", T::Gauge,
+        static_cast<double>(s.live_sources));
+  f.add("gmr_live_frames_received_total", "Frames published to live sources and accepted", T::Counter,
+        static_cast<double>(s.live_frames_received));
+  f.add("gmr_live_frames_refused_total", "Frames published to live sources and refused (wrong size, not finite)",
+        T::Counter, static_cast<double>(s.live_frames_refused));
+  f.add("gmr_relay_announces_refused_total",
+        "Live sources other replicas announced and this one refused (invalid, or past --max-remote-sources)",
+        T::Counter, static_cast<double>(s.relay_announces_refused));
+  f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm",
+        T::Counter, static_cast<double>(s.udp_rejected));
+  f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,
+        static_cast<double>(s.buffered_bytes));
+  f.add("gmr_view_bytes", "Motion bytes edited views own", T::Gauge, static_cast<double>(s.view_bytes));
+
+  auto families = registry_->Collect();
+  for (auto& family : f.families()) families.push_back(std::move(family));
+  std::ostringstream out;
+  prometheus::TextSerializer().Serialize(out, families);
+  return out.str();
+}
+
+}  // namespace gmr::server

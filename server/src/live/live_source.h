@@ -1,0 +1,88 @@
+// LiveSource: a motion whose frames arrive in time from a publisher
+// (docs/protocol.md, "Live sources"). It is listed beside the library's
+// motions; views of it are ordinary views whose edits are replayed on each
+// frame (ViewContent::live_steps), and its streams are driven by its frames
+// instead of a timer: each published frame is computed once per distinct view
+// content and encoded once per stream, as a library tick is.
+//
+// Touched only on the I/O thread.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "gmr/core/error.h"
+#include "gmr/motion/motion.h"
+#include "gmr/server/view.h"
+#include "transport/net.h"
+
+namespace gmr::server {
+
+class Stream;
+
+class LiveSource : public std::enable_shared_from_this<LiveSource> {
+ public:
+  // `skeleton`: the publisher's, pre-rotation channels. `serial` tells this
+  // publication from an earlier one of the same name (share keys).
+  LiveSource(std::string name, std::uint64_t serial, Skeleton skeleton, double frame_time, double metres_per_unit);
+
+  const std::string& name() const { return name_; }
+  std::uint64_t serial() const { return serial_; }
+  double frame_time() const { return frame_time_; }
+  double metres_per_unit() const { return metres_per_unit_; }
+  // Frames published so far; the newest has index frames() - 1.
+  std::uint64_t frames() const { return frames_; }
+  // The newest frame as a one-frame pre-rotation motion; before the first,
+  // the skeleton with every channel 0.
+  const std::shared_ptr<const Motion>& latest() const { return latest_; }
+  bool ended() const { return ended_; }
+  // The replica this source is published on (relay.h); empty: this one.
+  const std::string& origin() const { return origin_; }
+  void set_origin(std::string origin) { origin_ = std::move(origin); }
+
+  // Checks one frame (its size, finite values) and sends it to every stream
+  // of this source. An error says which value and why; nothing is sent then.
+  // `index`: the frame's number when another replica numbered it (frames
+  // that never came are a gap); none: the next.
+  Status push(std::span<const double> values, std::optional<std::uint64_t> index = std::nullopt);
+  // Ends the source: every stream's subscribers are told `reason`.
+  void end(const std::string& reason);
+
+  // Keeps every accepted frame from now on, up to `max_bytes` of values.
+  void record(std::size_t max_bytes);
+  // The frames recorded (null when not recording), once the source ended;
+  // `truncated` says whether the limit cut it short.
+  std::shared_ptr<const Motion> recording(bool* truncated) const;
+
+  // A stream that shows this source from now on (Stream::set_live): it gets
+  // every frame pushed from now on.
+  void attach(const std::shared_ptr<Stream>& stream);
+  // Hands `stream` the newest frame, as its view shows it (a subscriber
+  // joining a running source starts there); nothing before the first frame,
+  // once the source ended, or while the stream is paused or has no target.
+  void send_newest(Stream& stream) const;
+  // The motion a live view content shows at the newest frame: its edits
+  // replayed on it.
+  Result<std::shared_ptr<const Motion>> view_motion(const ViewContent& content) const;
+
+ private:
+  std::string name_;
+  std::uint64_t serial_;
+  double frame_time_;
+  double metres_per_unit_;
+  std::shared_ptr<const Motion> latest_;
+  std::uint64_t frames_ = 0;
+  bool ended_ = false;
+  std::vector<std::weak_ptr<Stream>> streams_;
+  std::uint64_t replay_failures_ = 0;
+  std::string origin_;
+  std::unique_ptr<Motion> recording_;
+  std::size_t record_max_bytes_ = 0;
+  bool record_truncated_ = false;
+};
+
+}  // namespace gmr::server

@@ -1,0 +1,328 @@
+// RequestHandler's subscriptions: each is a target (TCP or UDP) of a stream
+// that the StreamRegistry keeps, shared with other subscriptions while they
+// want the same bytes and split off when one of them changes alone.
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "gmr/wire/convert.h"
+#include "gmr/wire/framing.h"
+#include "live/live_source.h"
+#include "requests/request_handler.h"
+#include "streams/targets.h"
+
+namespace gmr::server {
+
+namespace {
+
+pb::ServerMessage ack() {
+  pb::ServerMessage out;
+  out.mutable_ack();
+  return out;
+}
+
+Refusal unknown_subscription(std::uint32_t id) {
+  return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown subscription " + std::to_string(id)};
+}
+
+}  // namespace
+
+Reply RequestHandler::subscribe(const pb::Subscribe& r) {
+  const View* v = find_view(r.view_id());
+  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+  const Motion& m = v->motion();
+  const ServerConfig& cfg = services_.cfg;
+  if (subs_.size() >= cfg.max_subscriptions_per_connection) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "at most " + std::to_string(cfg.max_subscriptions_per_connection) +
+                                                          " subscriptions per connection"};
+  }
+  Stream::Settings settings;
+  Stream::Schedule& s = settings.schedule;
+  // A live view plays its source's frames as they come: no range, loop,
+  // speed or rate of its own (docs/protocol.md, "Live sources").
+  std::shared_ptr<LiveSource> source;
+  if (v->live()) {
+    source = v->live_source();
+    if (!source || source->ended()) {
+      return Refusal{pb::ERROR_CODE_NOT_FOUND, "the live source '" + v->motion_name() + "' has ended"};
+    }
+  }
+  s.start = source ? 0 : r.start_frame();
+  s.end = source ? 1 : r.end_frame() == 0 ? static_cast<std::uint32_t>(m.frame_count) : r.end_frame();
+  if (!(s.start < s.end && s.end <= m.frame_count)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "frames [" + std::to_string(s.start) + ", " + std::to_string(s.end) +
+                                                   ") are not within the motion's " + std::to_string(m.frame_count) +
+                                                   " frames"};
+  }
+  s.loop = r.loop();
+  s.speed = r.speed() == 0.0 ? 1.0 : r.speed();
+  if (!(std::isfinite(s.speed) && s.speed >= kMinSpeed && s.speed <= kMaxSpeed)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "speed " + std::to_string(r.speed()) + " is not within [" +
+                                                   std::to_string(kMinSpeed) + ", " + std::to_string(kMaxSpeed) + "]"};
+  }
+  s.rate = source ? 1.0 / source->frame_time() : r.rate_hz() == 0.0 ? s.speed / m.frame_time : r.rate_hz();
+  if (source) {
+    s.loop = false;
+    s.speed = 1.0;
+  }
+  if (!(std::isfinite(s.rate) && s.rate >= kMinRateHz && s.rate <= kMaxRateHz)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST,
+                   "output rate " + std::to_string(s.rate) + " Hz" +
+                       (r.rate_hz() == 0.0 ? std::string(" (the motion's rate times speed)") : std::string()) +
+                       " is not within [" + std::to_string(kMinRateHz) + ", " + std::to_string(kMaxRateHz) + "] Hz"};
+  }
+  s.skip_repeats = r.skip_repeats();
+  // proto3 keeps enum values it does not know: refuse them rather than guess.
+  if (!pb::Transport_IsValid(r.transport()) || !pb::Precision_IsValid(r.precision())) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "unknown transport " + std::to_string(r.transport()) +
+                                                   " or precision " + std::to_string(r.precision()) +
+                                                   " (this server speaks protocol version " +
+                                                   std::to_string(wire::kProtocolVersion) + ")"};
+  }
+  const bool use_udp = r.transport() == pb::TRANSPORT_UDP;
+  const bool use_multicast = r.transport() == pb::TRANSPORT_MULTICAST;
+  if (use_multicast && !services_.multicast.group) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "this server sends no multicast (gmr-server --multicast-group): subscribe over TCP or UDP"};
+  }
+  if (use_udp && !udp_->endpoint) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "UDP transport: register this connection's UDP endpoint first (send the session token to UDP port " +
+                       std::to_string(services_.udp.port()) + ")"};
+  }
+  const std::vector<std::string> names(r.joints().begin(), r.joints().end());
+  auto joints = resolve_joints(*v, names);
+  if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
+  auto basis = output_basis_of(r.conventions(), services_.catalog.metres_per_unit(*v));
+  if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
+  // Its targets hold the connection (targets.h).
+  const auto conn = connection_.lock();
+  if (!conn) return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, "the connection is closing"};
+  // Admission: the rates all subscribers asked for stay within what the
+  // server can send (docs/protocol.md, "Admission"). Committed from here on.
+  const auto rate_mhz = static_cast<std::uint64_t>(std::llround(s.rate * 1000.0));
+  if (auto refused = services_.admission.commit_rate(s.rate, rate_mhz)) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, std::move(*refused)};
+  }
+  settings.joints = std::move(joints).value();
+  settings.orientations = r.orientations();
+  settings.local_transforms = r.local_transforms();
+  settings.basis = *basis;
+  settings.float64 = r.precision() == pb::PRECISION_FLOAT64;
+  settings.max_catch_up = cfg.max_catch_up;
+
+  // Streams with the same content and schedule can share one FK and one
+  // encoding per tick.
+  // A live source's serial keeps a later source of the same name apart.
+  const std::string shown = source ? v->motion_name() + "#live" + std::to_string(source->serial()) : v->motion_name();
+  // Multicast is for shared streams: one send per frame for all their subscribers.
+  const std::string key =
+      r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
+  std::shared_ptr<Stream> stream = key.empty() ? nullptr : services_.streams.find_running(key);
+  const bool joined = stream != nullptr;
+  if (!stream) {
+    stream = services_.streams.create(v->content(), settings, key);
+    if (source) stream->set_live();
+  }
+
+  const std::uint32_t id = next_sub_++;
+  std::shared_ptr<SubscriptionTarget> target;
+  if (use_multicast) {
+    target = std::make_shared<MulticastTarget>(weak_from_this(), conn, id, v->id(), services_.udp,
+                                               services_.multicast.channel(stream->id()));
+  } else if (use_udp) {
+    target = std::make_shared<UdpTarget>(weak_from_this(), conn, id, v->id(), services_.udp, udp_);
+  } else {
+    target = std::make_shared<TcpTarget>(weak_from_this(), conn, id, v->id());
+  }
+  target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
+                                                : std::chrono::milliseconds(r.max_staleness_ms()));
+  stream->add(target, r.max_frames());
+  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version, settings.basis,
+                           use_multicast};
+  if (!joined) {
+    stream->start();
+    if (source) attach_live(*source, stream);
+  }
+
+  pb::ServerMessage out;
+  auto* sub = out.mutable_subscribed();
+  sub->set_subscription_id(id);
+  sub->set_view_id(v->id());
+  sub->set_skeleton_version(v->content()->skeleton_version);
+  for (int j : settings.joints) sub->add_joints(static_cast<std::uint32_t>(j));
+  sub->set_rate_hz(s.rate);
+  sub->set_stream_id(stream->id());
+  sub->set_joined_running(joined);
+  wire::to_proto(v->motion(), settings.basis, *sub->mutable_skeleton());
+  if (v->content()->relative_to >= 0) sub->set_relative_to(v->motion().skeleton.joint(v->content()->relative_to).name);
+  if (use_multicast) {
+    const auto& group = *services_.multicast.group->endpoint;
+    sub->set_multicast_group(group.address().to_string() + ":" + std::to_string(group.port()));
+  }
+  spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", connection_id_, id, v->id(),
+                stream->id(), use_multicast ? "multicast" : use_udp ? "UDP" : "TCP", s.rate);
+  return out;
+}
+
+Reply RequestHandler::unsubscribe(const pb::Unsubscribe& r) {
+  if (!find_subscription(r.subscription_id())) return unknown_subscription(r.subscription_id());
+  drop_subscription(r.subscription_id());
+  return ack();
+}
+
+namespace {
+Refusal follows_its_stream(std::uint32_t id) {
+  return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                 "subscription " + std::to_string(id) +
+                     " is multicast: it follows its shared stream (unsubscribe, and subscribe over TCP or UDP to "
+                     "play on your own)"};
+}
+}  // namespace
+
+Reply RequestHandler::pause(const pb::Pause& r) {
+  Subscription* s = find_subscription(r.subscription_id());
+  if (!s) return unknown_subscription(r.subscription_id());
+  if (s->multicast) return follows_its_stream(r.subscription_id());
+  detach(*s)->pause();
+  return ack();
+}
+
+Reply RequestHandler::resume(const pb::Resume& r) {
+  Subscription* s = find_subscription(r.subscription_id());
+  if (!s) return unknown_subscription(r.subscription_id());
+  s->stream->resume();
+  return ack();
+}
+
+Reply RequestHandler::seek(const pb::Seek& r) {
+  Subscription* s = find_subscription(r.subscription_id());
+  if (!s) return unknown_subscription(r.subscription_id());
+  if (s->multicast) return follows_its_stream(r.subscription_id());
+  if (s->stream->live()) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "subscription " + std::to_string(r.subscription_id()) + " plays a live source: it cannot seek"};
+  }
+  const auto& sched = s->stream->schedule();
+  if (!(r.frame() >= sched.start && r.frame() < sched.end)) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "seek to frame " + std::to_string(r.frame()) +
+                                                   ": the subscription plays frames [" + std::to_string(sched.start) +
+                                                   ", " + std::to_string(sched.end) + ")"};
+  }
+  detach(*s)->seek(r.frame());
+  return ack();
+}
+
+RequestHandler::Subscription* RequestHandler::find_subscription(std::uint32_t id) {
+  auto it = subs_.find(id);
+  return it == subs_.end() ? nullptr : &it->second;
+}
+
+std::shared_ptr<Stream> RequestHandler::detach(Subscription& s) {
+  auto stream = services_.streams.detach(s.stream, s.target.get());
+  // A live stream's copy is fed by the same source from now on.
+  if (stream != s.stream && stream->live()) {
+    const View* v = find_view(s.view_id);
+    if (auto source = v ? v->live_source() : nullptr) source->attach(stream);
+  }
+  s.stream = std::move(stream);
+  return s.stream;
+}
+
+void RequestHandler::attach_live(LiveSource& source, const std::shared_ptr<Stream>& stream) {
+  source.attach(stream);
+  // A subscriber joining a running source starts at its newest frame (after
+  // the reply to its Subscribe, which is being written).
+  if (source.frames() > 0) {
+    net::post(services_.io, [weak_stream = std::weak_ptr<Stream>(stream), weak_source = source.weak_from_this()] {
+      auto s = weak_stream.lock();
+      auto l = weak_source.lock();
+      if (s && l) l->send_newest(*s);
+    });
+  }
+}
+
+void RequestHandler::drop_subscription(std::uint32_t id) {
+  auto it = subs_.find(id);
+  if (it == subs_.end()) return;
+  Subscription& s = it->second;
+  s.stream->remove(s.target.get());
+  if (s.stream->idle()) s.stream->stop();
+  if (auto c = connection_.lock()) c->discard_frames(id);
+  services_.admission.release_rate(s.rate_mhz);
+  subs_.erase(it);
+}
+
+void RequestHandler::view_changed(const View& v) {
+  std::vector<std::pair<std::uint32_t, std::string>> ended;
+  for (auto& [id, sub] : subs_) {
+    if (sub.view_id != v.id()) continue;
+    auto joints = resolve_joints(v, sub.joint_names);
+    if (!joints.ok()) {
+      ended.emplace_back(id, "the view changed: " + joints.error().message);
+      continue;
+    }
+    if (sub.multicast) {  // its stream's content is shared by others: it cannot follow alone
+      ended.emplace_back(id, "the view changed: a multicast subscription follows its shared stream (subscribe again)");
+      continue;
+    }
+    // The new skeleton goes out before any frame of its version (replies
+    // and pushes are written before waiting frames, connection.h), and
+    // after every frame of the old one: those still waiting go first.
+    if (v.content()->skeleton_version != sub.skeleton_version) {
+      sub.skeleton_version = v.content()->skeleton_version;
+      if (auto conn = connection_.lock()) conn->send_frames_now(id);
+      pb::ServerMessage m;
+      auto* c = m.mutable_skeleton_changed();
+      c->set_subscription_id(id);
+      c->set_view_id(v.id());
+      c->set_skeleton_version(sub.skeleton_version);
+      wire::to_proto(v.motion(), sub.basis, *c->mutable_skeleton());
+      for (int j : *joints) c->add_joints(static_cast<std::uint32_t>(j));
+      const int viewer = v.content()->relative_to;
+      if (viewer >= 0) c->set_relative_to(v.motion().skeleton.joint(viewer).name);
+      send(m);
+    }
+    detach(sub)->set_content(v.content(), std::move(joints).value());
+  }
+  for (auto& [id, reason] : ended) {
+    pb::ServerMessage m;
+    m.mutable_subscription_ended()->set_subscription_id(id);
+    m.mutable_subscription_ended()->set_reason(reason);
+    drop_subscription(id);
+    send(m);
+  }
+}
+
+void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, const std::string& reason) {
+  auto it = subs_.find(id);
+  if (it == subs_.end()) return;
+  Subscription& s = it->second;
+  pb::ServerMessage m;
+  m.mutable_subscription_ended()->set_subscription_id(id);
+  m.mutable_subscription_ended()->set_frames_sent(sent);
+  // The frames still waiting go out before the end notice.
+  auto c = connection_.lock();
+  const std::uint64_t stale = c ? c->end_frames(id) : 0;
+  m.mutable_subscription_ended()->set_frames_dropped(s.target->dropped() + stale);
+  m.mutable_subscription_ended()->set_frames_stale(stale);
+  m.mutable_subscription_ended()->set_frames_skipped(s.target->late_skipped());
+  m.mutable_subscription_ended()->set_reason(reason);
+  s.stream->remove(s.target.get());
+  services_.admission.release_rate(s.rate_mhz);
+  subs_.erase(it);
+  send(m);
+}
+
+void RequestHandler::udp_registered(const udp::endpoint& ep) {
+  if (stopped_) return;
+  const bool first = !udp_->endpoint || *udp_->endpoint != ep;
+  udp_->endpoint = ep;
+  if (first) spdlog::info("conn {}: UDP endpoint {}:{} registered", connection_id_, ep.address().to_string(), ep.port());
+  pb::ServerMessage m;
+  m.mutable_udp_registered()->set_endpoint(ep.address().to_string() + ":" + std::to_string(ep.port()));
+  send(m);
+}
+
+}  // namespace gmr::server

@@ -1,0 +1,149 @@
+#include "transport/calibrate.h"
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <ctime>
+#include <limits>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+namespace gmr::server {
+namespace {
+
+// A file descriptor closed when it goes.
+class Fd {
+ public:
+  explicit Fd(int fd = -1) : fd_(fd) {}
+  Fd(Fd&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
+  Fd& operator=(Fd&& o) noexcept {
+    if (this != &o) {
+      reset();
+      fd_ = std::exchange(o.fd_, -1);
+    }
+    return *this;
+  }
+  ~Fd() { reset(); }
+  int get() const { return fd_; }
+  void reset() {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+
+ private:
+  int fd_;
+};
+
+Error system_error(const std::string& what) {
+  return make_error(ErrorKind::kIo, "send calibration: " + what + ": " + std::strerror(errno));
+}
+
+double thread_cpu_ns() {
+  timespec t{};
+  ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) * 1e9 + static_cast<double>(t.tv_nsec);
+}
+
+// The median round's ns per send on the calling thread.
+Result<double> ns_per_send(std::size_t bytes, std::size_t sends_per_round, int rounds) {
+  Fd listener(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  if (listener.get() < 0) return system_error("socket");
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof address;
+  if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) return system_error("bind");
+  if (::listen(listener.get(), 1) != 0) return system_error("listen");
+  if (::getsockname(listener.get(), reinterpret_cast<sockaddr*>(&address), &length) != 0) {
+    return system_error("getsockname");
+  }
+  Fd writer(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  if (writer.get() < 0) return system_error("socket");
+  if (::connect(writer.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) return system_error("connect");
+  Fd reader(::accept4(listener.get(), nullptr, nullptr, SOCK_CLOEXEC));
+  if (reader.get() < 0) return system_error("accept");
+  const int one = 1;
+  ::setsockopt(writer.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+
+  // One thread writes each frame and reads it back at once: a send and its
+  // loopback delivery, without another thread to wake or share the socket
+  // with, whose cost would depend on what else the machine runs.
+  const std::string frame(bytes, 'f');
+  std::vector<char> back(bytes);
+  std::vector<double> per_send;
+  for (int r = 0; r < rounds; ++r) {
+    const double start = thread_cpu_ns();
+    for (std::size_t i = 0; i < sends_per_round; ++i) {
+      for (std::size_t sent = 0; sent < frame.size();) {
+        const ssize_t n = ::send(writer.get(), frame.data() + sent, frame.size() - sent, MSG_NOSIGNAL);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) return system_error("send");
+        sent += static_cast<std::size_t>(n);
+      }
+      for (std::size_t got = 0; got < back.size();) {
+        const ssize_t n = ::recv(reader.get(), back.data() + got, back.size() - got, 0);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) return system_error("recv");
+        got += static_cast<std::size_t>(n);
+      }
+    }
+    per_send.push_back((thread_cpu_ns() - start) / static_cast<double>(sends_per_round));
+  }
+  std::sort(per_send.begin(), per_send.end());
+  return std::max(1.0, per_send[per_send.size() / 2]);
+}
+
+}  // namespace
+
+Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t sends_per_round, int rounds) {
+  if (bytes == 0 || sends_per_round == 0 || rounds <= 0) {
+    return make_error(ErrorKind::kInvalidArgument, "send calibration: needs bytes, sends and rounds");
+  }
+  const auto began = std::chrono::steady_clock::now();
+  // The CPUs this process may run on (at most 16 are measured).
+  std::vector<int> cpus;
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  if (::sched_getaffinity(0, sizeof allowed, &allowed) == 0) {
+    for (int c = 0; c < CPU_SETSIZE && cpus.size() < 16; ++c) {
+      if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
+    }
+  }
+  if (cpus.empty()) cpus.push_back(-1);  // unknown: wherever the thread runs
+  SendCalibration out;
+  out.fastest_ns_per_send = std::numeric_limits<double>::infinity();
+  for (const int cpu : cpus) {
+    Result<double> ns = make_error("not measured");
+    std::thread t([&] {
+      if (cpu >= 0) {
+        cpu_set_t one;
+        CPU_ZERO(&one);
+        CPU_SET(cpu, &one);
+        ::pthread_setaffinity_np(::pthread_self(), sizeof one, &one);
+      }
+      ns = ns_per_send(bytes, sends_per_round, rounds);
+    });
+    t.join();
+    if (!ns.ok()) return ns.error();
+    out.ns_per_send = std::max(out.ns_per_send, *ns);
+    out.fastest_ns_per_send = std::min(out.fastest_ns_per_send, *ns);
+  }
+  out.cpus = cpus.size();
+  out.budget = kReferenceBudget * kReferenceNsPerSend / out.ns_per_send;
+  out.sends = sends_per_round * static_cast<std::size_t>(rounds) * cpus.size();
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count();
+  return out;
+}
+
+}  // namespace gmr::server

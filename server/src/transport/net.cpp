@@ -1,0 +1,76 @@
+#include "transport/net.h"
+
+#include <algorithm>
+#include <memory>
+
+#include "gmr/wire/convert.h"
+#include "gmr/wire/framing.h"
+
+namespace gmr::server {
+
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string printable(std::string_view text, std::size_t max) {
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out = "\"";
+  const std::size_t shown = std::min(text.size(), max);
+  for (std::size_t i = 0; i < shown; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c == '\n') {
+      out += "\\n";
+    } else if (c == '"' || c == '\\') {
+      out += '\\';
+      out += static_cast<char>(c);
+    } else if (c < 0x20 || c > 0x7e) {
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  out += '"';
+  if (text.size() > shown) out += " (and " + std::to_string(text.size() - shown) + " more bytes)";
+  return out;
+}
+
+bool LogLimiter::allow(std::uint64_t& suppressed) {
+  const auto now = Clock::now();
+  if (now - window_start_ >= period_) {
+    window_start_ = now;
+    in_window_ = 0;
+  }
+  if (in_window_ >= burst_) {
+    ++suppressed_;
+    return false;
+  }
+  ++in_window_;
+  suppressed = suppressed_;
+  suppressed_ = 0;
+  return true;
+}
+
+Refusal refusal(const Error& error) { return Refusal{wire::error_code_for(error.kind), error.to_string()}; }
+
+pb::ServerMessage error_message(std::uint64_t request_id, pb::ErrorCode code, std::string text) {
+  pb::ServerMessage m;
+  m.set_request_id(request_id);
+  m.mutable_error()->set_code(code);
+  m.mutable_error()->set_message(std::move(text));
+  return m;
+}
+
+void refuse_socket(tcp::socket socket, const pb::ServerMessage& refusal) {
+  auto bytes = std::make_shared<std::string>(wire::frame_message(refusal).value());
+  auto sock = std::make_shared<tcp::socket>(std::move(socket));
+  net::async_write(*sock, net::buffer(*bytes), [sock, bytes](const boost::system::error_code&, std::size_t) {
+    boost::system::error_code ignored;
+    sock->shutdown(tcp::socket::shutdown_both, ignored);
+    sock->close(ignored);
+  });
+}
+
+}  // namespace gmr::server
