@@ -167,7 +167,7 @@ pb::Beacon Server::Impl::describe() const {
   return b;
 }
 
-ServerStats Server::Impl::snapshot() {
+ServerStats Server::Impl::snapshot(bool sessions) {
   ServerStats st;
   st.connections = admission.connections().size();
   st.io_threads = lanes ? lanes->size() : 1;
@@ -189,12 +189,13 @@ ServerStats Server::Impl::snapshot() {
   st.buffered_bytes = admission.buffers.held.load();
   st.max_buffered_bytes = admission.buffers.max_held.load();
   st.view_bytes = admission.view_bytes();
-  st.sessions = admission.session_stats();
+  if (sessions) st.sessions = admission.session_stats();
   return st;
 }
 
 MetricsSnapshot Server::Impl::metrics_snapshot() {
   MetricsSnapshot s;
+  s.server = snapshot(false);
   s.ready = ready && !stopping;
   s.library_motions = catalog.library().size();
   const Admission::Holdings held = admission.holdings();
@@ -206,25 +207,12 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   if (lanes) {
     for (std::size_t lane = 0; lane < lanes->size(); ++lane) s.lane_connections.push_back(lanes->connections(lane));
   }
-  s.connections_refused = admission.connections_refused();
-  s.hellos_refused = admission.hellos_refused();
-  s.subscriptions_refused = admission.subscriptions_refused();
-  s.streams = streams.active();
-  s.committed_frames_per_second = admission.committed_frames_per_second();
-  s.send_budget = cfg.send_budget;
-  s.frames = counters;
-  s.fk_blocks_computed = fk_blocks.blocks_computed();
-  s.fk_block_hits = fk_blocks.hits();
-  s.fk_block_bytes = fk_blocks.bytes();
   s.udp_bytes_sent = udp.bytes_sent();
-  s.udp_rejected = udp.rejected();
   s.multicast_frames_sent = multicast.frames_sent;
   s.live_sources = catalog.live_sources().size();
   s.live_frames_received = catalog.live_frames_received();
   s.live_frames_refused = catalog.live_frames_refused();
   s.relay_announces_refused = replicas.announces_refused();
-  s.buffered_bytes = admission.buffers.held.load();
-  s.view_bytes = admission.view_bytes();
   return s;
 }
 

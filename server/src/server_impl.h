@@ -107,7 +107,8 @@ struct Server::Impl {
   void connection_closed(std::uint64_t id);
   // What a discovery beacon says of this server.
   pb::Beacon describe() const;
-  ServerStats snapshot();
+  // Server::stats(); `sessions`: with each connection's figures.
+  ServerStats snapshot(bool sessions = true);
   MetricsSnapshot metrics_snapshot();
 };
 

@@ -127,35 +127,35 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
     }
   }
   f.add("gmr_connections_refused_total", "Connections refused for a connection limit (TCP and WebSocket)", T::Counter,
-        static_cast<double>(s.connections_refused));
-  f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter, static_cast<double>(s.hellos_refused));
+        static_cast<double>(s.server.connections_refused));
+  f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter, static_cast<double>(s.server.hellos_refused));
   f.add("gmr_views", "Views clients hold", T::Gauge, static_cast<double>(s.views));
   for (const char* transport : {"tcp", "udp", "websocket"}) {
     f.add("gmr_subscriptions", "Subscriptions, by the transport their frames take", T::Gauge,
           count(s.subscriptions, transport), {{"transport", transport}});
   }
   f.add("gmr_subscriptions_refused_total", "Subscriptions refused for the send budget", T::Counter,
-        static_cast<double>(s.subscriptions_refused));
+        static_cast<double>(s.server.subscriptions_refused));
   f.add("gmr_streams", "Streams (one kinematics and one encoding per tick, shared by their subscribers)", T::Gauge,
-        static_cast<double>(s.streams));
+        static_cast<double>(s.server.streams));
   f.add("gmr_committed_frames_per_second", "Frames per second all subscriptions ask for (against the send budget)",
-        T::Gauge, s.committed_frames_per_second);
+        T::Gauge, s.server.committed_frames_per_second);
   f.add("gmr_send_budget_frames_per_second", "Frames per second subscriptions may ask for in all (0: no limit)",
-        T::Gauge, s.send_budget);
+        T::Gauge, s.server.send_budget);
 
   // Frames: computed and encoded once per stream, then sent per subscriber.
   f.add("gmr_frames_computed_total", "Forward-kinematics runs for streams", T::Counter,
-        static_cast<double>(s.frames.frames_computed));
+        static_cast<double>(s.server.frames_computed));
   f.add("gmr_fk_blocks_computed_total", "Float-path kinematics computed for streams, 16 frames at a time",
-        T::Counter, static_cast<double>(s.fk_blocks_computed));
+        T::Counter, static_cast<double>(s.server.fk_blocks_computed));
   f.add("gmr_fk_block_hits_total", "Float-path frames streams read from kinematics already computed", T::Counter,
-        static_cast<double>(s.fk_block_hits));
+        static_cast<double>(s.server.fk_block_hits));
   f.add("gmr_fk_block_bytes", "Bytes of float-path kinematics kept for streams to share", T::Gauge,
-        static_cast<double>(s.fk_block_bytes));
+        static_cast<double>(s.server.fk_block_bytes));
   f.add("gmr_frames_encoded_total", "Frame encodings (one per stream and tick)", T::Counter,
-        static_cast<double>(s.frames.frames_encoded));
+        static_cast<double>(s.server.frames_encoded));
   f.add("gmr_frames_skipped_total", "Frames skipped because the server was late (per subscriber)", T::Counter,
-        static_cast<double>(s.frames.frames_skipped));
+        static_cast<double>(s.server.frames_skipped));
   std::map<std::string, ConnectionCounters> by_transport;
   for (const auto& [transport, t] : s.connection_totals) {
     auto& own = by_transport[transport];
@@ -198,10 +198,10 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
         "Live sources other replicas announced and this one refused (invalid, or past --max-remote-sources)",
         T::Counter, static_cast<double>(s.relay_announces_refused));
   f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm",
-        T::Counter, static_cast<double>(s.udp_rejected));
+        T::Counter, static_cast<double>(s.server.udp_rejected));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,
-        static_cast<double>(s.buffered_bytes));
-  f.add("gmr_view_bytes", "Motion bytes edited views own", T::Gauge, static_cast<double>(s.view_bytes));
+        static_cast<double>(s.server.buffered_bytes));
+  f.add("gmr_view_bytes", "Motion bytes edited views own", T::Gauge, static_cast<double>(s.server.view_bytes));
 
   auto families = registry_->Collect();
   for (auto& family : f.families()) families.push_back(std::move(family));

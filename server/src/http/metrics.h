@@ -16,38 +16,31 @@
 #include <string_view>
 #include <vector>
 
+#include "gmr/server/server.h"
 #include "requests/services.h"
 #include "transport/net.h"
 #include "transport/outbox.h"
 
 namespace gmr::server {
 
-// The server's state as /metrics reports it, read at once on the control loop.
+// The server's state as /metrics reports it, read at once on the control loop:
+// what Server::stats() reports (without its sessions), and what only
+// /metrics tells.
 struct MetricsSnapshot {
+  ServerStats server;
   bool ready = false;
   std::size_t library_motions = 0;
   std::map<std::string, std::size_t, std::less<>> open_connections;           // by transport
   std::map<std::string, std::uint64_t, std::less<>> accepted_connections;     // by transport
   std::map<std::string, ConnectionCounters, std::less<>> connection_totals;  // open and closed, by transport
   std::vector<std::size_t> lane_connections;  // per I/O thread (empty before start)
-  std::uint64_t connections_refused = 0;
-  std::uint64_t hellos_refused = 0;
   std::size_t views = 0;
   std::map<std::string, std::size_t, std::less<>> subscriptions;  // by the transport their frames take
-  std::uint64_t subscriptions_refused = 0;
-  std::size_t streams = 0;
-  double committed_frames_per_second = 0;
-  double send_budget = 0;
-  StreamCounters frames;  // the pointers unused
-  std::uint64_t fk_blocks_computed = 0, fk_block_hits = 0;
-  std::size_t fk_block_bytes = 0;
-  std::uint64_t udp_bytes_sent = 0, udp_rejected = 0;
+  std::uint64_t udp_bytes_sent = 0;
   std::uint64_t multicast_frames_sent = 0;
   std::size_t live_sources = 0;
   std::uint64_t live_frames_received = 0, live_frames_refused = 0;
   std::uint64_t relay_announces_refused = 0;
-  std::uint64_t buffered_bytes = 0;
-  std::uint64_t view_bytes = 0;
 };
 
 class Metrics final : public RequestObserver {

@@ -20,6 +20,14 @@ Result<std::shared_ptr<const Motion>> replay(const std::vector<LiveStep>& steps,
   return m;
 }
 
+// A live stream's content at one frame: its view's, showing `motion`.
+std::shared_ptr<const ViewContent> at_frame(const ViewContent& content, std::shared_ptr<const Motion> motion) {
+  auto next = std::make_shared<ViewContent>(content);
+  next->motion = std::move(motion);
+  next->compiled = nullptr;
+  return next;
+}
+
 }  // namespace
 
 LiveSource::LiveSource(std::string name, std::uint64_t serial, Skeleton skeleton, double frame_time,
@@ -111,10 +119,7 @@ Status LiveSource::push(std::span<const double> values, std::optional<std::uint6
       s->live_skipped();
       continue;
     }
-    auto next = std::make_shared<ViewContent>(*content);
-    next->motion = it->second;
-    next->compiled = nullptr;
-    s->live_frame(std::move(next), index);
+    s->live_frame(at_frame(*content, it->second), index);
   }
   return Ok{};
 }
@@ -149,10 +154,7 @@ void LiveSource::send_newest(Stream& stream) const {
   if (ended_ || frames_ == 0 || stream.paused() || stream.idle()) return;
   auto motion = view_motion(*stream.content());
   if (!motion.ok()) return;  // the next frame will tell (push logs it)
-  auto next = std::make_shared<ViewContent>(*stream.content());
-  next->motion = std::move(motion).value();
-  next->compiled = nullptr;
-  stream.live_frame(std::move(next), frames_ - 1);
+  stream.live_frame(at_frame(*stream.content(), std::move(motion).value()), frames_ - 1);
 }
 
 Result<std::shared_ptr<const Motion>> LiveSource::view_motion(const ViewContent& content) const {
