@@ -12,7 +12,7 @@
 
 #include "gmr/wire/frames.h"
 #ifdef GMR_HAVE_SERVER
-#include "transport/ws_connection.h"
+#include "transport/ws_json.h"
 #endif
 
 namespace gmr::bench {

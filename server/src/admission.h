@@ -17,7 +17,7 @@
 
 #include "gmr/server/config.h"
 #include "gmr/server/server.h"
-#include "transport/connection.h"
+#include "transport/link.h"
 #include "transport/outbox.h"
 
 namespace gmr::server {

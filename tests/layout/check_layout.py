@@ -14,9 +14,7 @@
    top-level owners (catalog, admission) < requests < http < the
    composition root (server.cpp, server_impl.h); server_impl.h is included
    by server/src/server.cpp alone, anywhere in the repository.
-5. No server/src file is over 400 lines, but those listed in
-   SERVER_FILES_OVER_LIMIT, each held to the size it has (they may shrink,
-   never grow).
+5. No server/src file is over 400 lines.
 
 Usage: check_layout.py REPO_ROOT. Prints what it checked and every
 violation; exits 1 when there is one. check_layout.py --self-test builds a
@@ -32,13 +30,6 @@ INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 SERVER_LAYERS = ["transport", "streams", "live", "owners", "requests", "http", "root"]
 SERVER_ROOT_FILES = {"server.cpp", "server_impl.h"}
 SERVER_MAX_LINES = 400
-# Files still over the limit, with the size each may not pass (rule 5).
-SERVER_FILES_OVER_LIMIT = {
-    "transport/connection.cpp": 587,
-    "transport/udp_publisher.cpp": 501,
-    "transport/ws_connection.cpp": 488,
-    "streams/stream.cpp": 447,
-}
 
 
 def server_layer(rel):
@@ -71,12 +62,8 @@ def check_server(root, problems):
             elif there != here:
                 edges.add((here, there))
         lines = text.count("\n")
-        limit = SERVER_FILES_OVER_LIMIT.get(rel.as_posix(), SERVER_MAX_LINES)
-        if lines > limit:
-            problems.append(f"server/src/{rel}: {lines} lines, over {limit}")
-    for listed in SERVER_FILES_OVER_LIMIT:
-        if not (src / listed).is_file():
-            problems.append(f"SERVER_FILES_OVER_LIMIT names server/src/{listed}, which is gone: take it off the list")
+        if lines > SERVER_MAX_LINES:
+            problems.append(f"server/src/{rel}: {lines} lines, over {SERVER_MAX_LINES}")
     # Nobody but server.cpp includes the root, in tests, fuzzing or benchmarks either.
     for folder in ("tests", "fuzz", "bench", "client"):
         for f in sorted((root / folder).rglob("*")):
@@ -85,7 +72,7 @@ def check_server(root, problems):
             if any(t.endswith("server_impl.h") for t in INCLUDE.findall(f.read_text(errors="replace"))):
                 problems.append(f"{f.relative_to(root)} includes server_impl.h: only server.cpp includes the composition root")
     summary = [f"checked {len(files)} server files in {len(SERVER_LAYERS)} layers "
-               f"({' < '.join(SERVER_LAYERS)}); {len(SERVER_FILES_OVER_LIMIT)} still over {SERVER_MAX_LINES} lines"]
+               f"({' < '.join(SERVER_LAYERS)}), none over {SERVER_MAX_LINES} lines"]
     for layer in SERVER_LAYERS:
         below = sorted({there for here, there in edges if here == layer}, key=SERVER_LAYERS.index)
         summary.append(f"  server {layer} -> {', '.join(below) or '(nothing)'}")
@@ -220,8 +207,7 @@ def self_test():
                     "includes the generated gmr/stream/v1/stream.pb.h (through proto/wire/include/gmr/wire/w.h)",
                     "server/src/transport/t.h (transport) includes requests/r.h (requests): a lower layer",
                     "server/src/http/h.cpp includes server_impl.h: only server.cpp",
-                    "tests/t.cpp includes server_impl.h", "server/src/streams/long.cpp: 401 lines, over 400",
-                    "SERVER_FILES_OVER_LIMIT names server/src/transport/connection.cpp, which is gone"]
+                    "tests/t.cpp includes server_impl.h", "server/src/streams/long.cpp: 401 lines, over 400"]
         missing = [e for e in expected if not any(e in p for p in problems)]
         for e in missing:
             print(f"SELF-TEST: not reported: {e}")
@@ -232,8 +218,6 @@ def self_test():
         (root / "server/src/http/h.cpp").unlink()
         (root / "tests/t.cpp").unlink()
         write("server/src/streams/long.cpp", "//\n" * 400)
-        for listed, lines in SERVER_FILES_OVER_LIMIT.items():
-            write("server/src/" + listed, "//\n" * lines)
         mended, _ = check(root)
         for p in mended:
             print(f"SELF-TEST: reported in a correct tree: {p}")

@@ -23,7 +23,7 @@
 
 #include "gmr/wire/framing.h"
 #include "net_test_util.h"
-#include "transport/ws_connection.h"
+#include "transport/ws_json.h"
 
 namespace gmr::test {
 namespace {

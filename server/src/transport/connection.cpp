@@ -2,14 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
-#include <netinet/in.h>
-#include <netinet/tcp.h>
-#include <sys/socket.h>
 
 #include <algorithm>
 #include <array>
-#include <cerrno>
-#include <cstring>
 #include <optional>
 
 #include "gmr/wire/frames.h"
@@ -26,35 +21,14 @@ constexpr std::size_t kFirstChunk = 4096;
 constexpr std::size_t kBodyChunk = 256 * 1024;
 }  // namespace
 
-void tune_socket(tcp::socket& socket, const ConnectionLimits& limits, std::uint64_t id) {
-  boost::system::error_code ec;
-  socket.set_option(tcp::no_delay(true), ec);
-  if (limits.socket_send_buffer > 0) {
-    socket.set_option(net::socket_base::send_buffer_size(limits.socket_send_buffer), ec);
-  }
-  if (limits.socket_unsent_bytes > 0) {
-    // Bytes the kernel may hold that it has not sent: past them a write
-    // waits, so frames wait in the connection's queue, where latest-wins and
-    // the staleness bound apply, rather than in the kernel, where they would
-    // reach a client that stalled seconds late (docs/protocol.md, "Staleness").
-    const int lowat = limits.socket_unsent_bytes;
-    if (::setsockopt(socket.native_handle(), IPPROTO_TCP, TCP_NOTSENT_LOWAT, &lowat, sizeof lowat) != 0) {
-      spdlog::debug("conn {}: TCP_NOTSENT_LOWAT: {}", id, std::strerror(errno));
-    }
-  }
-}
-
 Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
                        BufferBudget* budget, net::ssl::context* tls, ConnectionPlacement placement)
-    : io_(io),
+    : QueuedOutbox(id, limits, budget),
+      io_(io),
       control_(placement.control != nullptr ? placement.control : &io),
       lane_(placement.lane),
       threads_(placement.threads),
       socket_(std::move(socket)),
-      id_(id),
-      limits_(limits),
-      budget_(budget),
-      frames_(limits.frames_per_key, limits.max_frame_bytes),
       watchdog_(io) {
   if (tls != nullptr) socket_.use_tls(*tls);
   secured_ = tls == nullptr;
@@ -62,10 +36,6 @@ Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id
   auto ep = socket_.tcp().remote_endpoint(ec);
   peer_address_ = ec ? std::string("?") : ep.address().to_string();
   peer_ = ec ? std::string("?") : peer_address_ + ":" + std::to_string(ep.port());
-}
-
-Connection::~Connection() {
-  if (budget_ != nullptr) budget_->release(accounted_);
 }
 
 template <class F>
@@ -77,36 +47,7 @@ void Connection::on_lane_do(F&& f) {
   }
 }
 
-void Connection::account() {
-  if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + body_.size());
-}
-
-bool Connection::stopped() const { return stopped_.load(std::memory_order_acquire); }
-
-bool Connection::closing() const {
-  Lock lock(m_);
-  return stopped_ || close_after_flush_;
-}
-
-void Connection::established() {
-  Lock lock(m_);
-  established_ = true;
-}
-
-void Connection::hold_reading(bool hold) {
-  Lock lock(m_);
-  reads_held_ = hold;
-  if (!hold) resume_reading();
-}
-
-bool Connection::may_read() const {
-  return !reads_held_ && !at_handler_ && reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
-         (budget_ == nullptr || budget_->allows_reading(accounted_));
-}
-
-void Connection::resume_reading() {
-  if (stopped_ || !read_paused_ || !may_read()) return;
-  read_paused_ = false;
+void Connection::read_more() {
   on_lane_do([self = shared_from_this()] {
     Lock lock(self->m_);
     self->read_prefix();
@@ -157,12 +98,9 @@ void Connection::stop(const std::string& reason) {
     stopped_.store(true, std::memory_order_release);
     spdlog::info("conn {}: closed: {} (frames sent {}, dropped {})", id_, reason, counters_.frames_sent,
                  counters_.frames_dropped);
-    frames_.clear();
-    replies_.clear();
-    reply_bytes_ = 0;
     std::string().swap(body_);
     body_received_ = 0;
-    account();
+    drop_queued();
     // The handler goes with `tell`: a stopped connection holds none (its
     // subscriptions hold the connection, so that would be a cycle).
     handler = std::move(handler_);
@@ -196,111 +134,6 @@ void Connection::finish() {
   frames_.clear();
   account();
   request_flush();
-}
-
-void Connection::close_after_reply() {
-  Lock lock(m_);
-  close_on_next_reply_ = true;
-  frames_.clear();
-  account();
-}
-
-void Connection::send(std::string framed) {
-  Lock lock(m_);
-  if (stopped_) return;
-  reply_bytes_ += framed.size();
-  replies_.push_back(std::make_shared<const std::string>(std::move(framed)));
-  // Closing waits for this reply (and not for one another thread queues).
-  if (std::exchange(close_on_next_reply_, false)) {
-    close_after_flush_ = true;
-    frames_.clear();
-  }
-  note_queue();
-  account();
-  request_flush();
-}
-
-bool Connection::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
-                            Clock::duration max_age) {
-  Lock lock(m_);
-  if (stopped_ || close_after_flush_) return true;
-  // With no write in flight the frame goes out at once; otherwise it waits,
-  // within this connection's bounds and the server's budget.
-  const Clock::time_point now = Clock::now();
-  const Clock::time_point stale_at = max_age > Clock::duration::zero() ? now + max_age : Clock::time_point::max();
-  const bool kept_all = frames_.push(key, PendingFrame{std::move(head), std::move(body), stale_at, now}, writing_,
-                                     budget_ != nullptr && budget_->over(), counters_);
-  note_queue();
-  account();
-  request_flush();
-  return kept_all;
-}
-
-bool Connection::congested(std::uint32_t key) const {
-  Lock lock(m_);
-  if (stopped_) return false;
-  if (!writing_) {
-    // Its I/O thread has not come round to the write it was handed: the
-    // thread is behind (overloaded), and frames would only pile up.
-    return flush_posted_ && frames_.waiting(key) && Clock::now() - flush_asked_ > limits_.congested_after;
-  }
-  if (budget_ != nullptr && budget_->over()) return true;
-  if (!frames_.waiting(key)) return false;
-  return Clock::now() - write_started_ > limits_.congested_after;
-}
-
-void Connection::discard_frames(std::uint32_t key) {
-  Lock lock(m_);
-  frames_.discard(key);
-  account();
-}
-
-void Connection::send_frames_now(std::uint32_t key) {
-  Lock lock(m_);
-  const std::int64_t now = now_ns();
-  for (auto& frame : frames_.take(key)) {
-    wire::set_write_stamp(frame.head, now);
-    auto bytes = std::make_shared<const std::string>(frame.head + *frame.body);
-    reply_bytes_ += bytes->size();
-    replies_.push_back(std::move(bytes));
-    ++counters_.frames_sent;
-  }
-  account();
-}
-
-std::uint64_t Connection::end_frames(std::uint32_t key) {
-  Lock lock(m_);
-  const std::uint64_t stale = frames_.stale_dropped(key);
-  send_frames_now(key);
-  frames_.discard(key);
-  account();
-  return stale;
-}
-
-void Connection::count_udp_frame_sent() {
-  Lock lock(m_);
-  CountingOutbox::count_udp_frame_sent();
-}
-void Connection::count_udp_frame_dropped() {
-  Lock lock(m_);
-  CountingOutbox::count_udp_frame_dropped();
-}
-void Connection::count_frame_dropped(std::uint64_t n) {
-  Lock lock(m_);
-  CountingOutbox::count_frame_dropped(n);
-}
-void Connection::count_frame_skipped(std::uint64_t n) {
-  Lock lock(m_);
-  CountingOutbox::count_frame_skipped(n);
-}
-
-void Connection::note_queue() { counters_.max_queued_bytes = std::max(counters_.max_queued_bytes, queued_bytes()); }
-
-ConnectionCounters Connection::counters() const {
-  Lock lock(m_);
-  ConnectionCounters c = counters_;
-  c.queued_bytes = queued_bytes();
-  return c;
 }
 
 void Connection::request_flush() {
@@ -388,57 +221,20 @@ void Connection::flush() {
   socket_.async_write(buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
     Lock lock(self->m_);
     self->writing_ = false;
-    self->counters_.bytes_sent += n;
     self->hold_.clear();
     self->hold_heads_.clear();
     if (self->tls_out_.capacity() > kBodyChunk) std::string().swap(self->tls_out_);
     self->in_flight_bytes_ = 0;
     self->account();
     if (ec) {
+      self->counters_.bytes_sent += n;
       if (ec != net::error::operation_aborted) self->stop("write failed: " + ec.message());
       return;
     }
-    self->last_write_ = Clock::now();
-    if (self->writing_frames_) {
-      self->last_frames_written_ = self->last_write_;
-      if (self->frame_wait_ != nullptr) {
-        self->frame_wait_->Observe(std::chrono::duration<double>(self->last_write_ - self->oldest_frame_in_flight_).count());
-      }
-      self->oldest_frame_in_flight_ = Clock::time_point::max();
-    }
-    if (self->read_paused_ && self->may_read()) {
-      self->read_paused_ = false;
-      self->read_prefix();
-    }
+    self->wrote(n);
+    self->resume_reading();
     self->flush();
   });
-}
-
-std::chrono::milliseconds watchdog_period(const ConnectionLimits& l, bool established) {
-  using std::chrono::milliseconds;
-  auto shortest = std::min({l.heartbeat_interval, l.idle_timeout, l.write_timeout});
-  if (!established && l.handshake_timeout.count() > 0) shortest = std::min(shortest, l.handshake_timeout);
-  return std::max(milliseconds(10), shortest / 4);
-}
-
-std::string watchdog_verdict(const LinkTimes& t, const ConnectionLimits& lim, Clock::time_point now, std::uint64_t id) {
-  if (!t.established && lim.handshake_timeout.count() > 0 && now - t.started > lim.handshake_timeout) {
-    spdlog::warn("conn {}: no Hello within {} ms", id, lim.handshake_timeout.count());
-    return "no Hello in time";
-  }
-  // A client that only listens to a subscription is not idle while its
-  // frames are written: a dead one stops taking them, and the write timeout
-  // below closes it. Heartbeats the server writes do not count.
-  if (now - t.last_read > lim.idle_timeout && now - t.last_frames_written > lim.idle_timeout) {
-    spdlog::warn("conn {}: idle for more than {} ms", id, lim.idle_timeout.count());
-    return "idle timeout";
-  }
-  if (t.writing && now - t.write_started > lim.write_timeout) {
-    spdlog::warn("conn {}: a write made no progress for {} ms: the client is not reading", id,
-                 lim.write_timeout.count());
-    return "write timeout";
-  }
-  return {};
 }
 
 void Connection::arm_watchdog() {
@@ -446,34 +242,12 @@ void Connection::arm_watchdog() {
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     Lock lock(self->m_);
     if (ec || self->stopped_) return;
-    const auto now = Clock::now();
-    // A client whose request the server is still on (its reads held for an
-    // edit, or a body with the handler) waits for the server: not idle.
-    if (self->reads_held_ || self->at_handler_) self->last_read_ = now;
-    const LinkTimes times{self->established_, self->writing_,       self->started_,
-                          self->last_read_,   self->write_started_, self->last_frames_written_};
-    if (std::string why = watchdog_verdict(times, self->limits_, now, self->id_); !why.empty()) {
+    if (std::string why = self->watchdog_tick(Clock::now()); !why.empty()) {
       self->stop(why);
       return;
     }
-    // Reads paused for the server-wide budget resume once it allows.
-    if (self->read_paused_ && self->may_read()) {
-      self->read_paused_ = false;
-      self->read_prefix();
-    }
-    // (Nothing is written into a TLS stream before its handshake.)
-    if (self->secured_ && !self->writing_ && now - self->last_write_ > self->limits_.heartbeat_interval) {
-      self->send(heartbeat_message());
-      self->last_write_ = now;
-    }
     self->arm_watchdog();
   });
-}
-
-std::string heartbeat_message() {
-  pb::ServerMessage hb;
-  hb.mutable_heartbeat()->set_client_time_ns(0);
-  return wire::frame_message(hb).value();
 }
 
 void Connection::read_prefix() {

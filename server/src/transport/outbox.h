@@ -1,6 +1,7 @@
 // Outbox: what a client's requests and subscriptions need from its transport.
-// Connection (TCP) and WsConnection (WebSocket) are the ones the server runs;
-// tests use one that only records, to run a RequestHandler without sockets.
+// QueuedOutbox (queued_outbox.h) implements it for Connection (TCP) and
+// WsConnection (WebSocket), the ones the server runs; tests use one that only
+// records, to run a RequestHandler without sockets.
 #pragma once
 
 #include <chrono>
@@ -90,24 +91,6 @@ class Outbox {
   virtual void count_frame_dropped(std::uint64_t n) = 0;
   virtual void count_frame_skipped(std::uint64_t n) = 0;
   virtual ConnectionCounters counters() const = 0;
-};
-
-// The counting a real transport does, shared by Connection and WsConnection.
-class CountingOutbox : public Outbox {
- public:
-  void count_udp_frame_sent() override {
-    ++counters_.frames_sent;
-    ++counters_.udp_frames_sent;
-  }
-  void count_udp_frame_dropped() override {
-    ++counters_.frames_dropped;
-    ++counters_.udp_frames_dropped;
-  }
-  void count_frame_dropped(std::uint64_t n) override { counters_.frames_dropped += n; }
-  void count_frame_skipped(std::uint64_t n) override { counters_.frames_skipped += n; }
-
- protected:
-  ConnectionCounters counters_;
 };
 
 }  // namespace gmr::server

@@ -32,19 +32,14 @@
 #include "gmr/wire/udp.h"
 #include "transport/io_threads.h"
 #include "transport/net.h"
+#include "transport/udp_sender.h"
 
 namespace gmr::server {
 
 class UdpPublisher {
  public:
-  // Where one session's UDP frames go, once registered.
-  struct Registration {
-    std::optional<udp::endpoint> endpoint;
-    std::size_t lane = 0;               // the sender (I/O thread) its frames leave from
-    // Guarded by that sender's lock:
-    std::size_t in_flight = 0;          // datagrams batched, not yet handed to the kernel
-    std::uint32_t next_message_id = 0;  // fragments of one message share an id
-  };
+  // Where one session's UDP frames go, once registered (udp_sender.h).
+  using Registration = UdpRegistration;
   using OnRegister = std::function<void(const udp::endpoint&)>;
 
   UdpPublisher(net::io_context& io, std::size_t max_in_flight);
@@ -104,7 +99,6 @@ class UdpPublisher {
     std::optional<udp::endpoint> challenged;  // the address a challenge went to, awaiting its confirm
     wire::UdpToken cookie{};
   };
-  class Sender;
   void receive();
   void handle(std::string_view datagram);
   // The live session holding `token` (constant-time compare), or null.
@@ -120,7 +114,7 @@ class UdpPublisher {
   std::uint64_t rejected_ = 0;
   std::uint64_t challenges_ = 0;
 
-  std::vector<std::unique_ptr<Sender>> senders_;  // one per lane
+  std::vector<std::unique_ptr<UdpSender>> senders_;  // one per lane
   Clock::duration congested_after_ = std::chrono::milliseconds(50);
 };
 

@@ -1,0 +1,84 @@
+#include "transport/link.h"
+
+#include <spdlog/spdlog.h>
+
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/socket.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+
+#include "gmr/wire/framing.h"
+
+namespace gmr::server {
+
+ConnectionLimits connection_limits(const ServerConfig& cfg) {
+  ConnectionLimits l;
+  l.max_message_bytes = cfg.max_message_bytes;
+  l.max_reply_queue_bytes = cfg.max_reply_queue_bytes;
+  l.max_frame_bytes = cfg.max_frame_bytes_per_connection;
+  l.frames_per_key = cfg.frames_per_subscription;
+  l.idle_timeout = cfg.idle_timeout;
+  l.handshake_timeout = cfg.handshake_timeout;
+  l.heartbeat_interval = cfg.heartbeat_interval;
+  l.write_timeout = cfg.write_timeout;
+  l.congested_after = cfg.congested_after;
+  l.socket_send_buffer = cfg.socket_send_buffer;
+  l.socket_unsent_bytes = cfg.socket_unsent_bytes;
+  return l;
+}
+
+void tune_socket(tcp::socket& socket, const ConnectionLimits& limits, std::uint64_t id) {
+  boost::system::error_code ec;
+  socket.set_option(tcp::no_delay(true), ec);
+  if (limits.socket_send_buffer > 0) {
+    socket.set_option(net::socket_base::send_buffer_size(limits.socket_send_buffer), ec);
+  }
+  if (limits.socket_unsent_bytes > 0) {
+    // Bytes the kernel may hold that it has not sent: past them a write
+    // waits, so frames wait in the connection's queue, where latest-wins and
+    // the staleness bound apply, rather than in the kernel, where they would
+    // reach a client that stalled seconds late (docs/protocol.md, "Staleness").
+    const int lowat = limits.socket_unsent_bytes;
+    if (::setsockopt(socket.native_handle(), IPPROTO_TCP, TCP_NOTSENT_LOWAT, &lowat, sizeof lowat) != 0) {
+      spdlog::debug("conn {}: TCP_NOTSENT_LOWAT: {}", id, std::strerror(errno));
+    }
+  }
+}
+
+std::chrono::milliseconds watchdog_period(const ConnectionLimits& l, bool established) {
+  using std::chrono::milliseconds;
+  auto shortest = std::min({l.heartbeat_interval, l.idle_timeout, l.write_timeout});
+  if (!established && l.handshake_timeout.count() > 0) shortest = std::min(shortest, l.handshake_timeout);
+  return std::max(milliseconds(10), shortest / 4);
+}
+
+std::string watchdog_verdict(const LinkTimes& t, const ConnectionLimits& lim, Clock::time_point now, std::uint64_t id) {
+  if (!t.established && lim.handshake_timeout.count() > 0 && now - t.started > lim.handshake_timeout) {
+    spdlog::warn("conn {}: no Hello within {} ms", id, lim.handshake_timeout.count());
+    return "no Hello in time";
+  }
+  // A client that only listens to a subscription is not idle while its
+  // frames are written: a dead one stops taking them, and the write timeout
+  // below closes it. Heartbeats the server writes do not count.
+  if (now - t.last_read > lim.idle_timeout && now - t.last_frames_written > lim.idle_timeout) {
+    spdlog::warn("conn {}: idle for more than {} ms", id, lim.idle_timeout.count());
+    return "idle timeout";
+  }
+  if (t.writing && now - t.write_started > lim.write_timeout) {
+    spdlog::warn("conn {}: a write made no progress for {} ms: the client is not reading", id,
+                 lim.write_timeout.count());
+    return "write timeout";
+  }
+  return {};
+}
+
+std::string heartbeat_message() {
+  pb::ServerMessage hb;
+  hb.mutable_heartbeat()->set_client_time_ns(0);
+  return wire::frame_message(hb).value();
+}
+
+}  // namespace gmr::server

@@ -1,0 +1,82 @@
+// What every client link shares, whatever its transport: the limits cfg sets
+// for a connection, the bytes all connections hold against one budget, the
+// socket options, and the watchdog's period and verdict.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include "gmr/server/config.h"
+#include "transport/net.h"
+
+namespace gmr::server {
+
+// The bytes all connections hold for their clients (replies, frames, writes
+// in flight, request bodies being read), against one limit. Connections on
+// every I/O thread settle into it: the counts are atomic.
+struct BufferBudget {
+  BufferBudget(std::uint64_t limit_bytes = 0, std::uint64_t fair_share_bytes = 0)
+      : limit(limit_bytes), fair_share(fair_share_bytes) {}
+  std::uint64_t limit = 0;  // 0: none
+  // Over the limit, a connection holding more than this is not read (one
+  // holding less, say a new client, still is: stuck clients cannot lock
+  // everyone out).
+  std::uint64_t fair_share = 0;
+  std::atomic<std::uint64_t> held{0};
+  std::atomic<std::uint64_t> max_held{0};  // high-water mark
+  bool over() const { return limit != 0 && held.load(std::memory_order_relaxed) > limit; }
+  // A connection that counted `accounted` bytes now holds `now`.
+  void settle(std::uint64_t& accounted, std::uint64_t now) {
+    const std::uint64_t h = held.fetch_add(now - accounted, std::memory_order_relaxed) + (now - accounted);
+    std::uint64_t m = max_held.load(std::memory_order_relaxed);
+    while (h > m && !max_held.compare_exchange_weak(m, h, std::memory_order_relaxed)) {
+    }
+    accounted = now;
+  }
+  // A connection that counted `accounted` bytes is gone.
+  void release(std::uint64_t accounted) { held.fetch_sub(accounted, std::memory_order_relaxed); }
+  // Whether a connection holding `accounted` bytes may be read.
+  bool allows_reading(std::uint64_t accounted) const { return !(over() && accounted > fair_share); }
+};
+
+struct ConnectionLimits {
+  std::uint32_t max_message_bytes = 0;    // a longer length prefix closes the connection
+  std::size_t max_reply_queue_bytes = 0;  // above it, requests are not read until replies drain
+  std::size_t frames_per_key = 1;         // frames waiting per key (subscription)
+  std::size_t max_frame_bytes = 0;        // frames waiting, all keys (0: no limit but frames_per_key)
+  // While a write has been in flight this long with a key's frames waiting
+  // in full, or a write handed to the connection's I/O thread has waited
+  // this long for it, that key is congested (streams skip computing its
+  // frames, counting them dropped).
+  std::chrono::milliseconds congested_after{50};
+  std::chrono::milliseconds idle_timeout{0};
+  std::chrono::milliseconds handshake_timeout{0};  // 0: none
+  std::chrono::milliseconds heartbeat_interval{0};
+  std::chrono::milliseconds write_timeout{0};
+  int socket_send_buffer = 0;             // SO_SNDBUF; 0: the system's default
+  int socket_unsent_bytes = 0;            // TCP_NOTSENT_LOWAT; 0: the system's default
+};
+
+// The limits cfg sets for each client connection.
+ConnectionLimits connection_limits(const ServerConfig& cfg);
+
+// Socket options every accepted client socket gets: no Nagle delay, the
+// configured send buffer and unsent-bytes bound.
+void tune_socket(tcp::socket& socket, const ConnectionLimits& limits, std::uint64_t id);
+
+// The watchdog both transports run: its period, and why it stops a link
+// (empty: it lives on).
+struct LinkTimes {
+  bool established = false;  // said Hello
+  bool writing = false;      // a write is in flight
+  Clock::time_point started, last_read, write_started, last_frames_written;
+};
+std::chrono::milliseconds watchdog_period(const ConnectionLimits& limits, bool established);
+std::string watchdog_verdict(const LinkTimes& times, const ConnectionLimits& limits, Clock::time_point now,
+                             std::uint64_t id);
+// A framed Heartbeat, what the server writes when it wrote nothing for a while.
+std::string heartbeat_message();
+
+}  // namespace gmr::server

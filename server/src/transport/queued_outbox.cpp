@@ -1,0 +1,200 @@
+#include "transport/queued_outbox.h"
+
+#include <algorithm>
+#include <utility>
+
+#include "gmr/wire/frames.h"
+#include "prometheus/histogram.h"
+
+namespace gmr::server {
+
+QueuedOutbox::QueuedOutbox(std::uint64_t id, const ConnectionLimits& limits, BufferBudget* budget)
+    : id_(id), limits_(limits), budget_(budget), frames_(limits.frames_per_key, limits.max_frame_bytes) {}
+
+QueuedOutbox::~QueuedOutbox() {
+  if (budget_ != nullptr) budget_->release(accounted_);
+}
+
+void QueuedOutbox::account() {
+  if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + reading_bytes());
+}
+
+void QueuedOutbox::note_queue() {
+  counters_.max_queued_bytes = std::max(counters_.max_queued_bytes, queued_bytes());
+}
+
+bool QueuedOutbox::closing() const {
+  Lock lock(m_);
+  return stopped_ || close_after_flush_;
+}
+
+void QueuedOutbox::established() {
+  Lock lock(m_);
+  established_ = true;
+}
+
+void QueuedOutbox::hold_reading(bool hold) {
+  Lock lock(m_);
+  reads_held_ = hold;
+  if (!hold) resume_reading();
+}
+
+bool QueuedOutbox::may_read() const {
+  return !reads_held_ && !at_handler_ && reply_bytes_ + in_flight_bytes_ <= limits_.max_reply_queue_bytes &&
+         (budget_ == nullptr || budget_->allows_reading(accounted_));
+}
+
+void QueuedOutbox::resume_reading() {
+  if (stopped_ || !read_paused_ || !may_read()) return;
+  read_paused_ = false;
+  read_more();
+}
+
+void QueuedOutbox::drop_queued() {
+  frames_.clear();
+  replies_.clear();
+  reply_bytes_ = 0;
+  account();
+}
+
+void QueuedOutbox::close_after_reply() {
+  Lock lock(m_);
+  close_on_next_reply_ = true;
+  frames_.clear();
+  account();
+}
+
+void QueuedOutbox::send(std::string framed) {
+  Lock lock(m_);
+  if (stopped_) return;
+  reply_bytes_ += framed.size();
+  replies_.push_back(std::make_shared<const std::string>(std::move(framed)));
+  // Closing waits for this reply (and not for one another thread queues).
+  if (std::exchange(close_on_next_reply_, false)) {
+    close_after_flush_ = true;
+    frames_.clear();
+  }
+  note_queue();
+  account();
+  request_flush();
+}
+
+bool QueuedOutbox::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+                              Clock::duration max_age) {
+  Lock lock(m_);
+  if (stopped_ || close_after_flush_) return true;
+  // With no write in flight the frame goes out at once; otherwise it waits,
+  // within this connection's bounds and the server's budget.
+  const Clock::time_point now = Clock::now();
+  const Clock::time_point stale_at = max_age > Clock::duration::zero() ? now + max_age : Clock::time_point::max();
+  const bool kept_all = frames_.push(key, PendingFrame{std::move(head), std::move(body), stale_at, now}, frames_wait(),
+                                     budget_ != nullptr && budget_->over(), counters_);
+  note_queue();
+  account();
+  request_flush();
+  return kept_all;
+}
+
+bool QueuedOutbox::congested(std::uint32_t key) const {
+  Lock lock(m_);
+  if (stopped_) return false;
+  if (!writing_) {
+    // Its I/O thread has not come round to the write it was handed: the
+    // thread is behind (overloaded), and frames would only pile up.
+    return flush_posted_ && frames_.waiting(key) && Clock::now() - flush_asked_ > limits_.congested_after;
+  }
+  if (budget_ != nullptr && budget_->over()) return true;
+  if (!frames_.waiting(key)) return false;
+  return Clock::now() - write_started_ > limits_.congested_after;
+}
+
+void QueuedOutbox::discard_frames(std::uint32_t key) {
+  Lock lock(m_);
+  frames_.discard(key);
+  account();
+}
+
+std::string QueuedOutbox::stamped(PendingFrame& f, std::int64_t write_time_ns) {
+  std::string framed = std::move(f.head);
+  wire::set_write_stamp(framed, write_time_ns);
+  framed += *f.body;
+  ++counters_.frames_sent;
+  return framed;
+}
+
+void QueuedOutbox::send_frames_now(std::uint32_t key) {
+  Lock lock(m_);
+  const std::int64_t now = now_ns();
+  for (auto& frame : frames_.take(key)) {
+    auto bytes = std::make_shared<const std::string>(stamped(frame, now));
+    reply_bytes_ += bytes->size();
+    replies_.push_back(std::move(bytes));
+  }
+  account();
+}
+
+std::uint64_t QueuedOutbox::end_frames(std::uint32_t key) {
+  Lock lock(m_);
+  const std::uint64_t stale = frames_.stale_dropped(key);
+  send_frames_now(key);
+  frames_.discard(key);
+  account();
+  return stale;
+}
+
+void QueuedOutbox::count_udp_frame_sent() {
+  Lock lock(m_);
+  ++counters_.frames_sent;
+  ++counters_.udp_frames_sent;
+}
+
+void QueuedOutbox::count_udp_frame_dropped() {
+  Lock lock(m_);
+  ++counters_.frames_dropped;
+  ++counters_.udp_frames_dropped;
+}
+
+void QueuedOutbox::count_frame_dropped(std::uint64_t n) {
+  Lock lock(m_);
+  counters_.frames_dropped += n;
+}
+
+void QueuedOutbox::count_frame_skipped(std::uint64_t n) {
+  Lock lock(m_);
+  counters_.frames_skipped += n;
+}
+
+ConnectionCounters QueuedOutbox::counters() const {
+  Lock lock(m_);
+  ConnectionCounters c = counters_;
+  c.queued_bytes = queued_bytes();
+  return c;
+}
+
+std::string QueuedOutbox::watchdog_tick(Clock::time_point now) {
+  // A client whose request the server is still on (its reads held for an
+  // edit, or a body with the handler) waits for the server: not idle.
+  if (reads_held_ || at_handler_) last_read_ = now;
+  const LinkTimes times{established_, writing_, started_, last_read_, write_started_, last_frames_written_};
+  if (std::string why = watchdog_verdict(times, limits_, now, id_); !why.empty()) return why;
+  // Reads paused for the server-wide budget resume once it allows.
+  resume_reading();
+  if (link_ready() && !writing_ && now - last_write_ > limits_.heartbeat_interval) {
+    send(heartbeat_message());
+    last_write_ = now;
+  }
+  return {};
+}
+
+void QueuedOutbox::wrote(std::size_t n) {
+  counters_.bytes_sent += n;
+  last_write_ = Clock::now();
+  if (!writing_frames_) return;
+  last_frames_written_ = last_write_;
+  if (frame_wait_ != nullptr) {
+    frame_wait_->Observe(std::chrono::duration<double>(last_write_ - oldest_frame_in_flight_).count());
+  }
+  oldest_frame_in_flight_ = Clock::time_point::max();
+}
+
+}  // namespace gmr::server
