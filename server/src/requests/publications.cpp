@@ -1,6 +1,5 @@
-// RequestHandler's live sources (docs/protocol.md, "Live sources"): a
-// connection with a 'publish' role announces a skeleton, then pushes frames;
-// its sources end when it says so or when it goes away.
+#include "requests/publications.h"
+
 #include <spdlog/spdlog.h>
 
 #include <chrono>
@@ -9,8 +8,6 @@
 #include <filesystem>
 
 #include "live/announcement.h"
-#include "live/live_source.h"
-#include "requests/request_handler.h"
 
 namespace gmr::server {
 
@@ -40,16 +37,16 @@ std::filesystem::path recording_path(const std::string& dir, const std::string& 
 
 }  // namespace
 
-Reply RequestHandler::publish(const pb::Publish& r) {
-  if (role_ < Role::kPublish) {
+Reply Publications::publish(const pb::Publish& r, Role role) {
+  if (role < Role::kPublish) {
     return Refusal{pb::ERROR_CODE_PERMISSION_DENIED,
-                   "this connection's role is '" + std::string(role_name(role_)) +
+                   "this connection's role is '" + std::string(role_name(role)) +
                        "': publishing a live source needs a 'publish' token (docs/security.md)"};
   }
-  const ServerConfig& cfg = services_.cfg;
+  const ServerConfig& cfg = link_.services.cfg;
   auto checked = check_announcement(r, cfg);
   if (auto* refusal = std::get_if<Refusal>(&checked)) return std::move(*refusal);
-  if (services_.catalog.find(r.name())) {
+  if (link_.services.catalog.find(r.name())) {
     return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
                    "a motion named '" + r.name() + "' is already served: publish under another name"};
   }
@@ -65,7 +62,7 @@ Reply RequestHandler::publish(const pb::Publish& r) {
     }
     recording = recording_path(cfg.record_dir, r.name()).string();
   }
-  auto source = services_.catalog.add_live(r.name(), std::move(std::get<Skeleton>(checked)), r.frame_time(),
+  auto source = link_.services.catalog.add_live(r.name(), std::move(std::get<Skeleton>(checked)), r.frame_time(),
                                           r.metres_per_unit());
   if (!recording.empty()) {
     source->record(cfg.max_record_bytes);
@@ -73,8 +70,8 @@ Reply RequestHandler::publish(const pb::Publish& r) {
   }
   const std::uint32_t id = next_publication_++;
   publications_[id] = source;
-  services_.replicas.announce(*source);
-  spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", connection_id_,
+  link_.services.replicas.announce(*source);
+  spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", link_.connection_id,
                printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(), 1.0 / r.frame_time());
   pb::ServerMessage out;
   out.mutable_published()->set_publication_id(id);
@@ -83,43 +80,41 @@ Reply RequestHandler::publish(const pb::Publish& r) {
   return out;
 }
 
-Reply RequestHandler::publish_frame(const pb::PublishFrame& r) {
+Reply Publications::publish_frame(const pb::PublishFrame& r) {
   auto it = publications_.find(r.publication_id());
   if (it == publications_.end()) {
-    services_.catalog.count_live_frame(false);
+    link_.services.catalog.count_live_frame(false);
     return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown publication " + std::to_string(r.publication_id())};
   }
   LiveSource& source = *it->second;
   if (Status s = source.push(std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
       !s.ok()) {
-    services_.catalog.count_live_frame(false);
+    link_.services.catalog.count_live_frame(false);
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "live '" + source.name() + "': " + s.error().message};
   }
-  services_.catalog.count_live_frame(true);
-  services_.replicas.frame(source, std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
+  link_.services.catalog.count_live_frame(true);
+  link_.services.replicas.frame(source, std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
   return pb::ServerMessage{};  // no reply
 }
 
-Reply RequestHandler::unpublish(const pb::Unpublish& r) {
+Reply Publications::unpublish(const pb::Unpublish& r) {
   if (!publications_.contains(r.publication_id())) {
     return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown publication " + std::to_string(r.publication_id())};
   }
-  end_publication(r.publication_id(), "the live source ended");
-  pb::ServerMessage out;
-  out.mutable_ack();
-  return out;
+  end(r.publication_id(), "the live source ended");
+  return ack();
 }
 
-void RequestHandler::end_publication(std::uint32_t id, const std::string& reason) {
+void Publications::end(std::uint32_t id, const std::string& reason) {
   auto it = publications_.find(id);
   if (it == publications_.end()) return;
   auto source = std::move(it->second);
   publications_.erase(it);
-  services_.catalog.remove_live(source);
-  spdlog::info("conn {}: live {} ended after {} frames: {}", connection_id_, printable(source->name(), 200),
+  link_.services.catalog.remove_live(source);
+  spdlog::info("conn {}: live {} ended after {} frames: {}", link_.connection_id, printable(source->name(), 200),
                source->frames(), reason);
   source->end(reason);
-  services_.replicas.end(*source, reason);
+  link_.services.replicas.end(*source, reason);
   if (auto path = recordings_.extract(source.get())) {
     bool truncated = false;
     auto motion = source->recording(&truncated);
@@ -129,8 +124,12 @@ void RequestHandler::end_publication(std::uint32_t id, const std::string& reason
     }
     // Written off the I/O thread (save_motion is atomic: a file appears
     // whole or not at all); the server waits for it when it stops.
-    services_.recordings.write(std::move(motion), std::move(path.mapped()), source->name(), truncated);
+    link_.services.recordings.write(std::move(motion), std::move(path.mapped()), source->name(), truncated);
   }
+}
+
+void Publications::end_all(const std::string& reason) {
+  while (!publications_.empty()) end(publications_.begin()->first, reason);
 }
 
 }  // namespace gmr::server

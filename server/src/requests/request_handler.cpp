@@ -2,49 +2,24 @@
 
 #include <spdlog/spdlog.h>
 
-#include <Eigen/Geometry>
 #include <exception>
 #include <new>
 #include <utility>
 
-#include "gmr/view/engine_pose.h"
-#include "gmr/view/viewpoint.h"
-#include "gmr/wire/convert.h"
 #include "gmr/wire/framing.h"
-#include "streams/targets.h"
 
 namespace gmr::server {
 
-static_assert(static_cast<int>(pb::CONVENTION_PRESET_CUSTOM) == static_cast<int>(ConventionPreset::kCustom) &&
-              static_cast<int>(pb::CONVENTION_PRESET_GODOT) == static_cast<int>(ConventionPreset::kGodot));
-
-Result<OutputBasis> output_basis_of(const pb::Conventions& c, double motion_metres_per_unit) {
-  // proto3 keeps enum values it does not know: refuse them rather than guess.
-  if (!pb::ConventionPreset_IsValid(c.preset())) {
-    return make_error("unknown conventions preset " + std::to_string(c.preset()));
-  }
-  Conventions g;
-  g.preset = static_cast<ConventionPreset>(c.preset());
-  g.up = c.up();
-  g.forward = c.forward();
-  g.left_handed = c.left_handed();
-  g.target_metres_per_unit = c.target_metres_per_unit() == 0.0 ? 1.0 : c.target_metres_per_unit();
-  // The request's word on the motion's unit, else the library's.
-  g.source_metres_per_unit = c.source_metres_per_unit() != 0.0 ? c.source_metres_per_unit() : motion_metres_per_unit;
-  return output_basis(g);
-}
-
-
 RequestHandler::RequestHandler(Services& services, const std::shared_ptr<Outbox>& outbox)
-    : services_(services),
-      connection_(outbox),
-      connection_id_(outbox->id()),
-      udp_(std::make_shared<UdpPublisher::Registration>()) {
+    : link_(services, outbox), udp_(std::make_shared<UdpPublisher::Registration>()) {
   udp_->lane = outbox->lane();  // its UDP frames leave from its connection's I/O thread
+  views_.on_changed([this](const View& v) { subscriptions_.view_changed(v); });
 }
 
 void RequestHandler::start() {
-  token_ = services_.udp.add_session([weak = weak_from_this()](const udp::endpoint& ep) {
+  // The subscriptions' targets report to them for as long as this session lives.
+  subscriptions_.set_self(std::shared_ptr<SubscriptionEvents>(shared_from_this(), &subscriptions_));
+  token_ = link_.services.udp.add_session([weak = weak_from_this()](const udp::endpoint& ep) {
     if (auto self = weak.lock()) self->udp_registered(ep);
   });
 }
@@ -52,28 +27,12 @@ void RequestHandler::start() {
 void RequestHandler::on_stop() {
   stopped_ = true;
   if (log_limit_.pending() > 0) {
-    spdlog::warn("conn {}: {} more lines about its requests were suppressed", connection_id_, log_limit_.pending());
+    spdlog::warn("conn {}: {} more lines about its requests were suppressed", link_.connection_id, log_limit_.pending());
   }
-  for (auto& [id, sub] : subs_) {
-    sub.stream->remove(sub.target.get());
-    services_.admission.release_rate(sub.rate_mhz);
-  }
-  subs_.clear();
-  for (const auto& [id, v] : views_) forget_view(*v);
+  subscriptions_.clear();
   views_.clear();
-  while (!publications_.empty()) end_publication(publications_.begin()->first, "the live source disconnected");
-  services_.udp.remove_session(token_);
-}
-
-void RequestHandler::send(const pb::ServerMessage& m) {
-  auto c = connection_.lock();
-  if (!c || c->stopped()) return;
-  auto bytes = wire::frame_message(m, services_.cfg.max_message_bytes);
-  if (!bytes.ok()) {
-    bytes = wire::frame_message(
-        error_message(m.request_id(), pb::ERROR_CODE_INTERNAL, "reply too large: " + bytes.error().message));
-  }
-  c->send(std::move(bytes).value());
+  publications_.end_all("the live source disconnected");
+  link_.services.udp.remove_session(token_);
 }
 
 std::string_view RequestHandler::request_kind(const pb::ClientMessage& m) {
@@ -85,11 +44,11 @@ void RequestHandler::on_message(const std::string& body) {
   pb::ClientMessage req;
   if (!req.ParseFromString(body)) {
     if (std::uint64_t suppressed = 0; log_limit_.allow(suppressed)) {
-      spdlog::warn("conn {}: a {}-byte message is not a ClientMessage{}", connection_id_, body.size(),
+      spdlog::warn("conn {}: a {}-byte message is not a ClientMessage{}", link_.connection_id, body.size(),
                    suppressed ? " (" + std::to_string(suppressed) + " more such lines suppressed)" : std::string());
     }
-    services_.observer.unparsable_request();
-    send(error_message(0, pb::ERROR_CODE_BAD_REQUEST, "cannot parse the message as a gmr.stream.v1.ClientMessage"));
+    link_.services.observer.unparsable_request();
+    link_.send(error_message(0, pb::ERROR_CODE_BAD_REQUEST, "cannot parse the message as a gmr.stream.v1.ClientMessage"));
     return;
   }
   if (req.body_case() == pb::ClientMessage::kHeartbeat) return;  // the connection counted it as a read
@@ -99,7 +58,7 @@ void RequestHandler::on_message(const std::string& body) {
     reply = dispatch(req, began);
   } catch (const std::bad_alloc&) {
     // The budgets (docs/protocol.md) make this rare; the server goes on.
-    spdlog::error("conn {}: out of memory answering request {}", connection_id_, req.request_id());
+    spdlog::error("conn {}: out of memory answering request {}", link_.connection_id, req.request_id());
     reply = Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "the server ran out of memory answering this request"};
   }
   // A view edit computed off the I/O thread answers when it is done.
@@ -110,27 +69,21 @@ void RequestHandler::on_message(const std::string& body) {
 void RequestHandler::answer(std::uint64_t request_id, std::string_view kind, Clock::time_point began, Reply reply) {
   if (auto* refused = std::get_if<Refusal>(&reply)) {
     if (std::uint64_t suppressed = 0; spdlog::should_log(spdlog::level::debug) && log_limit_.allow(suppressed)) {
-      spdlog::debug("conn {}: request {} refused: {}{}", connection_id_, request_id,
+      spdlog::debug("conn {}: request {} refused: {}{}", link_.connection_id, request_id,
                     printable(refused->message, 200),
                     suppressed ? " (" + std::to_string(suppressed) + " more lines suppressed)" : std::string());
     }
-    services_.observer.request(kind, Clock::now() - began, refused->code);
-    send(error_message(request_id, refused->code, std::move(refused->message)));
+    link_.services.observer.request(kind, Clock::now() - began, refused->code);
+    link_.send(error_message(request_id, refused->code, std::move(refused->message)));
     return;
   }
   auto& m = std::get<pb::ServerMessage>(reply);
   // A request that is answered only when refused (PublishFrame) gives an empty message.
   if (m.body_case() != pb::ServerMessage::BODY_NOT_SET) {
     m.set_request_id(request_id);
-    send(m);
+    link_.send(m);
   }
-  services_.observer.request(kind, Clock::now() - began, pb::ERROR_CODE_UNSPECIFIED);
-}
-
-std::pair<std::size_t, std::size_t> RequestHandler::subscription_count() const {
-  std::size_t udp = 0;
-  for (const auto& [id, s] : subs_) udp += dynamic_cast<const UdpTarget*>(s.target.get()) != nullptr ? 1 : 0;
-  return {subs_.size() - udp, udp};
+  link_.services.observer.request(kind, Clock::now() - began, pb::ERROR_CODE_UNSPECIFIED);
 }
 
 Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point began) {
@@ -147,9 +100,9 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point b
                        "': structural view edits and statistics need a 'control' token (docs/security.md)"};
   }
   switch (req.body_case()) {
-    case C::kListMotions: return list_motions();
-    case C::kGetSkeleton: return get_skeleton(req.get_skeleton());
-    case C::kCreateView: return create_view(req.create_view());
+    case C::kListMotions: return views_.list_motions();
+    case C::kGetSkeleton: return views_.get_skeleton(req.get_skeleton());
+    case C::kCreateView: return views_.create(req.create_view());
     case C::kCloseView: return close_view(req.close_view());
     case C::kShiftRoot: {
       const auto& r = req.shift_root();
@@ -174,17 +127,17 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point b
                        [](const EditReport& e, pb::ViewInfo& info) {
                          for (const auto& name : e.removed) info.add_removed(name);
                        });
-    case C::kSetCoordinates: return set_coordinates(req.set_coordinates());
-    case C::kQueryFrames: return query(req.query_frames());
-    case C::kSubscribe: return subscribe(req.subscribe());
-    case C::kUnsubscribe: return unsubscribe(req.unsubscribe());
-    case C::kPause: return pause(req.pause());
-    case C::kResume: return resume(req.resume());
-    case C::kSeek: return seek(req.seek());
+    case C::kSetCoordinates: return views_.set_coordinates(req.set_coordinates());
+    case C::kQueryFrames: return views_.query(req.query_frames());
+    case C::kSubscribe: return subscriptions_.subscribe(req.subscribe());
+    case C::kUnsubscribe: return subscriptions_.unsubscribe(req.unsubscribe());
+    case C::kPause: return subscriptions_.pause(req.pause());
+    case C::kResume: return subscriptions_.resume(req.resume());
+    case C::kSeek: return subscriptions_.seek(req.seek());
     case C::kGetStats: return stats();
-    case C::kPublish: return publish(req.publish());
-    case C::kPublishFrame: return publish_frame(req.publish_frame());
-    case C::kUnpublish: return unpublish(req.unpublish());
+    case C::kPublish: return publications_.publish(req.publish(), role_);
+    case C::kPublishFrame: return publications_.publish_frame(req.publish_frame());
+    case C::kUnpublish: return publications_.unpublish(req.unpublish());
     default: return Refusal{pb::ERROR_CODE_UNKNOWN_REQUEST, "unknown request"};
   }
 }
@@ -204,15 +157,15 @@ bool RequestHandler::needs_control(pb::ClientMessage::BodyCase request) {
 
 Reply RequestHandler::hello(const pb::Hello& h) {
   if (h.protocol_version() != wire::kProtocolVersion) {
-    spdlog::warn("conn {}: refused protocol version {} (this server speaks {})", connection_id_, h.protocol_version(),
+    spdlog::warn("conn {}: refused protocol version {} (this server speaks {})", link_.connection_id, h.protocol_version(),
                  wire::kProtocolVersion);
-    if (auto c = connection_.lock()) c->close_after_reply();
+    if (auto c = link_.connection()) c->close_after_reply();
     return Refusal{pb::ERROR_CODE_VERSION_MISMATCH, "client speaks protocol version " +
                                                         std::to_string(h.protocol_version()) +
                                                         ", this server speaks version " +
                                                         std::to_string(wire::kProtocolVersion)};
   }
-  const ServerConfig& cfg = services_.cfg;
+  const ServerConfig& cfg = link_.services.cfg;
   // The role: the token's, or the anonymous one. A token the server does not
   // know is refused rather than taken as anonymous (a typo should show); a
   // server without tokens takes every client as anonymous.
@@ -220,27 +173,27 @@ Reply RequestHandler::hello(const pb::Hello& h) {
   if (cfg.credentials && !h.auth_token().empty()) role = cfg.credentials->role_of(h.auth_token());
   if (role == Role::kNone) {
     const bool had_token = !h.auth_token().empty();
-    if (std::uint64_t suppressed = 0; services_.admission.hello_refused(suppressed)) {
-      spdlog::warn("conn {}: refused at Hello: {}{}", connection_id_,
+    if (std::uint64_t suppressed = 0; link_.services.admission.hello_refused(suppressed)) {
+      spdlog::warn("conn {}: refused at Hello: {}{}", link_.connection_id,
                    had_token ? "unknown token" : "no token and anonymous clients may not connect",
                    suppressed ? " (" + std::to_string(suppressed) + " more such lines suppressed)" : std::string());
     }
-    if (auto c = connection_.lock()) c->close_after_reply();
+    if (auto c = link_.connection()) c->close_after_reply();
     return Refusal{pb::ERROR_CODE_UNAUTHENTICATED, had_token ? "the server does not know this token"
                                                              : "this server needs a token (ClientOptions::auth_token, "
                                                                "gmr --token or GMR_TOKEN)"};
   }
   role_ = role;
   handshaked_ = true;
-  if (auto c = connection_.lock()) c->established();
-  services_.admission.established(connection_id_);
-  spdlog::info("conn {}: hello from {} ({})", connection_id_, printable(h.client_name()), role_name(role_));
+  if (auto c = link_.connection()) c->established();
+  link_.services.admission.established(link_.connection_id);
+  spdlog::info("conn {}: hello from {} ({})", link_.connection_id, printable(h.client_name()), role_name(role_));
   pb::ServerMessage out;
   auto* r = out.mutable_hello();
   r->set_protocol_version(wire::kProtocolVersion);
   r->set_server_name(cfg.server_name);
   r->set_udp_token(std::string(reinterpret_cast<const char*>(token_.data()), token_.size()));
-  r->set_udp_port(services_.udp.port());
+  r->set_udp_port(link_.services.udp.port());
   r->set_max_message_bytes(cfg.max_message_bytes);
   r->set_heartbeat_interval_ms(static_cast<std::uint32_t>(cfg.heartbeat_interval.count()));
   r->set_idle_timeout_ms(static_cast<std::uint32_t>(cfg.idle_timeout.count()));
@@ -253,36 +206,95 @@ Reply RequestHandler::hello(const pb::Hello& h) {
 }
 
 Reply RequestHandler::stats() {
-  auto c = connection_.lock();
+  auto c = link_.connection();
   const ConnectionCounters own = c ? c->counters() : ConnectionCounters{};
   pb::ServerMessage out;
   auto* st = out.mutable_stats();
-  st->set_connections(static_cast<std::uint32_t>(services_.admission.connections().size()));
-  st->set_streams(static_cast<std::uint32_t>(services_.streams.live()));
-  st->set_frames_computed(services_.counters.frames_computed);
-  st->set_frames_computed_float(services_.counters.frames_computed_float);
-  st->set_frames_encoded(services_.counters.frames_encoded);
+  st->set_connections(static_cast<std::uint32_t>(link_.services.admission.connections().size()));
+  st->set_streams(static_cast<std::uint32_t>(link_.services.streams.live()));
+  st->set_frames_computed(link_.services.counters.frames_computed);
+  st->set_frames_computed_float(link_.services.counters.frames_computed_float);
+  st->set_frames_encoded(link_.services.counters.frames_encoded);
   st->set_frames_sent(own.frames_sent);
   st->set_frames_dropped(own.frames_dropped);
   // Every connection's, in one snapshot: what a load test measures its
   // window with (2 requests, not 2 per client).
-  const ConnectionCounters all = services_.admission.totals();
+  const ConnectionCounters all = link_.services.admission.totals();
   st->set_frames_sent_total(all.frames_sent);
   st->set_frames_dropped_total(all.frames_dropped);
   st->set_frames_skipped(own.frames_skipped);
-  st->set_frames_skipped_total(services_.counters.frames_skipped);
+  st->set_frames_skipped_total(link_.services.counters.frames_skipped);
   st->set_queued_bytes(own.queued_bytes);
   st->set_max_queued_bytes(own.max_queued_bytes);
-  st->set_committed_frames_per_second(services_.admission.committed_frames_per_second());
-  st->set_send_budget(services_.cfg.send_budget);
-  st->set_subscriptions_refused(services_.admission.subscriptions_refused());
-  st->set_live_sources(static_cast<std::uint32_t>(services_.catalog.live_sources().size()));
-  st->set_live_frames_received(services_.catalog.live_frames_received());
-  st->set_live_frames_refused(services_.catalog.live_frames_refused());
-  st->set_multicast_frames_sent(services_.multicast.frames_sent);
-  st->set_io_threads(static_cast<std::uint32_t>(services_.lanes ? services_.lanes->size() : 1));
-  if (auto conn = connection_.lock()) st->set_io_thread(static_cast<std::uint32_t>(conn->lane()));
+  st->set_committed_frames_per_second(link_.services.admission.committed_frames_per_second());
+  st->set_send_budget(link_.services.cfg.send_budget);
+  st->set_subscriptions_refused(link_.services.admission.subscriptions_refused());
+  st->set_live_sources(static_cast<std::uint32_t>(link_.services.catalog.live_sources().size()));
+  st->set_live_frames_received(link_.services.catalog.live_frames_received());
+  st->set_live_frames_refused(link_.services.catalog.live_frames_refused());
+  st->set_multicast_frames_sent(link_.services.multicast.frames_sent);
+  st->set_io_threads(static_cast<std::uint32_t>(link_.services.lanes ? link_.services.lanes->size() : 1));
+  if (auto conn = link_.connection()) st->set_io_thread(static_cast<std::uint32_t>(conn->lane()));
   return out;
+}
+
+Reply RequestHandler::close_view(const pb::CloseView& r) {
+  if (!views_.find(r.view_id())) return unknown_view(r.view_id());
+  subscriptions_.drop_view(r.view_id());
+  views_.close(r.view_id());
+  return ack();
+}
+
+Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point began, std::uint32_t view_id,
+                                const std::function<Result<ViewEdit>(const View&)>& make,
+                                Views::EditDecoration decorate) {
+  View* v = views_.find(view_id);
+  if (!v) return unknown_view(view_id);
+  auto edit = make(*v);
+  if (!edit.ok()) return refusal_of(edit.error());
+  // A short motion's edit costs less than a trip to the edit thread.
+  if (edit->values() <= link_.services.cfg.edit_inline_values) {
+    return views_.commit_edit(view_id, *edit, edit->run(), decorate);
+  }
+  // A long one is computed on the edit thread; meanwhile this connection's
+  // requests are not read (they keep their order, and wait in the kernel),
+  // and everyone's frames go on.
+  edit_deferred_ = true;
+  if (auto c = link_.connection()) c->hold_reading(true);
+  net::post(link_.services.edit_pool, [self = weak_from_this(), &io = link_.services.io, edit = std::move(edit).value(),
+                                       view_id, decorate, request_id = req.request_id(), kind = request_kind(req),
+                                       began]() mutable {
+    auto next = [&]() -> Result<std::shared_ptr<const ViewContent>> {
+      try {
+        return edit.run();
+      } catch (const std::bad_alloc&) {
+        return make_error(ErrorKind::kResourceExhausted, "the server ran out of memory computing the edit");
+      } catch (const std::exception& e) {  // nothing may leave the edit thread's handler
+        return make_error(ErrorKind::kFailedPrecondition, std::string("the edit failed: ") + e.what());
+      }
+    }();
+    net::post(io, [self = std::move(self), edit = std::move(edit), next = std::move(next), view_id, decorate,
+                   request_id, kind, began]() mutable {
+      auto handler = self.lock();
+      if (!handler || handler->stopped_) return;
+      Reply reply = handler->views_.commit_edit(view_id, edit, std::move(next), decorate);
+      handler->answer(request_id, kind, began, std::move(reply));
+      if (auto c = handler->link_.connection()) c->hold_reading(false);
+    });
+  });
+  return pb::ServerMessage{};
+}
+
+void RequestHandler::udp_registered(const udp::endpoint& ep) {
+  if (stopped_) return;
+  const bool first = !udp_->endpoint || *udp_->endpoint != ep;
+  udp_->endpoint = ep;
+  if (first) {
+    spdlog::info("conn {}: UDP endpoint {}:{} registered", link_.connection_id, ep.address().to_string(), ep.port());
+  }
+  pb::ServerMessage m;
+  m.mutable_udp_registered()->set_endpoint(ep.address().to_string() + ":" + std::to_string(ep.port()));
+  link_.send(m);
 }
 
 }  // namespace gmr::server

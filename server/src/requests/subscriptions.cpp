@@ -1,6 +1,5 @@
-// RequestHandler's subscriptions: each is a target (TCP or UDP) of a stream
-// that the StreamRegistry keeps, shared with other subscriptions while they
-// want the same bytes and split off when one of them changes alone.
+#include "requests/subscriptions.h"
+
 #include <spdlog/spdlog.h>
 
 #include <cmath>
@@ -8,19 +7,10 @@
 
 #include "gmr/wire/convert.h"
 #include "gmr/wire/framing.h"
-#include "live/live_source.h"
-#include "requests/request_handler.h"
-#include "streams/targets.h"
 
 namespace gmr::server {
 
 namespace {
-
-pb::ServerMessage ack() {
-  pb::ServerMessage out;
-  out.mutable_ack();
-  return out;
-}
 
 Refusal unknown_subscription(std::uint32_t id) {
   return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown subscription " + std::to_string(id)};
@@ -28,11 +18,11 @@ Refusal unknown_subscription(std::uint32_t id) {
 
 }  // namespace
 
-Reply RequestHandler::subscribe(const pb::Subscribe& r) {
-  const View* v = find_view(r.view_id());
-  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+Reply Subscriptions::subscribe(const pb::Subscribe& r) {
+  const View* v = views_.find(r.view_id());
+  if (!v) return unknown_view(r.view_id());
   const Motion& m = v->motion();
-  const ServerConfig& cfg = services_.cfg;
+  const ServerConfig& cfg = link_.services.cfg;
   if (subs_.size() >= cfg.max_subscriptions_per_connection) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "at most " + std::to_string(cfg.max_subscriptions_per_connection) +
                                                           " subscriptions per connection"};
@@ -82,27 +72,27 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   }
   const bool use_udp = r.transport() == pb::TRANSPORT_UDP;
   const bool use_multicast = r.transport() == pb::TRANSPORT_MULTICAST;
-  if (use_multicast && !services_.multicast.group) {
+  if (use_multicast && !link_.services.multicast.group) {
     return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
                    "this server sends no multicast (gmr-server --multicast-group): subscribe over TCP or UDP"};
   }
   if (use_udp && !udp_->endpoint) {
     return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
                    "UDP transport: register this connection's UDP endpoint first (send the session token to UDP port " +
-                       std::to_string(services_.udp.port()) + ")"};
+                       std::to_string(link_.services.udp.port()) + ")"};
   }
   const std::vector<std::string> names(r.joints().begin(), r.joints().end());
-  auto joints = resolve_joints(*v, names);
+  auto joints = views_.resolve_joints(*v, names);
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
-  auto basis = output_basis_of(r.conventions(), services_.catalog.metres_per_unit(*v));
+  auto basis = output_basis_of(r.conventions(), link_.services.catalog.metres_per_unit(*v));
   if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   // Its targets hold the connection (targets.h).
-  const auto conn = connection_.lock();
+  const auto conn = link_.connection();
   if (!conn) return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, "the connection is closing"};
   // Admission: the rates all subscribers asked for stay within what the
   // server can send (docs/protocol.md, "Admission"). Committed from here on.
   const auto rate_mhz = static_cast<std::uint64_t>(std::llround(s.rate * 1000.0));
-  if (auto refused = services_.admission.commit_rate(s.rate, rate_mhz)) {
+  if (auto refused = link_.services.admission.commit_rate(s.rate, rate_mhz)) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, std::move(*refused)};
   }
   settings.joints = std::move(joints).value();
@@ -119,22 +109,22 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   // Multicast is for shared streams: one send per frame for all their subscribers.
   const std::string key =
       r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
-  std::shared_ptr<Stream> stream = key.empty() ? nullptr : services_.streams.find_running(key);
+  std::shared_ptr<Stream> stream = key.empty() ? nullptr : link_.services.streams.find_running(key);
   const bool joined = stream != nullptr;
   if (!stream) {
-    stream = services_.streams.create(v->content(), settings, key);
+    stream = link_.services.streams.create(v->content(), settings, key);
     if (source) stream->set_live();
   }
 
   const std::uint32_t id = next_sub_++;
   std::shared_ptr<SubscriptionTarget> target;
   if (use_multicast) {
-    target = std::make_shared<MulticastTarget>(weak_from_this(), conn, id, v->id(), services_.udp,
-                                               services_.multicast.channel(stream->id()));
+    target = std::make_shared<MulticastTarget>(self_, conn, id, v->id(), link_.services.udp,
+                                               link_.services.multicast.channel(stream->id()));
   } else if (use_udp) {
-    target = std::make_shared<UdpTarget>(weak_from_this(), conn, id, v->id(), services_.udp, udp_);
+    target = std::make_shared<UdpTarget>(self_, conn, id, v->id(), link_.services.udp, udp_);
   } else {
-    target = std::make_shared<TcpTarget>(weak_from_this(), conn, id, v->id());
+    target = std::make_shared<TcpTarget>(self_, conn, id, v->id());
   }
   target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
                                                 : std::chrono::milliseconds(r.max_staleness_ms()));
@@ -158,17 +148,17 @@ Reply RequestHandler::subscribe(const pb::Subscribe& r) {
   wire::to_proto(v->motion(), settings.basis, *sub->mutable_skeleton());
   if (v->content()->relative_to >= 0) sub->set_relative_to(v->motion().skeleton.joint(v->content()->relative_to).name);
   if (use_multicast) {
-    const auto& group = *services_.multicast.group->endpoint;
+    const auto& group = *link_.services.multicast.group->endpoint;
     sub->set_multicast_group(group.address().to_string() + ":" + std::to_string(group.port()));
   }
-  spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", connection_id_, id, v->id(),
+  spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", link_.connection_id, id, v->id(),
                 stream->id(), use_multicast ? "multicast" : use_udp ? "UDP" : "TCP", s.rate);
   return out;
 }
 
-Reply RequestHandler::unsubscribe(const pb::Unsubscribe& r) {
-  if (!find_subscription(r.subscription_id())) return unknown_subscription(r.subscription_id());
-  drop_subscription(r.subscription_id());
+Reply Subscriptions::unsubscribe(const pb::Unsubscribe& r) {
+  if (!find(r.subscription_id())) return unknown_subscription(r.subscription_id());
+  drop(r.subscription_id());
   return ack();
 }
 
@@ -181,23 +171,23 @@ Refusal follows_its_stream(std::uint32_t id) {
 }
 }  // namespace
 
-Reply RequestHandler::pause(const pb::Pause& r) {
-  Subscription* s = find_subscription(r.subscription_id());
+Reply Subscriptions::pause(const pb::Pause& r) {
+  Subscription* s = find(r.subscription_id());
   if (!s) return unknown_subscription(r.subscription_id());
   if (s->multicast) return follows_its_stream(r.subscription_id());
   detach(*s)->pause();
   return ack();
 }
 
-Reply RequestHandler::resume(const pb::Resume& r) {
-  Subscription* s = find_subscription(r.subscription_id());
+Reply Subscriptions::resume(const pb::Resume& r) {
+  Subscription* s = find(r.subscription_id());
   if (!s) return unknown_subscription(r.subscription_id());
   s->stream->resume();
   return ack();
 }
 
-Reply RequestHandler::seek(const pb::Seek& r) {
-  Subscription* s = find_subscription(r.subscription_id());
+Reply Subscriptions::seek(const pb::Seek& r) {
+  Subscription* s = find(r.subscription_id());
   if (!s) return unknown_subscription(r.subscription_id());
   if (s->multicast) return follows_its_stream(r.subscription_id());
   if (s->stream->live()) {
@@ -214,28 +204,28 @@ Reply RequestHandler::seek(const pb::Seek& r) {
   return ack();
 }
 
-RequestHandler::Subscription* RequestHandler::find_subscription(std::uint32_t id) {
+Subscriptions::Subscription* Subscriptions::find(std::uint32_t id) {
   auto it = subs_.find(id);
   return it == subs_.end() ? nullptr : &it->second;
 }
 
-std::shared_ptr<Stream> RequestHandler::detach(Subscription& s) {
-  auto stream = services_.streams.detach(s.stream, s.target.get());
+std::shared_ptr<Stream> Subscriptions::detach(Subscription& s) {
+  auto stream = link_.services.streams.detach(s.stream, s.target.get());
   // A live stream's copy is fed by the same source from now on.
   if (stream != s.stream && stream->live()) {
-    const View* v = find_view(s.view_id);
+    const View* v = views_.find(s.view_id);
     if (auto source = v ? v->live_source() : nullptr) source->attach(stream);
   }
   s.stream = std::move(stream);
   return s.stream;
 }
 
-void RequestHandler::attach_live(LiveSource& source, const std::shared_ptr<Stream>& stream) {
+void Subscriptions::attach_live(LiveSource& source, const std::shared_ptr<Stream>& stream) {
   source.attach(stream);
   // A subscriber joining a running source starts at its newest frame (after
   // the reply to its Subscribe, which is being written).
   if (source.frames() > 0) {
-    net::post(services_.io, [weak_stream = std::weak_ptr<Stream>(stream), weak_source = source.weak_from_this()] {
+    net::post(link_.services.io, [weak_stream = std::weak_ptr<Stream>(stream), weak_source = source.weak_from_this()] {
       auto s = weak_stream.lock();
       auto l = weak_source.lock();
       if (s && l) l->send_newest(*s);
@@ -243,22 +233,22 @@ void RequestHandler::attach_live(LiveSource& source, const std::shared_ptr<Strea
   }
 }
 
-void RequestHandler::drop_subscription(std::uint32_t id) {
+void Subscriptions::drop(std::uint32_t id) {
   auto it = subs_.find(id);
   if (it == subs_.end()) return;
   Subscription& s = it->second;
   s.stream->remove(s.target.get());
   if (s.stream->idle()) s.stream->stop();
-  if (auto c = connection_.lock()) c->discard_frames(id);
-  services_.admission.release_rate(s.rate_mhz);
+  if (auto c = link_.connection()) c->discard_frames(id);
+  link_.services.admission.release_rate(s.rate_mhz);
   subs_.erase(it);
 }
 
-void RequestHandler::view_changed(const View& v) {
+void Subscriptions::view_changed(const View& v) {
   std::vector<std::pair<std::uint32_t, std::string>> ended;
   for (auto& [id, sub] : subs_) {
     if (sub.view_id != v.id()) continue;
-    auto joints = resolve_joints(v, sub.joint_names);
+    auto joints = views_.resolve_joints(v, sub.joint_names);
     if (!joints.ok()) {
       ended.emplace_back(id, "the view changed: " + joints.error().message);
       continue;
@@ -272,7 +262,7 @@ void RequestHandler::view_changed(const View& v) {
     // after every frame of the old one: those still waiting go first.
     if (v.content()->skeleton_version != sub.skeleton_version) {
       sub.skeleton_version = v.content()->skeleton_version;
-      if (auto conn = connection_.lock()) conn->send_frames_now(id);
+      if (auto conn = link_.connection()) conn->send_frames_now(id);
       pb::ServerMessage m;
       auto* c = m.mutable_skeleton_changed();
       c->set_subscription_id(id);
@@ -282,7 +272,7 @@ void RequestHandler::view_changed(const View& v) {
       for (int j : *joints) c->add_joints(static_cast<std::uint32_t>(j));
       const int viewer = v.content()->relative_to;
       if (viewer >= 0) c->set_relative_to(v.motion().skeleton.joint(viewer).name);
-      send(m);
+      link_.send(m);
     }
     detach(sub)->set_content(v.content(), std::move(joints).value());
   }
@@ -290,12 +280,12 @@ void RequestHandler::view_changed(const View& v) {
     pb::ServerMessage m;
     m.mutable_subscription_ended()->set_subscription_id(id);
     m.mutable_subscription_ended()->set_reason(reason);
-    drop_subscription(id);
-    send(m);
+    drop(id);
+    link_.send(m);
   }
 }
 
-void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, const std::string& reason) {
+void Subscriptions::subscription_ended(std::uint32_t id, std::uint64_t sent, const std::string& reason) {
   auto it = subs_.find(id);
   if (it == subs_.end()) return;
   Subscription& s = it->second;
@@ -303,26 +293,38 @@ void RequestHandler::subscription_ended(std::uint32_t id, std::uint64_t sent, co
   m.mutable_subscription_ended()->set_subscription_id(id);
   m.mutable_subscription_ended()->set_frames_sent(sent);
   // The frames still waiting go out before the end notice.
-  auto c = connection_.lock();
+  auto c = link_.connection();
   const std::uint64_t stale = c ? c->end_frames(id) : 0;
   m.mutable_subscription_ended()->set_frames_dropped(s.target->dropped() + stale);
   m.mutable_subscription_ended()->set_frames_stale(stale);
   m.mutable_subscription_ended()->set_frames_skipped(s.target->late_skipped());
   m.mutable_subscription_ended()->set_reason(reason);
   s.stream->remove(s.target.get());
-  services_.admission.release_rate(s.rate_mhz);
+  link_.services.admission.release_rate(s.rate_mhz);
   subs_.erase(it);
-  send(m);
+  link_.send(m);
 }
 
-void RequestHandler::udp_registered(const udp::endpoint& ep) {
-  if (stopped_) return;
-  const bool first = !udp_->endpoint || *udp_->endpoint != ep;
-  udp_->endpoint = ep;
-  if (first) spdlog::info("conn {}: UDP endpoint {}:{} registered", connection_id_, ep.address().to_string(), ep.port());
-  pb::ServerMessage m;
-  m.mutable_udp_registered()->set_endpoint(ep.address().to_string() + ":" + std::to_string(ep.port()));
-  send(m);
+void Subscriptions::drop_view(std::uint32_t view_id) {
+  std::vector<std::uint32_t> ids;
+  for (const auto& [id, sub] : subs_) {
+    if (sub.view_id == view_id) ids.push_back(id);
+  }
+  for (auto id : ids) drop(id);
+}
+
+void Subscriptions::clear() {
+  for (auto& [id, sub] : subs_) {
+    sub.stream->remove(sub.target.get());
+    link_.services.admission.release_rate(sub.rate_mhz);
+  }
+  subs_.clear();
+}
+
+std::pair<std::size_t, std::size_t> Subscriptions::count() const {
+  std::size_t over_udp = 0;
+  for (const auto& [id, s] : subs_) over_udp += dynamic_cast<const UdpTarget*>(s.target.get()) != nullptr ? 1 : 0;
+  return {subs_.size() - over_udp, over_udp};
 }
 
 }  // namespace gmr::server

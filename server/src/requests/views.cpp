@@ -1,24 +1,19 @@
-// RequestHandler's views (docs/protocol.md, "Views"): the library listed,
-// views made of its motions and of live sources, their structural edits (on
-// the edit thread when long), their coordinates, and frame queries.
-#include <spdlog/spdlog.h>
+#include "requests/views.h"
 
 #include <Eigen/Geometry>
-#include <exception>
-#include <new>
 #include <utility>
 
 #include "gmr/view/engine_pose.h"
 #include "gmr/view/viewpoint.h"
 #include "gmr/wire/convert.h"
-#include "requests/request_handler.h"
+#include "live/live_source.h"
 
 namespace gmr::server {
 
-Reply RequestHandler::list_motions() const {
+Reply Views::list_motions() const {
   pb::ServerMessage out;
   auto* list = out.mutable_motions();
-  for (const auto& e : services_.catalog.library()) {
+  for (const auto& e : link_.services.catalog.library()) {
     auto* m = list->add_motions();
     m->set_name(e.name);
     m->set_joint_count(static_cast<std::uint32_t>(e.motion->skeleton.size()));
@@ -27,7 +22,7 @@ Reply RequestHandler::list_motions() const {
     m->set_source(e.source);
     m->set_metres_per_unit(e.metres_per_unit);
   }
-  for (const auto& [name, source] : services_.catalog.live_sources()) {
+  for (const auto& [name, source] : link_.services.catalog.live_sources()) {
     auto* m = list->add_motions();
     m->set_name(name);
     m->set_joint_count(static_cast<std::uint32_t>(source->latest()->skeleton.size()));
@@ -40,8 +35,8 @@ Reply RequestHandler::list_motions() const {
   return out;
 }
 
-Reply RequestHandler::get_skeleton(const pb::GetSkeleton& r) const {
-  const Catalog::Found found = services_.catalog.find(r.motion());
+Reply Views::get_skeleton(const pb::GetSkeleton& r) const {
+  const Catalog::Found found = link_.services.catalog.find(r.motion());
   if (!found) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
   if (const auto& source = found.live) {
     const auto basis = output_basis_of(r.conventions(), source->metres_per_unit());
@@ -60,103 +55,36 @@ Reply RequestHandler::get_skeleton(const pb::GetSkeleton& r) const {
   return out;
 }
 
-Reply RequestHandler::create_view(const pb::CreateView& r) {
-  const Catalog::Found found = services_.catalog.find(r.motion());
+Reply Views::create(const pb::CreateView& r) {
+  const Catalog::Found found = link_.services.catalog.find(r.motion());
   if (!found) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown motion '" + r.motion() + "'"};
-  if (views_.size() >= services_.cfg.max_views_per_connection) {
+  if (views_.size() >= link_.services.cfg.max_views_per_connection) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
-                   "at most " + std::to_string(services_.cfg.max_views_per_connection) + " views per connection"};
+                   "at most " + std::to_string(link_.services.cfg.max_views_per_connection) + " views per connection"};
   }
   const std::uint32_t id = next_view_++;
   auto v = found.live ? std::make_unique<View>(id, found.live->name(), found.live->latest(), found.live)
                       : std::make_unique<View>(id, found.entry->name, found.entry->motion,
-                                               services_.catalog.compiled_form(found.index));
+                                               link_.services.catalog.compiled_form(found.index));
   pb::ServerMessage out;
-  *out.mutable_view() = view_info(*v);
+  *out.mutable_view() = info(*v);
   views_.emplace(id, std::move(v));
   return out;
 }
 
-Reply RequestHandler::close_view(const pb::CloseView& r) {
-  View* v = find_view(r.view_id());
-  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
-  std::vector<std::uint32_t> ids;
-  for (auto& [id, sub] : subs_) {
-    if (sub.view_id == v->id()) ids.push_back(id);
-  }
-  for (auto id : ids) drop_subscription(id);
-  forget_view(*v);
-  views_.erase(v->id());
-  pb::ServerMessage out;
-  out.mutable_ack();
-  return out;
-}
-
-namespace {
-
-// A library error as the protocol's: NOT_FOUND for an unknown joint,
-// RESOURCE_EXHAUSTED for memory, FAILED_PRECONDITION for anything else the
-// view refuses (the view is left as it was).
-Refusal refusal_of(const Error& e) {
-  switch (e.kind) {
-    case ErrorKind::kNotFound: return Refusal{pb::ERROR_CODE_NOT_FOUND, e.to_string()};
-    case ErrorKind::kResourceExhausted: return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, e.to_string()};
-    default: return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, e.to_string()};
-  }
-}
-
-}  // namespace
-
-Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point began, std::uint32_t view_id,
-                                const std::function<Result<ViewEdit>(const View&)>& make, EditDecoration decorate) {
-  View* v = find_view(view_id);
-  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(view_id)};
-  auto edit = make(*v);
-  if (!edit.ok()) return refusal_of(edit.error());
-  // A short motion's edit costs less than a trip to the edit thread.
-  if (edit->values() <= services_.cfg.edit_inline_values) return commit_edit(view_id, *edit, edit->run(), decorate);
-  // A long one is computed on the edit thread; meanwhile this connection's
-  // requests are not read (they keep their order, and wait in the kernel),
-  // and everyone's frames go on.
-  edit_deferred_ = true;
-  if (auto c = connection_.lock()) c->hold_reading(true);
-  net::post(services_.edit_pool, [self = weak_from_this(), &io = services_.io, edit = std::move(edit).value(), view_id,
-                                decorate, request_id = req.request_id(), kind = request_kind(req), began]() mutable {
-    auto next = [&]() -> Result<std::shared_ptr<const ViewContent>> {
-      try {
-        return edit.run();
-      } catch (const std::bad_alloc&) {
-        return make_error(ErrorKind::kResourceExhausted, "the server ran out of memory computing the edit");
-      } catch (const std::exception& e) {  // nothing may leave the edit thread's handler
-        return make_error(ErrorKind::kFailedPrecondition, std::string("the edit failed: ") + e.what());
-      }
-    }();
-    net::post(io, [self = std::move(self), edit = std::move(edit), next = std::move(next), view_id, decorate,
-                   request_id, kind, began]() mutable {
-      auto handler = self.lock();
-      if (!handler) return;
-      if (handler->stopped_) return;
-      Reply reply = handler->commit_edit(view_id, edit, std::move(next), decorate);
-      handler->answer(request_id, kind, began, std::move(reply));
-      if (auto c = handler->connection_.lock()) c->hold_reading(false);
-    });
-  });
-  return pb::ServerMessage{};
-}
-
-Reply RequestHandler::commit_edit(std::uint32_t view_id, const ViewEdit& edit,
-                                  Result<std::shared_ptr<const ViewContent>> next, EditDecoration decorate) {
-  View* v = find_view(view_id);
-  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(view_id)};
+Reply Views::commit_edit(std::uint32_t view_id, const ViewEdit& edit, Result<std::shared_ptr<const ViewContent>> next,
+                         EditDecoration decorate) {
+  View* v = find(view_id);
+  if (!v) return unknown_view(view_id);
   if (!next.ok()) return refusal_of(next.error());
   const auto before = v->content();
-  const std::uint64_t old_bytes = services_.catalog.owned_bytes(*v);
+  const std::uint64_t old_bytes = link_.services.catalog.owned_bytes(*v);
   if (Status s = v->commit(edit, std::move(next).value()); !s.ok()) return refusal_of(s.error());
   // The view budget: an edit whose copy would pass it is undone and refused.
-  const std::uint64_t new_bytes = services_.catalog.owned_bytes(*v);
-  const ServerConfig& cfg = services_.cfg;
+  const std::uint64_t new_bytes = link_.services.catalog.owned_bytes(*v);
+  const ServerConfig& cfg = link_.services.cfg;
   const std::uint64_t mine = view_bytes_ - old_bytes + new_bytes;
-  const std::uint64_t all = services_.admission.view_bytes() - old_bytes + new_bytes;
+  const std::uint64_t all = link_.services.admission.view_bytes() - old_bytes + new_bytes;
   if (new_bytes > old_bytes && (mine > cfg.max_view_bytes_per_connection || all > cfg.max_view_bytes)) {
     v->restore(before);
     const bool own = mine > cfg.max_view_bytes_per_connection;
@@ -168,27 +96,27 @@ Reply RequestHandler::commit_edit(std::uint32_t view_id, const ViewEdit& edit,
                        ": close views you no longer use"};
   }
   view_bytes_ = mine;
-  services_.admission.set_view_bytes(all);
-  view_changed(*v);
+  link_.services.admission.set_view_bytes(all);
+  if (changed_) changed_(*v);
   pb::ServerMessage out;
-  *out.mutable_view() = view_info(*v);
+  *out.mutable_view() = info(*v);
   if (decorate != nullptr) decorate(edit.report(), *out.mutable_view());
   return out;
 }
 
-Reply RequestHandler::set_coordinates(const pb::SetCoordinates& r) {
-  View* v = find_view(r.view_id());
-  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+Reply Views::set_coordinates(const pb::SetCoordinates& r) {
+  View* v = find(r.view_id());
+  if (!v) return unknown_view(r.view_id());
   if (Status s = v->set_relative_to(r.relative_to()); !s.ok()) return refusal_of(s.error());
-  view_changed(*v);  // the same motion: the same bytes
+  if (changed_) changed_(*v);  // the same motion: the same bytes
   pb::ServerMessage out;
-  *out.mutable_view() = view_info(*v);
+  *out.mutable_view() = info(*v);
   return out;
 }
 
-Reply RequestHandler::query(const pb::QueryFrames& r) const {
-  const View* v = find_view(r.view_id());
-  if (!v) return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(r.view_id())};
+Reply Views::query(const pb::QueryFrames& r) const {
+  const View* v = find(r.view_id());
+  if (!v) return unknown_view(r.view_id());
   // A live view's one frame is its source's newest (the last it had, once
   // the source ended).
   std::shared_ptr<const Motion> newest = v->content()->motion;
@@ -207,17 +135,17 @@ Reply RequestHandler::query(const pb::QueryFrames& r) const {
   }
   auto joints = resolve_joints(*v, {r.joints().begin(), r.joints().end()});
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
-  const auto basis = output_basis_of(r.conventions(), services_.catalog.metres_per_unit(*v));
+  const auto basis = output_basis_of(r.conventions(), link_.services.catalog.metres_per_unit(*v));
   if (!basis.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, basis.error().message};
   // Refuse before computing anything a reply too big to send.
   const std::uint64_t per_frame =
       joints->size() * (3 + (r.orientations() ? 4 : 0) + (r.local_transforms() ? 7 : 0)) * 9 + 8;
   const std::uint64_t estimate = (end - begin) * per_frame + 64;
-  if (estimate > services_.cfg.max_message_bytes) {
+  if (estimate > link_.services.cfg.max_message_bytes) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
                    "a query of " + std::to_string(end - begin) + " frames would take about " +
                        std::to_string(estimate) + " bytes, above the limit of " +
-                       std::to_string(services_.cfg.max_message_bytes) + ": ask for fewer frames"};
+                       std::to_string(link_.services.cfg.max_message_bytes) + ": ask for fewer frames"};
   }
   pb::ServerMessage out;
   auto* b = out.mutable_frames();
@@ -263,18 +191,18 @@ Reply RequestHandler::query(const pb::QueryFrames& r) const {
   return out;
 }
 
-void RequestHandler::forget_view(const View& v) {
-  const std::uint64_t bytes = services_.catalog.owned_bytes(v);
+void Views::forget(const View& v) {
+  const std::uint64_t bytes = link_.services.catalog.owned_bytes(v);
   view_bytes_ -= bytes;
-  services_.admission.release_view_bytes(bytes);
+  link_.services.admission.release_view_bytes(bytes);
 }
 
-View* RequestHandler::find_view(std::uint32_t id) const {
+View* Views::find(std::uint32_t id) const {
   auto it = views_.find(id);
   return it == views_.end() ? nullptr : it->second.get();
 }
 
-Result<std::vector<int>> RequestHandler::resolve_joints(const View& v, const std::vector<std::string>& names) const {
+Result<std::vector<int>> Views::resolve_joints(const View& v, const std::vector<std::string>& names) const {
   std::vector<int> out;
   if (names.empty()) {
     for (int j = 0; j < static_cast<int>(v.motion().skeleton.size()); ++j) out.push_back(j);
@@ -288,7 +216,7 @@ Result<std::vector<int>> RequestHandler::resolve_joints(const View& v, const std
   return out;
 }
 
-pb::ViewInfo RequestHandler::view_info(const View& v) const {
+pb::ViewInfo Views::info(const View& v) const {
   pb::ViewInfo info;
   info.set_view_id(v.id());
   info.set_motion(v.motion_name());
@@ -298,6 +226,18 @@ pb::ViewInfo RequestHandler::view_info(const View& v) const {
   info.set_frame_count(v.motion().frame_count);
   info.set_frame_time(v.motion().frame_time);
   return info;
+}
+
+void Views::close(std::uint32_t id) {
+  auto it = views_.find(id);
+  if (it == views_.end()) return;
+  forget(*it->second);
+  views_.erase(it);
+}
+
+void Views::clear() {
+  for (const auto& [id, v] : views_) forget(*v);
+  views_.clear();
 }
 
 }  // namespace gmr::server

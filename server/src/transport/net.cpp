@@ -53,7 +53,6 @@ bool LogLimiter::allow(std::uint64_t& suppressed) {
   return true;
 }
 
-Refusal refusal(const Error& error) { return Refusal{wire::error_code_for(error.kind), error.to_string()}; }
 
 pb::ServerMessage error_message(std::uint64_t request_id, pb::ErrorCode code, std::string text) {
   pb::ServerMessage m;

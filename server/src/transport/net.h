@@ -60,8 +60,6 @@ class LogLimiter {
   std::uint64_t suppressed_ = 0;
 };
 
-// A refusal whose code follows the error's kind (wire::error_code_for).
-Refusal refusal(const Error& error);
 // ServerMessage{error}.
 pb::ServerMessage error_message(std::uint64_t request_id, pb::ErrorCode code, std::string text);
 // Writes `refusal` (framed) to a connection the server will not serve, then

@@ -1,0 +1,38 @@
+// Publications: the live sources one session publishes (docs/protocol.md,
+// "Live sources"). A connection with a 'publish' role announces a skeleton,
+// then pushes frames; its sources end when it says so or when it goes away,
+// and a recorded one is written to the record directory then.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+
+#include "gmr/server/auth.h"
+#include "live/live_source.h"
+#include "requests/session_link.h"
+
+namespace gmr::server {
+
+class Publications {
+ public:
+  explicit Publications(SessionLink& link) : link_(link) {}
+
+  // `role`: the session's (publishing needs kPublish).
+  Reply publish(const pb::Publish& r, Role role);
+  Reply publish_frame(const pb::PublishFrame& r);
+  Reply unpublish(const pb::Unpublish& r);
+  // Every source this session publishes ends with `reason`.
+  void end_all(const std::string& reason);
+
+ private:
+  void end(std::uint32_t id, const std::string& reason);
+
+  SessionLink& link_;
+  std::map<std::uint32_t, std::shared_ptr<LiveSource>> publications_;
+  std::map<const LiveSource*, std::string> recordings_;  // of publications_, those recorded: the file
+  std::uint32_t next_publication_ = 1;
+};
+
+}  // namespace gmr::server
