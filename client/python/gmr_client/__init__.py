@@ -5,8 +5,9 @@ Needs Debian's python3-protobuf and python3-numpy. The protocol module
 use the package from the build tree (build/python) or an installed copy.
 """
 
-from .client import (DEFAULT_PORT, PRESETS, PROTOCOL_VERSION, Client, Conventions, Frame, GmrError, MotionInfo,
-                     Publication, QueryResult, Skeleton, Subscription, View)
+from .client import DEFAULT_PORT, PROTOCOL_VERSION, Client
+from .subscriptions import Subscription
+from .values import PRESETS, Conventions, Frame, GmrError, MotionInfo, Publication, QueryResult, Skeleton, View
 
 __all__ = ["Client", "Conventions", "Frame", "GmrError", "MotionInfo", "Publication", "QueryResult", "Skeleton",
            "Subscription", "View", "DEFAULT_PORT", "PRESETS", "PROTOCOL_VERSION"]

@@ -19,341 +19,30 @@ A client with the publish role is also a live source (docs/live.md):
 
         pub = c.publish("lab/tracker", Skeleton.points(names), 1 / 120)
         c.publish_frame(pub, positions)             # (joints, 3), one call per frame
+
+The package is split as the C++ client is: this module is the connection
+and its requests (reads, replies, heartbeats, UDP receive); subscriptions.py
+the subscriptions' bookkeeping and what is delivered to them; values.py the
+values handed out; _wire.py framing and UDP datagrams.
 """
 
 import collections
-import dataclasses
 import select
 import socket
 import time
-from typing import List, Optional, Sequence, Union
+from typing import List, Sequence, Union
 
 import numpy as np
 
 from . import _wire
 from . import stream_pb2 as pb
+from .subscriptions import Subscription, Subscriptions
+from .values import (ConventionsLike, GmrError, MotionInfo, Publication, QueryResult, Skeleton, View, _decode_frame,
+                     _set_conventions, _values)
 
 PROTOCOL_VERSION = 1
 DEFAULT_PORT = 7400
 _DEFAULT_MAX_MESSAGE_BYTES = 4 << 20
-_MAX_QUEUED_FRAMES = 1024  # per subscription; older frames give way (counted)
-_END_GRACE_S = 0.1  # how long an end notice waits for the frames it counts (UDP)
-
-
-def _frames_to_come(end: dict) -> int:
-    """How many frames an ended subscription's client gets: those the server
-    counted against it, less those it dropped or skipped."""
-    return max(0, end["frames_sent"] - end["frames_dropped"] - end["frames_skipped"])
-
-
-_CHANNELS = ["Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"]
-
-
-class GmrError(Exception):
-    """A refusal from the server (`code` is its name, e.g. "NOT_FOUND"), or a
-    broken connection or malformed message (`code` "CONNECTION" or "PROTOCOL")."""
-
-    def __init__(self, code: str, message: str):
-        super().__init__(f"{code}: {message}")
-        self.code = code
-        self.message = message
-
-
-PRESETS = {"native": 0, "unreal": 1, "unity": 2, "blender": 3, "godot": 4, "custom": 5}
-
-
-@dataclasses.dataclass
-class Conventions:
-    """An engine's axes, handedness and unit (docs/protocol.md, "Conventions").
-
-    preset: "native", "unreal", "unity", "blender", "godot" or "custom".
-    For "custom": signed axes (1 = +X, 2 = +Y, 3 = +Z, -1 = -X, ...), handedness
-    and the target's unit in metres. source_metres_per_unit: the motion's unit
-    (0: the library's, or none).
-    """
-
-    preset: str = "native"
-    up: int = 2
-    forward: int = 3
-    left_handed: bool = False
-    target_metres_per_unit: float = 0.0
-    source_metres_per_unit: float = 0.0
-
-    def to_proto(self, out) -> None:
-        if self.preset not in PRESETS:
-            raise ValueError(f"unknown conventions preset '{self.preset}' (one of {', '.join(PRESETS)})")
-        out.preset = PRESETS[self.preset]
-        if self.preset == "custom":
-            out.up = self.up
-            out.forward = self.forward
-            out.left_handed = self.left_handed
-            out.target_metres_per_unit = self.target_metres_per_unit
-        out.source_metres_per_unit = self.source_metres_per_unit
-
-
-ConventionsLike = Union[None, str, Conventions]
-
-
-def _set_conventions(conventions: ConventionsLike, out) -> None:
-    if conventions is None:
-        return
-    if isinstance(conventions, str):
-        conventions = Conventions(preset=conventions)
-    conventions.to_proto(out)
-
-
-@dataclasses.dataclass
-class Skeleton:
-    """Joints in index order, parents before children. The rest pose is each
-    joint's translation and rotation (x, y, z, w) relative to its parent's
-    frame (roots: to the world) with every channel zero, as engine bones."""
-
-    names: List[str]
-    parents: np.ndarray        # (n,) int, -1 for a root
-    soft_parents: np.ndarray   # (n,) int, roots only: the parent a split removed; -1 if none
-    offsets: np.ndarray        # (n, 3)
-    channels: List[List[str]]  # per joint, BVH channel names in order
-    rest_translations: np.ndarray  # (n, 3)
-    rest_rotations: np.ndarray     # (n, 4) x, y, z, w
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    def index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise KeyError(f"no joint '{name}' in this skeleton") from None
-
-    @property
-    def roots(self) -> List[int]:
-        return [j for j, p in enumerate(self.parents) if p < 0]
-
-    @property
-    def channel_count(self) -> int:
-        """Channel values per frame of a motion on this skeleton."""
-        return sum(len(c) for c in self.channels)
-
-    @staticmethod
-    def points(names: Sequence[str]) -> "Skeleton":
-        """Every joint a root with Xposition Yposition Zposition: a motion of
-        world positions (what a marker or tracker system gives), to publish."""
-        n = len(names)
-        return Skeleton(list(names), np.full(n, -1, dtype=np.int32), np.full(n, -1, dtype=np.int32),
-                        np.zeros((n, 3)), [_CHANNELS[:3] for _ in range(n)], np.zeros((n, 3)),
-                        np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
-
-    def to_proto(self, out) -> None:
-        """Writes names, parents, soft parents, offsets and channels into a
-        stream_pb2.Skeleton (the rest pose is the server's to give)."""
-        out.Clear()
-        offsets = np.asarray(self.offsets, dtype=np.float64).reshape(len(self.names), 3)
-        for j, name in enumerate(self.names):
-            m = out.joints.add()
-            m.name = name
-            m.parent = int(self.parents[j])
-            m.soft_parent = int(self.soft_parents[j]) if len(self.soft_parents) else -1
-            m.offset.x, m.offset.y, m.offset.z = (float(v) for v in offsets[j])
-            for c in self.channels[j]:
-                if c not in _CHANNELS:
-                    raise ValueError(f"joint '{name}': unknown channel '{c}' (one of {', '.join(_CHANNELS)})")
-                m.channels.append(_CHANNELS.index(c))
-
-    @staticmethod
-    def from_proto(m) -> "Skeleton":
-        n = len(m.joints)
-        names = [j.name for j in m.joints]
-        parents = np.array([j.parent for j in m.joints], dtype=np.int32)
-        for j, p in enumerate(parents):
-            if not -1 <= p < j:
-                raise GmrError("PROTOCOL", f"joint {j} ('{names[j]}') has parent {p}: parents come before children")
-        offsets = np.array([[j.offset.x, j.offset.y, j.offset.z] for j in m.joints], dtype=np.float64).reshape(n, 3)
-        rest_t = np.array(
-            [[t.x, t.y, t.z] for t in (j.rest_translation if j.HasField("rest_translation") else j.offset for j in m.joints)],
-            dtype=np.float64).reshape(n, 3)
-        rest_q = np.array(
-            [[j.rest_rotation.x, j.rest_rotation.y, j.rest_rotation.z, j.rest_rotation.w]
-             if j.HasField("rest_rotation") else [0.0, 0.0, 0.0, 1.0] for j in m.joints],
-            dtype=np.float64).reshape(n, 4)
-        channels = []
-        for j in m.joints:
-            if any(not 0 <= c < 6 for c in j.channels):
-                raise GmrError("PROTOCOL", f"joint '{j.name}' has an unknown channel type")
-            channels.append([_CHANNELS[c] for c in j.channels])
-        return Skeleton(names, parents, np.array([j.soft_parent for j in m.joints], dtype=np.int32), offsets,
-                        channels, rest_t, rest_q)
-
-
-@dataclasses.dataclass
-class MotionInfo:
-    name: str
-    joint_count: int
-    frame_count: int
-    frame_time: float
-    source: str
-    metres_per_unit: float  # 0: unknown
-
-
-@dataclasses.dataclass
-class Publication:
-    """A live source this client publishes (docs/live.md)."""
-    id: int
-    motion: str     # its name in the server's list: views and subscriptions use it
-    recording: str  # with record=True: the file the server writes when the publication ends
-    channel_count: int
-
-
-@dataclasses.dataclass
-class View:
-    id: int
-    motion: str
-    skeleton_version: int
-    skeleton: Skeleton
-    relative_to: str  # empty: world coordinates
-    frame_count: int
-    frame_time: float
-    removed: List[str]
-    join_offset_spread: float
-
-
-@dataclasses.dataclass
-class QueryResult:
-    skeleton_version: int
-    begin: int
-    end: int
-    joints: np.ndarray                         # (J,) joint indices of the values
-    positions: np.ndarray                      # (frames, J, 3)
-    orientations: Optional[np.ndarray]         # (frames, J, 4) x y z w, when asked
-    local_rotations: Optional[np.ndarray]      # (frames, J, 4), when asked
-    local_translations: Optional[np.ndarray]   # (frames, J, 3), when asked
-
-
-@dataclasses.dataclass
-class Frame:
-    subscription_id: int
-    view_id: int
-    stream_id: int
-    skeleton_version: int
-    frame_index: int
-    motion_time: float
-    sequence: int
-    server_send_time_ns: int   # when the server encoded it (system_clock ns)
-    server_write_time_ns: int  # when the server handed it to the kernel (0: not stamped)
-    receive_time_ns: int
-    udp: bool
-    positions: np.ndarray                     # (J, 3)
-    orientations: Optional[np.ndarray]        # (J, 4) x y z w
-    local_rotations: Optional[np.ndarray]     # (J, 4)
-    local_translations: Optional[np.ndarray]  # (J, 3)
-
-
-def _values(flat, width: int, count: Optional[int], what: str) -> Optional[np.ndarray]:
-    """A repeated field as (count, width) values; None when empty."""
-    if len(flat) == 0:
-        return None
-    a = np.asarray(flat, dtype=np.float64)
-    if a.size % width != 0 or (count is not None and a.size != count * width):
-        expected = f"{count * width}" if count is not None else f"a multiple of {width}"
-        raise GmrError("PROTOCOL", f"{a.size} {what} values (expected {expected})")
-    return a.reshape(-1, width)
-
-
-def _decode_frame(f, udp: bool) -> Frame:
-    f64 = len(f.positions_f64) > 0
-    positions = _values(f.positions_f64 if f64 else f.positions, 3, None, "position")
-    if positions is None:
-        positions = np.zeros((0, 3))
-    n = positions.shape[0]
-    orientations = _values(f.orientations_f64 if f64 else f.orientations, 4, n, "orientation")
-    local_r = _values(f.local_rotations_f64 if f64 else f.local_rotations, 4, n, "local rotation")
-    local_t = _values(f.local_translations_f64 if f64 else f.local_translations, 3, n, "local translation")
-    if (local_r is None) != (local_t is None):
-        raise GmrError("PROTOCOL", "local rotations without local translations, or the other way round")
-    return Frame(f.subscription_id, f.view_id, f.stream_id, f.skeleton_version, f.frame_index, f.motion_time,
-                 f.sequence, f.server_send_time_ns, f.server_write_time_ns, time.time_ns(), udp, positions,
-                 orientations, local_r, local_t)
-
-
-class Subscription:
-    """A running subscription. Iterate it for its frames (blocking until the
-    next one, ending when the server ends it), or call `latest()` from a loop
-    that must not block. `skeleton`, `joints` and `skeleton_version` follow
-    the server's SkeletonChanged pushes, and every frame handed out is of
-    that version: a frame of another one (a UDP frame of the new version
-    overtaking its SkeletonChanged, an old one still queued behind it, or
-    waiting here unread when the skeleton changed) is dropped and counted in
-    `frames_other_skeleton`."""
-
-    def __init__(self, client: "Client", reply):
-        self._client = client
-        self.id = reply.subscription_id
-        self.view_id = reply.view_id
-        self.skeleton_version = reply.skeleton_version
-        self.joints = np.array(reply.joints, dtype=np.int32)
-        self.rate_hz = reply.rate_hz
-        self.stream_id = reply.stream_id
-        self.joined_running = reply.joined_running
-        self.skeleton = Skeleton.from_proto(reply.skeleton) if reply.HasField("skeleton") else None
-        self.relative_to = reply.relative_to
-        self.ended = None  # dict(reason, frames_sent, frames_dropped, frames_skipped) once ended
-        self.skeleton_changes = 0
-        self.frames_overflowed = 0  # frames this client queued but nobody read in time
-        self.frames_stale = 0       # frames that arrived older than max_staleness (dropped)
-        self.max_age_ns = 0         # 0: no staleness bound
-        self.frames_other_skeleton = 0  # frames of another skeleton version than `skeleton_version` (dropped)
-        self.arrived = 0  # frames that came for it, whatever became of them
-        # The end notice, held while frames it counts are still on their way
-        # (a UDP frame can be overtaken by the TCP notice), until they come or
-        # the grace period is over: `ended` is set after the last frame.
-        self._ending = None
-        self._ending_deadline = 0.0
-        self._frames = collections.deque()
-
-    def _push(self, frame: Frame) -> None:
-        if frame.skeleton_version != self.skeleton_version:
-            self.frames_other_skeleton += 1
-            return
-        if len(self._frames) >= _MAX_QUEUED_FRAMES:
-            self._frames.popleft()
-            self.frames_overflowed += 1
-        self._frames.append(frame)
-
-    def _skeleton_changed(self, c) -> None:
-        self.skeleton_version = c.skeleton_version
-        self.skeleton = Skeleton.from_proto(c.skeleton)
-        self.joints = np.array(c.joints, dtype=np.int32)
-        self.relative_to = c.relative_to
-        self.skeleton_changes += 1
-        kept = [f for f in self._frames if f.skeleton_version == self.skeleton_version]
-        self.frames_other_skeleton += len(self._frames) - len(kept)
-        self._frames = collections.deque(kept)
-
-    def __iter__(self):
-        while True:
-            if self._frames:
-                yield self._frames.popleft()
-            elif self.ended is not None:
-                return
-            else:
-                wait = self._client.timeout
-                if self._ending is not None:
-                    wait = min(wait, max(0.0, self._ending_deadline - time.monotonic()))
-                self._client._pump(wait)
-
-    def frames(self) -> List[Frame]:
-        """Every frame that arrived and was not read yet (reads the sockets first, without blocking)."""
-        self._client.poll(0.0)
-        out = list(self._frames)
-        self._frames.clear()
-        return out
-
-    def latest(self) -> Optional[Frame]:
-        """The newest frame that arrived, dropping older unread ones; None if none (never blocks)."""
-        frames = self.frames()
-        return frames[-1] if frames else None
-
-    def unsubscribe(self) -> None:
-        self._client.unsubscribe(self.id)
 
 
 class Client:
@@ -362,12 +51,7 @@ class Client:
         self.timeout = timeout
         self._next_request = 1
         self._replies = {}
-        self._subs = {}
-        self._early = collections.defaultdict(list)  # frames that came before their Subscribed reply
-        # Pushes about a subscription read in the same batch as its Subscribed
-        # reply (a short one's end notice), before subscribe() registered it.
-        self._early_pushes = []
-        self._subscribing = False
+        self._subs = Subscriptions()
         self._buffer = bytearray()
         self._udp = None
         self._udp_registered = False
@@ -515,33 +199,22 @@ class Client:
         s.max_frames = max_frames
         s.max_staleness_ms = max_staleness_ms if max_staleness_ms > 0 else 0xFFFFFFFF  # 0 on the wire: 100 ms
         _set_conventions(conventions, s.conventions)
-        # Frames can come before the reply is handled (in the same read, or by
-        # UDP): they wait in _early until the subscription exists.
-        self._subscribing = True
+        # Frames and pushes can come before the reply is handled (in the same
+        # read, or by UDP): they wait until the subscription exists.
+        self._subs.subscribing = True
         try:
             reply = self._request(m, "subscribed")
         finally:
-            self._subscribing = False
+            self._subs.subscribing = False
         sub = Subscription(self, reply)
         sub.max_age_ns = max_staleness_ms * 1_000_000 if max_staleness_ms > 0 else 0
-        self._subs[sub.id] = sub
-        for frame in self._early.pop(sub.id, []):
-            sub.arrived += 1
-            sub._push(frame)
-        self._early.clear()
-        pushes, self._early_pushes = self._early_pushes, []
-        for msg in pushes:
+        for msg in self._subs.add(sub):
             self._on_message(msg, udp=False)
         return sub
 
     def unsubscribe(self, subscription: int) -> None:
         self._ask("unsubscribe", "ack", subscription_id=subscription)
-        sub = self._subs.pop(subscription, None)
-        if sub is not None and sub._ending is not None:
-            sub.ended, sub._ending = sub._ending, None
-        if sub is not None and sub.ended is None:
-            sub.ended = {"reason": "unsubscribed", "frames_sent": 0, "frames_dropped": 0, "frames_skipped": 0,
-                         "frames_stale": 0}
+        self._subs.remove(subscription)
 
     def pause(self, subscription: int) -> None:
         self._ask("pause", "ack", subscription_id=subscription)
@@ -689,23 +362,12 @@ class Client:
         return View(v.view_id, v.motion, v.skeleton_version, Skeleton.from_proto(v.skeleton), v.relative_to,
                     v.frame_count, v.frame_time, list(v.removed), v.join_offset_spread)
 
-    def _end(self, sub: "Subscription") -> None:
-        """Gives a held end notice to its subscription (`ended`), which leaves."""
-        sub.ended, sub._ending = sub._ending, None
-        if self._subs.get(sub.id) is sub:
-            del self._subs[sub.id]
-
-    def _expire_endings(self) -> None:
-        now = time.monotonic()
-        for sub in [s for s in self._subs.values() if s._ending is not None and now >= s._ending_deadline]:
-            self._end(sub)
-
     def _pump(self, timeout: float, udp_handshake=None) -> bool:
         """Waits up to `timeout` for data and handles one batch of it, then ends
         the subscriptions whose held end notice's grace is over. True if
         anything was read."""
         got = self._read_some(timeout, udp_handshake)
-        self._expire_endings()
+        self._subs.expire_endings()
         return got
 
     def _read_some(self, timeout: float, udp_handshake) -> bool:
@@ -796,34 +458,13 @@ class Client:
             except GmrError:
                 self.frames_malformed += 1
                 return
-            sub = self._subs.get(frame.subscription_id)
-            if sub is not None:
-                sub.arrived += 1
-                if sub.max_age_ns and frame.receive_time_ns + self.clock_offset_ns - frame.server_send_time_ns > sub.max_age_ns:
-                    sub.frames_stale += 1  # waited in the kernel's buffers while we were not reading
-                else:
-                    sub._push(frame)
-                if sub._ending is not None and sub.arrived >= _frames_to_come(sub._ending):
-                    self._end(sub)
-            elif self._subscribing and len(self._early[frame.subscription_id]) < _MAX_QUEUED_FRAMES:
-                self._early[frame.subscription_id].append(frame)
-        elif which in ("subscription_ended", "skeleton_changed") and self._subscribing and \
-                getattr(msg, which).subscription_id not in self._subs:
-            if len(self._early_pushes) < _MAX_QUEUED_FRAMES:
-                self._early_pushes.append(msg)
+            self._subs.on_frame(frame, self.clock_offset_ns)
+        elif which in ("subscription_ended", "skeleton_changed") and self._subs.hold(msg, which):
+            pass  # handled once its subscription is registered
         elif which == "subscription_ended":
-            e = msg.subscription_ended
-            sub = self._subs.get(e.subscription_id)
-            if sub is not None and sub._ending is None:
-                sub._ending = {"reason": e.reason, "frames_sent": e.frames_sent, "frames_dropped": e.frames_dropped,
-                               "frames_skipped": e.frames_skipped, "frames_stale": e.frames_stale}
-                sub._ending_deadline = time.monotonic() + _END_GRACE_S
-                if sub.arrived >= _frames_to_come(sub._ending):
-                    self._end(sub)
+            self._subs.on_ended(msg.subscription_ended)
         elif which == "skeleton_changed":
-            sub = self._subs.get(msg.skeleton_changed.subscription_id)
-            if sub is not None:
-                sub._skeleton_changed(msg.skeleton_changed)
+            self._subs.on_skeleton_changed(msg.skeleton_changed)
         elif which == "udp_registered":
             self._udp_registered = True
         elif which == "heartbeat":

@@ -1,0 +1,151 @@
+#include "client_impl.h"
+
+namespace gmr::client {
+
+namespace {
+
+// How many frames an ended subscription's client gets: those the server
+// counted against it, less those it dropped (slow client, staleness) or
+// skipped (late server).
+std::uint64_t frames_to_come(const SubscriptionEnd& e) {
+  const std::uint64_t gone = e.frames_dropped + e.frames_skipped;
+  return e.frames_sent > gone ? e.frames_sent - gone : 0;
+}
+
+SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
+  return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason(), e.frames_skipped(),
+                         e.frames_stale()};
+}
+
+}  // namespace
+
+void Client::Impl::on_message(const pb::ServerMessage& m, bool via_udp) {
+  if (m.has_frame()) {
+    if (auto sub = deliver_frame(m.frame(), via_udp)) finish_ending(m.frame().subscription_id(), sub, false);
+    return;
+  }
+  if (m.request_id() != 0) {
+    on_answer(m);
+  } else {
+    on_push(m);
+  }
+}
+
+std::shared_ptr<Client::Impl::Sub> Client::Impl::deliver_frame(const pb::Frame& f, bool via_udp) {
+  std::shared_ptr<Sub> sub;
+  {
+    std::lock_guard lock(mutex);
+    (via_udp ? counters.frames_udp : counters.frames_tcp)++;
+    if (auto it = subs.find(f.subscription_id()); it != subs.end()) {
+      sub = it->second;
+      ++sub->arrived;
+      if (f.skeleton_version() != sub->skeleton_version) {
+        ++counters.frames_other_skeleton;
+        return sub;
+      }
+    } else if (subscribes_in_flight > 0) {
+      if (early_frames.size() == kMaxEarlyFrames) early_frames.pop_front();
+      pb::ServerMessage held;
+      *held.mutable_frame() = f;
+      early_frames.emplace_back(std::move(held), via_udp);
+      (via_udp ? counters.frames_udp : counters.frames_tcp)--;  // counted when replayed
+      return nullptr;
+    }
+  }
+  if (!sub || !sub->on_frame) return sub;
+  const std::int64_t received = now_ns();
+  // Older than its bound (it waited in the kernel's buffers while this
+  // client was not reading): dropped, counted.
+  if (sub->max_age_ns > 0 && received + hello.clock_offset_ns - f.server_send_time_ns() > sub->max_age_ns) {
+    std::lock_guard lock(mutex);
+    ++counters.frames_stale;
+    return sub;
+  }
+  auto decoded = wire::decode_frame(f);
+  if (!decoded.ok()) {
+    std::lock_guard lock(mutex);
+    ++counters.frames_malformed;
+    return sub;
+  }
+  ReceivedFrame r;
+  static_cast<wire::FrameValues&>(r) = std::move(decoded).value();
+  r.receive_time_ns = received;
+  r.udp = via_udp;
+  sub->on_frame(r);
+  return sub;
+}
+
+void Client::Impl::finish_ending(std::uint32_t id, const std::shared_ptr<Sub>& sub, bool now) {
+  std::optional<SubscriptionEnd> end;
+  {
+    std::lock_guard lock(mutex);
+    if (!sub->ending || (!now && sub->arrived < frames_to_come(*sub->ending))) return;
+    end = std::move(sub->ending);
+    sub->ending.reset();
+    if (auto it = subs.find(id); it != subs.end() && it->second == sub) subs.erase(it);
+    if (sub->ending_timer) sub->ending_timer->cancel();
+  }
+  if (sub->on_end) sub->on_end(*end);
+}
+
+void Client::Impl::on_push(const pb::ServerMessage& m) {
+  if (m.has_subscription_ended()) {
+    const std::uint32_t id = m.subscription_ended().subscription_id();
+    SubscriptionEnd end = end_of(m.subscription_ended());
+    std::shared_ptr<Sub> sub;
+    bool held = false;
+    {
+      std::lock_guard lock(mutex);
+      if (auto it = subs.find(id); it != subs.end() && !it->second->ending) {
+        sub = it->second;
+        if (sub->arrived < frames_to_come(end)) {
+          // Frames it counts are still on their way (UDP): wait for them.
+          sub->ending = std::move(end);
+          sub->ending_timer = std::make_shared<net::steady_timer>(strand, kEndGrace);
+          held = true;
+        } else {
+          subs.erase(it);
+        }
+      }
+    }
+    if (held) {
+      sub->ending_timer->async_wait([self = shared_from_this(), id, sub](const boost::system::error_code& ec) {
+        if (!ec) self->finish_ending(id, sub, true);
+      });
+    } else if (sub && sub->on_end) {
+      sub->on_end(end);
+    }
+  } else if (m.has_skeleton_changed()) {
+    const auto& c = m.skeleton_changed();
+    std::shared_ptr<Sub> sub;
+    {
+      std::lock_guard lock(mutex);
+      if (auto it = subs.find(c.subscription_id()); it != subs.end()) sub = it->second;
+    }
+    auto sk = wire::from_proto(c.skeleton());
+    if (sub && sk.ok()) {
+      std::lock_guard lock(mutex);
+      sub->skeleton_version = c.skeleton_version();
+    }
+    if (sub && sub->on_skeleton && sk.ok()) {
+      SkeletonChange change;
+      change.subscription_id = c.subscription_id();
+      change.view_id = c.view_id();
+      change.skeleton_version = c.skeleton_version();
+      change.skeleton = std::move(sk).value();
+      change.rest = wire::rest_from_proto(c.skeleton());
+      for (std::uint32_t j : c.joints()) change.joints.push_back(static_cast<int>(j));
+      change.relative_to = c.relative_to();
+      sub->on_skeleton(change);
+    }
+  } else if (m.has_udp_registered()) {
+    std::lock_guard lock(mutex);
+    udp_registered = true;
+    udp_cv.notify_all();
+  } else if (m.has_error()) {
+    std::lock_guard lock(mutex);
+    close_reason = std::string(wire::error_code_name(m.error().code())) + ": " + m.error().message();
+  }
+}
+
+}  // namespace gmr::client
