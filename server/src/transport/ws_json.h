@@ -15,7 +15,7 @@ namespace gmr::server {
 // directly: MessageToJsonString takes 69 us for a 38-joint float64 frame,
 // parsing it and this 4.6 us (bench/wire_bench.cpp). Parsed back with
 // JsonStringToMessage it gives `m` again, every Frame field included
-// (tests/net/server_http_test.cpp checks each one).
+// (tests/net/http/server_http_test.cpp checks each one).
 std::string frame_to_json(const pb::ServerMessage& m);
 
 // A ServerMessage's bytes as its JSON (a frame through frame_to_json).
