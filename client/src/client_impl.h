@@ -28,7 +28,7 @@
 #include "gmr/wire/convert.h"
 #include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
-#include "gmr/wire/tls_socket.h"
+#include "gmr/asio/tls_socket.h"
 #include "gmr/wire/udp.h"
 
 namespace gmr::client {
@@ -80,7 +80,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   bool own_loop = true;
   std::atomic<bool> closed{false};
   std::optional<net::ssl::context> tls_context;  // options.tls.enabled; outlives the socket
-  wire::TlsSocket socket{net::any_io_executor(strand)};
+  asio::TlsSocket socket{net::any_io_executor(strand)};
   udp::socket udp_socket{strand};
   udp::endpoint server_udp;
   net::steady_timer heartbeat{strand};

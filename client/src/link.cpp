@@ -38,7 +38,7 @@ void Client::Impl::write_next() {
 void Client::Impl::read_prefix() {
   socket.async_read(net::buffer(prefix), [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
     if (ec) {
-      return self->fail(wire::TlsSocket::peer_closed(ec) ? std::string("the server closed the connection")
+      return self->fail(asio::TlsSocket::peer_closed(ec) ? std::string("the server closed the connection")
                                                          : "read failed: " + ec.message());
     }
     const std::uint32_t n = wire::read_length_prefix(self->prefix);

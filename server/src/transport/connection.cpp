@@ -272,7 +272,7 @@ void Connection::read_prefix() {
 void Connection::on_prefix(const boost::system::error_code& ec) {
   if (stopped_) return;
   if (ec) {
-    stop(wire::TlsSocket::peer_closed(ec) ? std::string("the client closed the connection")
+    stop(asio::TlsSocket::peer_closed(ec) ? std::string("the client closed the connection")
                                           : "read failed: " + ec.message());
     return;
   }
@@ -314,7 +314,7 @@ std::optional<std::string> Connection::on_body(const boost::system::error_code& 
   if (ec) {
     spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_,
                  body_expected_);
-    stop(wire::TlsSocket::peer_closed(ec) ? std::string("truncated message") : "read failed: " + ec.message());
+    stop(asio::TlsSocket::peer_closed(ec) ? std::string("truncated message") : "read failed: " + ec.message());
     return std::nullopt;
   }
   last_read_ = Clock::now();

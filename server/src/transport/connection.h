@@ -34,7 +34,7 @@
 #include <string>
 #include <vector>
 
-#include "gmr/wire/tls_socket.h"
+#include "gmr/asio/tls_socket.h"
 #include "transport/io_threads.h"
 #include "transport/link.h"
 #include "transport/net.h"
@@ -112,7 +112,7 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   net::io_context* control_;  // where the Handler and on_closed run
   std::size_t lane_;
   IoThreads* threads_;
-  wire::TlsSocket socket_;
+  asio::TlsSocket socket_;
   std::string peer_;
   std::string peer_address_;  // the IP address alone
   std::shared_ptr<Handler> handler_;

@@ -1,5 +1,7 @@
 // A TCP connection that speaks TLS or not: the server's connections and the
-// client use it alike. Reads and writes go through the TLS stream when there
+// client use it alike. It lives apart from gmr::wire (proto/wire), which has
+// no Asio: this header is the protocol's transport over Asio, shared by the
+// two programs that use Asio. Reads and writes go through the TLS stream when there
 // is one, straight to the socket otherwise; the rest of the code does not
 // care which. Header-only; users link Boost.System and OpenSSL (OpenSSL::SSL).
 #pragma once
@@ -10,7 +12,7 @@
 #include <boost/asio/ssl.hpp>
 #include <variant>
 
-namespace gmr::wire {
+namespace gmr::asio {
 
 class TlsSocket {
  public:
@@ -51,4 +53,4 @@ class TlsSocket {
   std::variant<Tcp, Tls> s_;
 };
 
-}  // namespace gmr::wire
+}  // namespace gmr::asio
