@@ -70,15 +70,16 @@ BENCHMARK(BM_ScalarFloat)->Name("scalar_float/bvh")->Unit(benchmark::kMillisecon
 void run_range(benchmark::State& state, const Motion& m, Layout layout) {
   auto cm = CompiledMotion::compile(m).value();
   std::vector<float> ws(fast::fk_workspace_size(cm)), pos(cm.frame_count() * cm.joint_count() * 3);
-  const FkRangeJob job{.motion = &cm, .begin = 0, .end = cm.frame_count(), .layout = layout, .out_positions = pos,
-                       .workspace = ws};
+  const FkRangeJob job{
+      .motion = &cm, .begin = 0, .end = cm.frame_count(), .layout = layout, .out_positions = pos, .workspace = ws};
   for (auto _ : state) {
     job.run();
     benchmark::DoNotOptimize(pos.data());
     benchmark::ClobberMemory();
   }
   set_counters(state, cm.frame_count(), cm.bytes_per_frame());
-  state.SetLabel(std::string(fast::simd_target_name()) + (layout == Layout::kFrameMajor ? " frame-major" : " joint-major"));
+  state.SetLabel(std::string(fast::simd_target_name()) +
+                 (layout == Layout::kFrameMajor ? " frame-major" : " joint-major"));
 }
 
 void BM_FastBvh(benchmark::State& state) { run_range(state, bvh(), static_cast<Layout>(state.range(0))); }
@@ -96,9 +97,12 @@ void BM_FastBvhInL2(benchmark::State& state) {
   std::vector<float> ws(fast::fk_workspace_size(cm)), pos(kRange * kRanges * cm.joint_count() * 3);
   std::vector<FkRangeJob> jobs;
   for (std::size_t r = 0; r < kRanges; ++r) {
-    jobs.push_back(FkRangeJob{.motion = &cm, .begin = r * kRange, .end = (r + 1) * kRange, .layout = layout,
+    jobs.push_back(FkRangeJob{.motion = &cm,
+                              .begin = r * kRange,
+                              .end = (r + 1) * kRange,
+                              .layout = layout,
                               .out_positions = std::span<float>(pos).subspan(r * kRange * cm.joint_count() * 3,
-                                                                            kRange * cm.joint_count() * 3),
+                                                                             kRange * cm.joint_count() * 3),
                               .workspace = ws});
   }
   for (auto _ : state) {
@@ -107,9 +111,15 @@ void BM_FastBvhInL2(benchmark::State& state) {
     benchmark::ClobberMemory();
   }
   set_counters(state, kRange * kRanges, cm.bytes_per_frame());
-  state.SetLabel(std::string(fast::simd_target_name()) + (layout == Layout::kFrameMajor ? " frame-major" : " joint-major"));
+  state.SetLabel(std::string(fast::simd_target_name()) +
+                 (layout == Layout::kFrameMajor ? " frame-major" : " joint-major"));
 }
-BENCHMARK(BM_FastBvhInL2)->Name("fast/bvh_in_l2")->ArgName("joint_major")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_FastBvhInL2)
+    ->Name("fast/bvh_in_l2")
+    ->ArgName("joint_major")
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMicrosecond);
 
 // k roots: 1 (the conversion's own), a few, many, and every joint.
 void BM_FastGmrRoots(benchmark::State& state) {
@@ -211,9 +221,15 @@ void BM_Memcpy(benchmark::State& state) {
     benchmark::ClobberMemory();
   }
   set_counters(state, frames, floats * sizeof(float));
-  state.SetBytesProcessed(static_cast<std::int64_t>(state.iterations()) * static_cast<std::int64_t>(src.size() * sizeof(float)));
+  state.SetBytesProcessed(static_cast<std::int64_t>(state.iterations()) *
+                          static_cast<std::int64_t>(src.size() * sizeof(float)));
 }
-BENCHMARK(BM_Memcpy)->Name("memcpy_positions")->ArgName("frames")->Arg(2752)->Arg(2752 * 64)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_Memcpy)
+    ->Name("memcpy_positions")
+    ->ArgName("frames")
+    ->Arg(2752)
+    ->Arg(2752 * 64)
+    ->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 }  // namespace gmr::bench

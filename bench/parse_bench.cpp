@@ -94,7 +94,8 @@ BENCHMARK(BM_ParseGmrb)->Name("parse/gmrb_memory")->ArgName("repeat")->Arg(1)->A
 void BM_ReadGmrb(benchmark::State& state) {
   const std::filesystem::path path =
       std::filesystem::temp_directory_path() / ("gmr_parse_bench_" + std::to_string(state.range(0)) + ".gmrb");
-  if (!write_gmrb(repeated_gmr(static_cast<std::size_t>(state.range(0))), path).ok()) die("cannot write " + path.string());
+  if (!write_gmrb(repeated_gmr(static_cast<std::size_t>(state.range(0))), path).ok())
+    die("cannot write " + path.string());
   const auto size = std::filesystem::file_size(path);
   for (auto _ : state) {
     auto m = read_gmrb(path);

@@ -20,9 +20,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   for (std::size_t f = 0; f < m.frame_count; ++f) {
     for (std::size_t i = 0; i < m.names.size(); ++i) {
       const double a = 0.3 * static_cast<double>(f) + static_cast<double>(i);
-      m.positions.insert(m.positions.end(), {100 * std::cos(a) + static_cast<double>(i * 37 % 101),
-                                             100 * std::sin(a) + static_cast<double>(f),
-                                             static_cast<double>(i * 13 % 29) * 10});
+      m.positions.insert(m.positions.end(),
+                         {100 * std::cos(a) + static_cast<double>(i * 37 % 101),
+                          100 * std::sin(a) + static_cast<double>(f), static_cast<double>(i * 13 % 29) * 10});
     }
   }
   auto solved = gmr::solve_markers(m, *model);

@@ -26,6 +26,7 @@ packages=(
   python3-prometheus-client # the metrics test parses /metrics with Prometheus's own parser
   chromium                  # the viewer test: the page in a real headless browser
   clang libclang-rt-14-dev  # the sanitizer build uses clang (gmr builds with GCC and clang)
+  clang-format              # the C and C++ style, checked on every file (scripts/check-format.sh)
   blender                   # the interop test: Blender's own BVH importer reads what gmr writes
   nodejs npm                # the interop test: three.js's BVHLoader (npm, tests/interop/package.json)
   libassimp-dev             # the interop test: Assimp's BVH importer

@@ -41,7 +41,8 @@ std::string default_web_root() {
 
 int main(int argc, char** argv) {
   using namespace gmr::server;
-  CLI::App app{"gmr-server: streams GMR motions over TCP, UDP and WebSocket, with a browser viewer and /metrics on HTTP"};
+  CLI::App app{
+      "gmr-server: streams GMR motions over TCP, UDP and WebSocket, with a browser viewer and /metrics on HTTP"};
   ServerConfig cfg;
   cfg.port = 7400;  // the port the gmr command, gmr-load and docker/ expect by default
   std::string library_dir;
@@ -55,8 +56,10 @@ int main(int argc, char** argv) {
   long long handshake_ms = cfg.handshake_timeout.count();
   app.add_option("--library", library_dir, "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library)");
   app.add_option("--port", cfg.port, "TCP port (0: any free port)")->capture_default_str();
-  app.add_option("--udp-port", cfg.udp_port, "UDP port (default: the TCP port number, or any free port with --port 0; 0: any free port)");
-  app.add_option("--bind", cfg.bind_address, "Address to listen on (loopback unless told otherwise)")->capture_default_str();
+  app.add_option("--udp-port", cfg.udp_port,
+                 "UDP port (default: the TCP port number, or any free port with --port 0; 0: any free port)");
+  app.add_option("--bind", cfg.bind_address, "Address to listen on (loopback unless told otherwise)")
+      ->capture_default_str();
   app.add_option("--max-message-bytes", cfg.max_message_bytes, "Largest message either way")->capture_default_str();
   app.add_option("--max-connections", cfg.max_connections, "Connections served at once")->capture_default_str();
   app.add_option("--io-threads", cfg.io_threads,
@@ -134,8 +137,10 @@ int main(int argc, char** argv) {
                  "SO_SNDBUF per connection in bytes (0: the kernel's autotuning)")
       ->capture_default_str();
   app.add_option("--idle-timeout-ms", idle_ms, "Close a connection silent for this long")->capture_default_str();
-  app.add_option("--heartbeat-ms", heartbeat_ms, "Send a heartbeat after this long without writing")->capture_default_str();
-  app.add_option("--write-timeout-ms", write_ms, "Close a connection whose write stalls this long")->capture_default_str();
+  app.add_option("--heartbeat-ms", heartbeat_ms, "Send a heartbeat after this long without writing")
+      ->capture_default_str();
+  app.add_option("--write-timeout-ms", write_ms, "Close a connection whose write stalls this long")
+      ->capture_default_str();
   app.add_option("--congested-after-ms", congested_ms,
                  "Compute no frames for a subscription whose frames have waited this long behind a stalled write "
                  "(or UDP lane)")
@@ -153,7 +158,8 @@ int main(int argc, char** argv) {
   app.add_option("--record-dir", cfg.record_dir,
                  "Write live sources that ask to be recorded here, as .gmrb, when they end")
       ->check(CLI::ExistingDirectory);
-  app.add_option("--max-record-bytes", cfg.max_record_bytes, "Values one recording may hold; past them it stops growing")
+  app.add_option("--max-record-bytes", cfg.max_record_bytes,
+                 "Values one recording may hold; past them it stops growing")
       ->capture_default_str();
   app.add_option("--multicast-group", cfg.multicast_group,
                  "IPv4 multicast group (239.255.74.1) for shared streams subscribed over multicast (default: none)");
@@ -194,7 +200,8 @@ int main(int argc, char** argv) {
   app.add_option("--allow-origin", cfg.http_allowed_origins,
                  "An origin (http://host:port, or *) besides the server's own whose pages may open the WebSocket; "
                  "repeatable");
-  app.add_option("--max-http-sessions", cfg.max_http_sessions, "HTTP connections open at once (WebSockets count "
+  app.add_option("--max-http-sessions", cfg.max_http_sessions,
+                 "HTTP connections open at once (WebSockets count "
                  "under --max-connections)")
       ->capture_default_str();
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
@@ -310,7 +317,7 @@ int main(int argc, char** argv) {
     boost::asio::io_context signals_io;
     boost::asio::signal_set signals(signals_io, SIGINT, SIGTERM, SIGHUP);
     std::function<void(const boost::system::error_code&, int)> on_signal = [&](const boost::system::error_code& ec,
-                                                                                 int sig) {
+                                                                               int sig) {
       if (ec) return;
       if (sig != SIGHUP) {
         spdlog::info("signal {}: stopping", sig);

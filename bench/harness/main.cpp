@@ -113,14 +113,20 @@ Timing ns_per_frame(const std::function<void()>& run, std::size_t frames, int re
 Timing time_reference(const Motion& m, int repeats) {
   std::vector<Eigen::Vector3d> pos(m.skeleton.size());
   std::vector<Eigen::Matrix3d> world(m.skeleton.size());
-  return ns_per_frame([&] { for (std::size_t f = 0; f < m.frame_count; ++f) compute_frame(m, f, pos, world); },
-                      m.frame_count, repeats);
+  return ns_per_frame(
+      [&] {
+        for (std::size_t f = 0; f < m.frame_count; ++f) compute_frame(m, f, pos, world);
+      },
+      m.frame_count, repeats);
 }
 
 Timing time_scalar_float(const CompiledMotion& cm, int repeats) {
   std::vector<float> ws(fast::fk_workspace_size(cm)), pos(cm.joint_count() * 3);
-  return ns_per_frame([&] { for (std::size_t f = 0; f < cm.frame_count(); ++f) fast::scalar_float_frame(cm, f, pos, ws); },
-                      cm.frame_count(), repeats);
+  return ns_per_frame(
+      [&] {
+        for (std::size_t f = 0; f < cm.frame_count(); ++f) fast::scalar_float_frame(cm, f, pos, ws);
+      },
+      cm.frame_count(), repeats);
 }
 
 Timing time_range(const CompiledMotion& cm, Layout layout, int repeats) {
@@ -306,7 +312,8 @@ std::vector<Row> parse_rows(const std::string& csv, const std::string& label) {
       if (f.size() != 7) throw std::invalid_argument("fields");
       rows.push_back(Row{f[0], std::stoul(f[1]), std::stoul(f[2]), std::stoul(f[4]), f[3], std::stod(f[6])});
     } catch (const std::exception&) {
-      throw CommandError(label + ":" + std::to_string(number) + ": expected file,frames,joints,method,roots,set,ns_per_frame");
+      throw CommandError(label + ":" + std::to_string(number) +
+                         ": expected file,frames,joints,method,roots,set,ns_per_frame");
     }
   }
   return rows;
@@ -348,7 +355,8 @@ void plot_figure4(const std::string& csv, const std::string& png, const std::str
     return v.size() % 2 ? v[h] : (v[h - 1] + v[h]) / 2;
   };
   std::string data;
-  for (const auto& [k, by_file] : gmr) data += std::to_string(k) + " " + format_double(median_over_files(by_file)) + "\n";
+  for (const auto& [k, by_file] : gmr)
+    data += std::to_string(k) + " " + format_double(median_over_files(by_file)) + "\n";
   const auto line = [&](const std::string& method, const std::string& title) {
     const auto it = bvh.find(method);
     if (it == bvh.end()) return std::string();
@@ -357,13 +365,18 @@ void plot_figure4(const std::string& csv, const std::string& png, const std::str
   const fs::path tmp = fs::path(png).parent_path() / ("." + fs::path(png).filename().string() + ".tmp.png");
   const std::string script =
       "set terminal pngcairo size 960,600 font ',11'\n"
-      "set output " + gp_quote(tmp.string()) + "\n"
-      "set title \"Positions of every joint per frame: GMR with k roots vs BVH\\n" + std::to_string(best) +
-      " files with a " + std::to_string(joints) + "-joint skeleton (median over files), random root sets per k, " +
-      fast::simd_target_name() + "\"\n"
+      "set output " +
+      gp_quote(tmp.string()) +
+      "\n"
+      "set title \"Positions of every joint per frame: GMR with k roots vs BVH\\n" +
+      std::to_string(best) + " files with a " + std::to_string(joints) +
+      "-joint skeleton (median over files), random root sets per k, " + fast::simd_target_name() +
+      "\"\n"
       "set xlabel 'number of roots k'\nset ylabel 'ns per frame (log scale)'\n"
       "set logscale y\nset grid\nset key outside bottom center horizontal\n"
-      "$gmr << EOD\n" + data + "EOD\n"
+      "$gmr << EOD\n" +
+      data +
+      "EOD\n"
       "plot $gmr using 1:2 with linespoints pt 7 ps 0.7 title 'GMR, fast SIMD (mean of the sets per k)'" +
       line("bvh_fast", "BVH, fast SIMD") + line("bvh_scalar_float", "BVH, scalar float") +
       line("bvh_reference_double", "BVH, reference double") + "\n";
@@ -412,7 +425,8 @@ void run_figure4(const Figure4Options& o) {
     const std::string name = path.lexically_relative(o.dir).string();
     const auto row = [&](const std::string& method, std::size_t roots, int set, double ns) {
       csv += name + "," + std::to_string(post.frame_count) + "," + std::to_string(n) + "," + method + "," +
-             std::to_string(roots) + "," + std::to_string(set) + "," + format_double(std::round(ns * 100.0) / 100.0) + "\n";
+             std::to_string(roots) + "," + std::to_string(set) + "," + format_double(std::round(ns * 100.0) / 100.0) +
+             "\n";
     };
     const CompiledMotion bvh = compile(post);
     const double ref = time_reference(post, o.repeat).median;
@@ -450,7 +464,8 @@ void add_commands(CLI::App& bench) {
     CLI::App* cmd = bench.add_subcommand("fk", "ns per frame of every FK path on one motion file");
     cmd->add_option("FILE", o->file, "Motion file (.bvh, .gmr, .gmrb, .amc)")->required();
     cmd->add_flag("--json", o->json, "One JSON object on stdout");
-    cmd->add_option("--repeat", o->repeat, "Timed samples per path (median and fastest reported)")->capture_default_str();
+    cmd->add_option("--repeat", o->repeat, "Timed samples per path (median and fastest reported)")
+        ->capture_default_str();
     cmd->callback([o] { run_fk(*o); });
   }
   {

@@ -97,7 +97,7 @@ struct Slot {
 struct Figures {
   std::atomic<std::uint64_t> connects{0}, connect_failures{0}, hostile{0};
   std::mutex mutex;
-  std::vector<double> connect_ms;  // connect + view + edit + subscribe, this window
+  std::vector<double> connect_ms;     // connect + view + edit + subscribe, this window
   std::vector<std::string> failures;  // the first few, for the report
 };
 
@@ -132,7 +132,8 @@ Slot start_client(const gmr::client::ClientOptions& base, double rate, std::mt19
       if (!e.ok()) return fail(e.error().to_string());
       break;
     }
-    default: break;
+    default:
+      break;
   }
   gmr::client::SubscribeOptions so;
   so.loop = true;
@@ -413,8 +414,8 @@ int main(int argc, char** argv) {
     h.release(true);
   });
 
-  std::printf("%7s %9s %6s %10s %8s %8s %8s %8s %10s %8s %8s %8s\n", "t(s)", "RSS(MB)", "fds", "frames/s",
-              "gaps/s", "p50(ms)", "p99(ms)", "max(ms)", "join99(ms)", "joined", "failed", "hostile");
+  std::printf("%7s %9s %6s %10s %8s %8s %8s %8s %10s %8s %8s %8s\n", "t(s)", "RSS(MB)", "fds", "frames/s", "gaps/s",
+              "p50(ms)", "p99(ms)", "max(ms)", "join99(ms)", "joined", "failed", "hostile");
   std::vector<Sample> samples;
   const auto t0 = Clock::now();
   auto next_sample = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(sample_every));
@@ -499,9 +500,9 @@ int main(int argc, char** argv) {
     std::ofstream out(csv);
     out << "t_s,rss_mb,fds,frames_per_s,gaps_per_s,p50_ms,p99_ms,max_ms,join_p99_ms,joined,failed,hostile\n";
     for (const auto& x : samples) {
-      out << x.t << ',' << x.rss_mb << ',' << x.fds << ',' << x.frames_per_s << ',' << x.gaps_per_s << ','
-          << x.p50_ms << ',' << x.p99_ms << ',' << x.max_ms << ',' << x.connect_p99_ms << ',' << x.connects << ','
-          << x.failures << ',' << x.hostile << '\n';
+      out << x.t << ',' << x.rss_mb << ',' << x.fds << ',' << x.frames_per_s << ',' << x.gaps_per_s << ',' << x.p50_ms
+          << ',' << x.p99_ms << ',' << x.max_ms << ',' << x.connect_p99_ms << ',' << x.connects << ',' << x.failures
+          << ',' << x.hostile << '\n';
     }
   }
   // After the first minute (warm caches, every stream started): the trend.
@@ -518,9 +519,10 @@ int main(int argc, char** argv) {
     fds_max = std::max(fds_max, x.fds);
     p99_max = std::max(p99_max, x.p99_ms);
   }
-  std::printf("\nsummary of the samples after the first minute (%zu): RSS %.1f-%.1f MB, slope %+.2f MB/min; fds %d-%d; "
-              "worst window p99 %.2f ms\n",
-              settled.size(), rss_min, rss_max, slope_mb_per_minute(settled), fds_min, fds_max, p99_max);
+  std::printf(
+      "\nsummary of the samples after the first minute (%zu): RSS %.1f-%.1f MB, slope %+.2f MB/min; fds %d-%d; "
+      "worst window p99 %.2f ms\n",
+      settled.size(), rss_min, rss_max, slope_mb_per_minute(settled), fds_min, fds_max, p99_max);
   std::printf("clients joined %llu, failed %llu; hostile actions %llu\n",
               static_cast<unsigned long long>(figures.connects.load()),
               static_cast<unsigned long long>(figures.connect_failures.load()),

@@ -41,7 +41,7 @@ struct InfoOptions {
   std::string file;
   std::string asf;
   std::string model;  // marker input: a skeleton model to fit (built-in name or file)
-  double fps = 0.0;  // .amc input: frames per second (0: 120)
+  double fps = 0.0;   // .amc input: frames per second (0: 120)
 };
 
 void run_info(const InfoOptions& o) {
@@ -59,7 +59,7 @@ void run_info(const InfoOptions& o) {
   out += "file:        " + o.file + "\n";
   out += std::string("convention:  ") +
          (m.convention == Convention::kPostRotation ? "post-rotation (BVH: a joint's rotation moves its children)"
-                                                     : "pre-rotation (GMR: a joint's rotation moves the joint)") +
+                                                    : "pre-rotation (GMR: a joint's rotation moves the joint)") +
          "\n";
   out += "joints:      " + std::to_string(sk.size()) + " (" + std::to_string(leaves) + " leaves)\n";
   out += "roots:       " + std::to_string(sk.roots().size()) + " (" + roots + ")\n";
@@ -103,11 +103,11 @@ struct ConvertOptions {
   std::string in;
   std::string out;
   std::string asf;
-  double fps = 0.0;  // .amc input: frames per second (0: 120)
-  bool force = false;  // .amc output: replace an .asf beside it that holds another skeleton
+  double fps = 0.0;          // .amc input: frames per second (0: 120)
+  bool force = false;        // .amc output: replace an .asf beside it that holds another skeleton
   bool single_root = false;  // .bvh output: a forest as one ROOT
-  std::string model;  // marker input: the skeleton model (built-in name or file)
-  std::string roots;  // marker input with a model: the essential joints, A,B
+  std::string model;         // marker input: the skeleton model (built-in name or file)
+  std::string roots;         // marker input with a model: the essential joints, A,B
 };
 
 void run_convert(const ConvertOptions& o) {
@@ -135,7 +135,7 @@ struct PositionsOptions {
   std::string frames = ":";
   std::string orientations;  // "", "quat" or "matrix"
   std::string model;         // marker input: the skeleton model (built-in name or file)
-  ViewOptions view;  // --roots, --strip-dummies, --relative-to (cmd_ops.cpp)
+  ViewOptions view;          // --roots, --strip-dummies, --relative-to (cmd_ops.cpp)
 };
 
 void add_positions_transform_options(CLI::App& cmd, PositionsOptions& o) { add_view_options(cmd, o.view); }

@@ -125,8 +125,10 @@ MarkerSolveResult solve(const MarkerTrajectories& d, const std::string& model_na
 
 Motion marker_motion(const std::string& file, const std::string& model, double& metres_per_unit, Warnings& warnings) {
   if (model.empty()) {
-    throw CommandError(file + ": a marker file gives joint positions through a skeleton model: add --model NAME or "
-                              "--model FILE (built in: " + builtin_names() + ")");
+    throw CommandError(file +
+                       ": a marker file gives joint positions through a skeleton model: add --model NAME or "
+                       "--model FILE (built in: " +
+                       builtin_names() + ")");
   }
   const MarkerTrajectories d = take(load_markers(file, &warnings));
   MarkerSolveResult r = solve(d, model, {}, warnings);
@@ -173,8 +175,9 @@ void run_marker_convert(const std::string& in, const std::string& out, const std
   const std::string ext = lower_extension(out);
   if (ext == ".trc") {
     if (!model.empty() || !roots.empty()) {
-      throw CommandError(out + ": a .trc output keeps the markers; --model and --roots make a motion (.gmr, .gmrb, "
-                               ".bvh, .amc)");
+      throw CommandError(out +
+                         ": a .trc output keeps the markers; --model and --roots make a motion (.gmr, .gmrb, "
+                         ".bvh, .amc)");
     }
     Warnings warnings;
     const MarkerTrajectories d = take(load_markers(in, &warnings));
@@ -183,8 +186,10 @@ void run_marker_convert(const std::string& in, const std::string& out, const std
     return;
   }
   if (model.empty()) {
-    throw CommandError(out + ": markers become a motion through a skeleton model: add --model NAME or --model FILE "
-                             "(built in: " + builtin_names() + "), or write .trc");
+    throw CommandError(out +
+                       ": markers become a motion through a skeleton model: add --model NAME or --model FILE "
+                       "(built in: " +
+                       builtin_names() + "), or write .trc");
   }
   Warnings warnings;
   const MarkerTrajectories d = take(load_markers(in, &warnings));
@@ -195,9 +200,10 @@ void run_marker_convert(const std::string& in, const std::string& out, const std
 
 void add_marker_commands(CLI::App& app) {
   auto o = std::make_shared<MarkersOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "markers", "Print a marker file (.c3d, .trc) as CSV: frame,marker,x,y,z (frames from 0, file units, "
-                 "missing points as empty cells)");
+  CLI::App* cmd =
+      app.add_subcommand("markers",
+                         "Print a marker file (.c3d, .trc) as CSV: frame,marker,x,y,z (frames from 0, file units, "
+                         "missing points as empty cells)");
   cmd->add_option("FILE", o->file, "Marker file (.c3d, .trc)")->required();
   cmd->add_option("--frames", o->frames, "Half-open frame range A:B (frames A to B-1; ':' = all)");
   cmd->callback([o] { run_markers(*o); });

@@ -48,8 +48,8 @@ std::unique_ptr<client::Client> connect(ServerOptions o) {
 // Rows in the motion's own joint order (as `gmr positions` prints them):
 // the view's joints mapped back by name, joints the view lost left out.
 struct RowOrder {
-  Skeleton names;                // unlinked joints, for write_positions_csv_rows
-  std::vector<std::size_t> from; // row r takes value index from[r] of a frame
+  Skeleton names;                 // unlinked joints, for write_positions_csv_rows
+  std::vector<std::size_t> from;  // row r takes value index from[r] of a frame
 };
 RowOrder row_order(const Skeleton& source, const Skeleton& view, const std::vector<int>& joints) {
   RowOrder o;
@@ -102,9 +102,8 @@ void run_skeleton(const ServerOptions& s, const std::string& motion) {
       channels += channel_name(ch);
     }
     std::printf("%s%s  offset %s %s %s%s%s\n", tree_indent(sk.depth(j)).c_str(), jt.name.c_str(),
-                format_double(jt.offset.x()).c_str(),
-                format_double(jt.offset.y()).c_str(), format_double(jt.offset.z()).c_str(),
-                channels.empty() ? "" : "  channels ", channels.c_str());
+                format_double(jt.offset.x()).c_str(), format_double(jt.offset.y()).c_str(),
+                format_double(jt.offset.z()).c_str(), channels.empty() ? "" : "  channels ", channels.c_str());
   }
 }
 
@@ -276,8 +275,8 @@ void run_stream(const StreamOptions& o) {
     st->cv.wait_for(lock, std::chrono::milliseconds(500), [&] { return st->done || !c->connected(); });
     if (o.summary && st->window_frames > 0) {
       const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-      std::printf("t=%6.2fs  frames %6llu  last frame %6llu  seq %6llu  latency avg %.3f ms max %.3f ms  gaps %llu\n", t,
-                  static_cast<unsigned long long>(st->frames), static_cast<unsigned long long>(st->last_frame),
+      std::printf("t=%6.2fs  frames %6llu  last frame %6llu  seq %6llu  latency avg %.3f ms max %.3f ms  gaps %llu\n",
+                  t, static_cast<unsigned long long>(st->frames), static_cast<unsigned long long>(st->last_frame),
                   static_cast<unsigned long long>(st->last_sequence),
                   static_cast<double>(st->window_latency_sum) / static_cast<double>(st->window_frames) / 1e6,
                   static_cast<double>(st->window_latency_max) / 1e6, static_cast<unsigned long long>(st->gaps));
@@ -302,11 +301,12 @@ void run_stream(const StreamOptions& o) {
     // server dropped them), ticks the server skipped being late, and the rest,
     // lost on the way (UDP).
     const std::uint64_t server_side = dropped + skipped;
-    std::printf("done: %llu frames (%s), %llu gaps: %llu dropped for a slow reader, %llu skipped by a late server, "
-                "%llu lost in transit; latency avg %.3f ms, max %.3f ms\n",
-                static_cast<unsigned long long>(frames), reason.c_str(), static_cast<unsigned long long>(gaps),
-                static_cast<unsigned long long>(dropped), static_cast<unsigned long long>(skipped),
-                static_cast<unsigned long long>(gaps > server_side ? gaps - server_side : 0), avg, max);
+    std::printf(
+        "done: %llu frames (%s), %llu gaps: %llu dropped for a slow reader, %llu skipped by a late server, "
+        "%llu lost in transit; latency avg %.3f ms, max %.3f ms\n",
+        static_cast<unsigned long long>(frames), reason.c_str(), static_cast<unsigned long long>(gaps),
+        static_cast<unsigned long long>(dropped), static_cast<unsigned long long>(skipped),
+        static_cast<unsigned long long>(gaps > server_side ? gaps - server_side : 0), avg, max);
   }
   if (!std::cout) throw CommandError("cannot write to standard output");
 }
@@ -386,7 +386,8 @@ void run_record(const RecordOptions& o) {
   }
   if (stopped_here) check(c->unsubscribe(sub.id));
   std::lock_guard lock(st->mutex);
-  if (st->frames == 0) throw CommandError("nothing recorded: the subscription ended (" + st->end_reason + ") before a frame");
+  if (st->frames == 0)
+    throw CommandError("nothing recorded: the subscription ended (" + st->end_reason + ") before a frame");
   // Names and soft links from the view: each recorded joint hangs from its
   // nearest recorded ancestor.
   std::vector<std::string> names;
@@ -403,14 +404,13 @@ void run_record(const RecordOptions& o) {
     }
     soft.push_back(link);
   }
-  const Motion m = take(motion_from_world_poses(names, soft, sub.rate_hz > 0 ? 1.0 / sub.rate_hz : 0.0,
-                                                st->positions, st->orientations));
+  const Motion m = take(
+      motion_from_world_poses(names, soft, sub.rate_hz > 0 ? 1.0 / sub.rate_hz : 0.0, st->positions, st->orientations));
   check(save_motion(m, o.out));
-  std::fprintf(stderr, "recorded %llu frames of %s (%zu joints) to %s: %s%s\n",
-               static_cast<unsigned long long>(m.frame_count), o.motion.c_str(), names.size(), o.out.c_str(),
-               st->end_reason.c_str(),
-               st->filled > 0 ? (", " + std::to_string(st->filled) + " lost frames filled with the one before").c_str()
-                              : "");
+  std::fprintf(
+      stderr, "recorded %llu frames of %s (%zu joints) to %s: %s%s\n", static_cast<unsigned long long>(m.frame_count),
+      o.motion.c_str(), names.size(), o.out.c_str(), st->end_reason.c_str(),
+      st->filled > 0 ? (", " + std::to_string(st->filled) + " lost frames filled with the one before").c_str() : "");
 }
 
 // ---- gmr publish
@@ -457,15 +457,17 @@ void run_publish(const PublishCommand& o) {
   std::fprintf(stderr, "publishing %s as live '%s': %zu joints, %zu channels, %.2f Hz%s\n", o.file.c_str(),
                po.name.c_str(), m.skeleton.size(), m.stride(), 1.0 / frame_time, o.loop ? ", looping" : "");
   const std::uint64_t total = o.count != 0 ? o.count : o.loop ? 0 : m.frame_count;
-  const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-      std::chrono::duration<double>(frame_time));
+  const auto period =
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(frame_time));
   const auto start = std::chrono::steady_clock::now();
   std::uint64_t sent = 0;
   for (; total == 0 || sent < total; ++sent) {
     std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(sent));
-    if (!c->connected()) throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
+    if (!c->connected())
+      throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
     if (auto s = c->publish_frame(id, m.frame(sent % m.frame_count)); !s.ok()) {
-      std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent), s.error().message.c_str());
+      std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent),
+                   s.error().message.c_str());
     }
     for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
   }
@@ -516,7 +518,8 @@ void run_discover(const DiscoverOptions& o) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.seconds);
   std::array<char, 2048> buf{};
   for (;;) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) break;
     pollfd p{fd, POLLIN, 0};
     if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) continue;
@@ -562,9 +565,11 @@ void add_net_commands(CLI::App& app) {
   {
     auto o = std::make_shared<QueryOptions>();
     CLI::App* cmd = app.add_subcommand(
-        "query", "Print a served motion's positions as CSV (frame,joint,x,y,z), like gmr positions, computed by the server");
+        "query",
+        "Print a served motion's positions as CSV (frame,joint,x,y,z), like gmr positions, computed by the server");
     cmd->add_option("motion", o->motion, "Motion name (see gmr ls)")->required();
-    cmd->add_option("--frames", o->frames, "Half-open frame range A:B (either side may be empty)")->capture_default_str();
+    cmd->add_option("--frames", o->frames, "Half-open frame range A:B (either side may be empty)")
+        ->capture_default_str();
     add_view_options(*cmd, o->view);
     add_connect_options(*cmd, o->server);
     cmd->callback([o] { run_query(*o); });
@@ -583,8 +588,9 @@ void add_net_commands(CLI::App& app) {
     add_play_options(*cmd, *o);
     cmd->add_option("-o,--output", o->out, "Output file: .gmr, .gmrb or .bvh")->required();
     cmd->add_option("--seconds", o->seconds, "Stop after this many seconds (default: when the subscription ends)");
-    cmd->footer("Over UDP, a lost frame is filled with the one before it (and counted); with --loop, stop it "
-                "with --seconds or --count.");
+    cmd->footer(
+        "Over UDP, a lost frame is filled with the one before it (and counted); with --loop, stop it "
+        "with --seconds or --count.");
     cmd->callback([o] { run_record(*o); });
   }
   {
@@ -612,8 +618,9 @@ void add_net_commands(CLI::App& app) {
     cmd->add_option("--count", o->count, "Publish this many frames, then end");
     cmd->add_flag("--record", o->record, "Ask the server to record the source (into its --record-dir) as .gmrb");
     add_connect_options(*cmd, o->server);
-    cmd->footer("The server needs a 'publish' token (--token or GMR_TOKEN; docs/security.md). Subscribers see it "
-                "in gmr ls as source 'live', and stream it with every view option.");
+    cmd->footer(
+        "The server needs a 'publish' token (--token or GMR_TOKEN; docs/security.md). Subscribers see it "
+        "in gmr ls as source 'live', and stream it with every view option.");
     cmd->callback([o] { run_publish(*o); });
   }
 }

@@ -31,8 +31,8 @@ struct OpOptions {
   std::string file;
   std::string out;
   std::string asf;
-  double fps = 0.0;  // .amc input: frames per second (0: 120)
-  std::string joints;  // --set / --to / --at / --root
+  double fps = 0.0;          // .amc input: frames per second (0: 120)
+  std::string joints;        // --set / --to / --at / --root
   bool single_root = false;  // .bvh output: a forest as one ROOT
 };
 
@@ -97,7 +97,8 @@ void run_strip(const OpOptions& o) {
   std::vector<RemovedJoint> removed;
   const Motion stripped = take(strip_dummies(m, &removed));
   save(stripped, o);
-  for (const RemovedJoint& r : removed) std::printf("removed %s (zero-length, merged into %s)\n", r.name.c_str(), r.merged_into.c_str());
+  for (const RemovedJoint& r : removed)
+    std::printf("removed %s (zero-length, merged into %s)\n", r.name.c_str(), r.merged_into.c_str());
   if (removed.empty()) std::printf("no zero-length joints to remove\n");
   // BVH cannot let siblings rotate independently without zero-length joints:
   // say so when the writer had to insert some back.

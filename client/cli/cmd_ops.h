@@ -13,9 +13,9 @@
 namespace gmr::cli {
 
 struct ViewOptions {
-  std::string roots;         // "A,B,C": the joints that become roots
+  std::string roots;  // "A,B,C": the joints that become roots
   bool strip_dummies = false;
-  std::string relative_to;   // joint whose frame the coordinates are in
+  std::string relative_to;  // joint whose frame the coordinates are in
   // An engine's axes and unit (gmr/view/conventions.h), applied last.
   std::string conventions = "native";
   double metres_per_unit = 0.0;  // the motion's unit in metres; 0: unknown

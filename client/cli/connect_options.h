@@ -12,8 +12,7 @@ namespace gmr::cli {
 inline void add_connect_options(CLI::App& cmd, client::ClientOptions& o) {
   cmd.add_option("--host", o.host, "Server address")->capture_default_str();
   cmd.add_option("--port", o.port, "Server TCP port")->capture_default_str();
-  cmd.add_option("--token", o.auth_token, "Token from the server's auth file (docs/security.md)")
-      ->envname("GMR_TOKEN");
+  cmd.add_option("--token", o.auth_token, "Token from the server's auth file (docs/security.md)")->envname("GMR_TOKEN");
   cmd.add_flag("--tls", o.tls.enabled, "Speak TLS; the server's certificate must chain to the system's trust store");
   cmd.add_option("--tls-ca", o.tls.ca_file, "PEM file of the CA (or self-signed certificate) to trust (implies --tls)")
       ->check(CLI::ExistingFile)

@@ -81,7 +81,8 @@ struct ClientRun {
 
   void on_frame(const gmr::client::ReceivedFrame& f) {
     if (g_measuring.load(std::memory_order_relaxed)) {
-      if (seen && f.sequence > last_sequence + 1) gaps.fetch_add(f.sequence - last_sequence - 1, std::memory_order_relaxed);
+      if (seen && f.sequence > last_sequence + 1)
+        gaps.fetch_add(f.sequence - last_sequence - 1, std::memory_order_relaxed);
       frames.fetch_add(1, std::memory_order_relaxed);
       ThreadHistogram& h = this_threads_histogram();
       std::lock_guard lock(h.mutex);
@@ -189,7 +190,9 @@ int main(int argc, char** argv) {
                  "busy with the first ones' frames wait behind them)")
       ->capture_default_str()
       ->check(CLI::Range(100, 600000));
-  app.add_option("--clients", clients, "Connections, one subscription each")->capture_default_str()->check(CLI::Range(1, 20000));
+  app.add_option("--clients", clients, "Connections, one subscription each")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 20000));
   app.add_option("--motion", motion, "Motion to stream, looped (default: the first in the server's list)");
   app.add_option("--seconds", seconds, "Measurement time")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--warmup", warmup, "Seconds ignored after the last client subscribed")->capture_default_str();
@@ -259,8 +262,8 @@ int main(int argc, char** argv) {
   const auto setup_started = std::chrono::steady_clock::now();
   std::vector<std::unique_ptr<ClientRun>> runs(static_cast<std::size_t>(clients));
   std::mutex error_mutex;
-  std::string error;         // the first failure, which ends the set-up
-  std::string admission;     // the server's admission control refused one
+  std::string error;      // the first failure, which ends the set-up
+  std::string admission;  // the server's admission control refused one
   auto connect_one = [&](std::size_t i) -> std::unique_ptr<ClientRun> {
     auto run = std::make_unique<ClientRun>();
     gmr::client::ClientOptions co = connect_options;

@@ -113,9 +113,9 @@ std::string to_json(const LoadResult& r) {
   j["cpu_user_seconds"] = r.cpu_user_seconds;
   j["cpu_system_seconds"] = r.cpu_system_seconds;
   if (r.have_server) {
-    j["server"] = {{"frames_sent", r.server_sent},         {"frames_dropped", r.server_dropped},
-                   {"frames_skipped", r.server_skipped},   {"frames_computed", r.server_computed},
-                   {"frames_encoded", r.server_encoded},   {"frames_skipped_total", r.server_late_total},
+    j["server"] = {{"frames_sent", r.server_sent},       {"frames_dropped", r.server_dropped},
+                   {"frames_skipped", r.server_skipped}, {"frames_computed", r.server_computed},
+                   {"frames_encoded", r.server_encoded}, {"frames_skipped_total", r.server_late_total},
                    {"io_threads", r.server_io_threads}};
   }
   if (r.server_cpu_seconds >= 0) j["server_cpu_seconds"] = r.server_cpu_seconds;
@@ -242,19 +242,20 @@ std::string describe(const LoadResult& r) {
   out += format("delivered        %.0f of %.0f frames/s expected (%.2f%%), %.1f/s per client\n", got, expected,
                 expected > 0 ? 100.0 * got / expected : 0.0, got / clients);
   const double lost = static_cast<double>(r.gaps);
-  out += format("lost             %llu frames never arrived (sequence gaps, %.3f%% of those due)%s\n",
-                static_cast<unsigned long long>(r.gaps),
-                r.frames + r.gaps > 0 ? 100.0 * lost / static_cast<double>(r.frames + r.gaps) : 0.0,
-                r.stale > 0 ? format(", %llu dropped here as stale", static_cast<unsigned long long>(r.stale)).c_str()
-                            : "");
+  out += format(
+      "lost             %llu frames never arrived (sequence gaps, %.3f%% of those due)%s\n",
+      static_cast<unsigned long long>(r.gaps),
+      r.frames + r.gaps > 0 ? 100.0 * lost / static_cast<double>(r.frames + r.gaps) : 0.0,
+      r.stale > 0 ? format(", %llu dropped here as stale", static_cast<unsigned long long>(r.stale)).c_str() : "");
   out += format("latency          p50 %.3f ms  p99 %.3f ms  p99.9 %.3f ms  max %.3f ms  (%llu frames)\n",
                 ms(r.latency.quantile_ns(0.5)), ms(r.latency.quantile_ns(0.99)), ms(r.latency.quantile_ns(0.999)),
                 ms(static_cast<double>(r.latency.max())), static_cast<unsigned long long>(r.latency.count()));
   if (r.server_wait.count() > 0) {
-    out += format("  in the server  p50 %.3f ms  p99 %.3f ms  p99.9 %.3f ms  max %.3f ms  (encoded to written: "
-                  "the fan-out and the I/O thread's queue)\n",
-                  ms(r.server_wait.quantile_ns(0.5)), ms(r.server_wait.quantile_ns(0.99)),
-                  ms(r.server_wait.quantile_ns(0.999)), ms(static_cast<double>(r.server_wait.max())));
+    out += format(
+        "  in the server  p50 %.3f ms  p99 %.3f ms  p99.9 %.3f ms  max %.3f ms  (encoded to written: "
+        "the fan-out and the I/O thread's queue)\n",
+        ms(r.server_wait.quantile_ns(0.5)), ms(r.server_wait.quantile_ns(0.99)), ms(r.server_wait.quantile_ns(0.999)),
+        ms(static_cast<double>(r.server_wait.max())));
   }
   // The distribution in powers of two of milliseconds, with a bar.
   if (r.latency.count() > 0) {
@@ -268,7 +269,8 @@ std::string describe(const LoadResult& r) {
       seen += in;
       const double share = static_cast<double>(in) / static_cast<double>(total);
       const int bar = static_cast<int>(std::lround(share * 50));
-      out += format("  %9.3f ms %7.3f%% %s\n", ms(static_cast<double>(edge)), 100 * share, std::string(bar, '#').c_str());
+      out +=
+          format("  %9.3f ms %7.3f%% %s\n", ms(static_cast<double>(edge)), 100 * share, std::string(bar, '#').c_str());
       edge *= 2;
     }
   }
@@ -277,11 +279,12 @@ std::string describe(const LoadResult& r) {
                 cpu > 0 ? 100 * r.cpu_system_seconds / cpu : 0.0, r.threads,
                 cpu / window > 0.9 * r.threads ? ": the load generator was saturated, not only the server" : "");
   if (r.have_server) {
-    out += format("server, window   %llu frames sent to all its clients, %llu dropped (slow reader or full UDP "
-                  "queue), %llu skipped (late); %llu FK runs, %llu encodings\n",
-                  static_cast<unsigned long long>(r.server_sent), static_cast<unsigned long long>(r.server_dropped),
-                  static_cast<unsigned long long>(r.server_skipped), static_cast<unsigned long long>(r.server_computed),
-                  static_cast<unsigned long long>(r.server_encoded));
+    out += format(
+        "server, window   %llu frames sent to all its clients, %llu dropped (slow reader or full UDP "
+        "queue), %llu skipped (late); %llu FK runs, %llu encodings\n",
+        static_cast<unsigned long long>(r.server_sent), static_cast<unsigned long long>(r.server_dropped),
+        static_cast<unsigned long long>(r.server_skipped), static_cast<unsigned long long>(r.server_computed),
+        static_cast<unsigned long long>(r.server_encoded));
   } else {
     out += "server, window   (the server's counters were not available)\n";
   }
@@ -322,16 +325,18 @@ std::string plot(const LoadResult& r, const std::string& png) {
   std::string quoted = "'";
   for (char c : partial) quoted += c == '\'' ? std::string("''") : std::string(1, c);
   quoted += "'";
-  const std::string title = format("gmr-load: %llu clients, %s%s, %.0f Hz; p50 %.2f ms, p99 %.2f ms, p99.9 %.2f ms",
-                                   static_cast<unsigned long long>(r.clients), r.udp ? "UDP" : "TCP",
-                                   r.shared ? " shared" : "", r.rate_hz, ms(r.latency.quantile_ns(0.5)),
-                                   ms(r.latency.quantile_ns(0.99)), ms(r.latency.quantile_ns(0.999)));
-  const std::string script = "set terminal pngcairo size 960,600 font ',11'\nset output " + quoted +
-                             "\nset title '" + title + "'\nset logscale x\nset xlabel 'latency (ms)'\n"
+  const std::string title =
+      format("gmr-load: %llu clients, %s%s, %.0f Hz; p50 %.2f ms, p99 %.2f ms, p99.9 %.2f ms",
+             static_cast<unsigned long long>(r.clients), r.udp ? "UDP" : "TCP", r.shared ? " shared" : "", r.rate_hz,
+             ms(r.latency.quantile_ns(0.5)), ms(r.latency.quantile_ns(0.99)), ms(r.latency.quantile_ns(0.999)));
+  const std::string script = "set terminal pngcairo size 960,600 font ',11'\nset output " + quoted + "\nset title '" +
+                             title +
+                             "'\nset logscale x\nset xlabel 'latency (ms)'\n"
                              "set ylabel 'share of frames per 1/32 octave'\nset y2label 'cumulative share'\n"
                              "set y2range [0:1]\nset ytics nomirror\nset y2tics\nset grid\n"
-                             "plot '" + data.string() + "' using 1:2 with impulses lw 2 title 'frames', '" +
-                             data.string() + "' using 1:3 axes x1y2 with lines lw 2 title 'cumulative'\n";
+                             "plot '" +
+                             data.string() + "' using 1:2 with impulses lw 2 title 'frames', '" + data.string() +
+                             "' using 1:3 axes x1y2 with lines lw 2 title 'cumulative'\n";
   FILE* gp = ::popen("gnuplot 2>&1", "w");
   if (gp == nullptr) {
     fs::remove(data);

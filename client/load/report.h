@@ -46,13 +46,13 @@ struct LoadResult {
   std::string motion;
   bool udp = false;
   bool shared = false;
-  double rate_hz = 0;      // per client
-  double seconds = 0;      // the measured window
+  double rate_hz = 0;  // per client
+  double seconds = 0;  // the measured window
   double setup_seconds = 0;
   std::uint64_t frames = 0;  // received in the window
   std::uint64_t gaps = 0;    // sequence numbers that never arrived
   std::uint64_t stale = 0;   // dropped by the clients as older than max staleness
-  Histogram latency;      // receive time - Frame.server_send_time_ns (encoding)
+  Histogram latency;         // receive time - Frame.server_send_time_ns (encoding)
   // Frame.server_write_time_ns - server_send_time_ns, of the frames that
   // carry a write stamp: how long a frame waited in the server after its
   // encoding (behind the fan-out to other subscribers and the lane's queue).

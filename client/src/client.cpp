@@ -20,7 +20,8 @@ ServerHello hello_of(const pb::HelloReply& h) {
   ServerHello s;
   s.protocol_version = h.protocol_version();
   s.server_name = h.server_name();
-  if (h.udp_token().size() == s.udp_token.size()) std::memcpy(s.udp_token.data(), h.udp_token().data(), s.udp_token.size());
+  if (h.udp_token().size() == s.udp_token.size())
+    std::memcpy(s.udp_token.data(), h.udp_token().data(), s.udp_token.size());
   s.udp_port = static_cast<std::uint16_t>(h.udp_port());
   s.max_message_bytes = h.max_message_bytes();
   s.heartbeat_interval_ms = h.heartbeat_interval_ms();
@@ -98,15 +99,19 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   if (options.receive_buffer > 0) {
     d.socket.tcp().set_option(net::socket_base::receive_buffer_size(options.receive_buffer), ec);
   }
-  net::async_connect(d.socket.tcp(), endpoints,
-                     [&connected](const boost::system::error_code& e, const tcp::endpoint&) { connected.set_value(e); });
+  net::async_connect(d.socket.tcp(), endpoints, [&connected](const boost::system::error_code& e, const tcp::endpoint&) {
+    connected.set_value(e);
+  });
   if (d.own_loop) {
     d.guard.emplace(d.io.get_executor());
     d.thread = std::thread([impl = c->impl_] { impl->io.run(); });
   }
   const std::string where = options.host + ":" + std::to_string(options.port);
   if (connected_future.wait_for(options.timeout) != std::future_status::ready) {
-    net::post(d.strand, [impl = c->impl_] { boost::system::error_code e; impl->socket.tcp().close(e); });
+    net::post(d.strand, [impl = c->impl_] {
+      boost::system::error_code e;
+      impl->socket.tcp().close(e);
+    });
     connected_future.wait();
     c->close();
     return make_error("cannot connect to " + where + ": timed out");
@@ -148,7 +153,8 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   }
   d.server_udp = udp::endpoint(remote.address(), d.hello.udp_port);
   d.udp_socket.open(remote.address().is_v4() ? udp::v4() : udp::v6(), ec);
-  if (!ec) d.udp_socket.bind(udp::endpoint(remote.address().is_loopback() ? remote.address() : net::ip::address(), 0), ec);
+  if (!ec)
+    d.udp_socket.bind(udp::endpoint(remote.address().is_loopback() ? remote.address() : net::ip::address(), 0), ec);
   // A deep receive buffer rides out scheduling stalls of the I/O thread (the
   // kernel caps it at net.core.rmem_max).
   if (!ec) d.udp_socket.set_option(net::socket_base::receive_buffer_size(4 << 20), ec);
@@ -218,7 +224,8 @@ Result<std::vector<MotionInfo>> Client::list_motions() {
   if (!r.ok()) return r.error();
   std::vector<MotionInfo> out;
   for (const auto& i : r->motions().motions()) {
-    out.push_back(MotionInfo{i.name(), i.joint_count(), i.frame_count(), i.frame_time(), i.source(), i.metres_per_unit()});
+    out.push_back(
+        MotionInfo{i.name(), i.joint_count(), i.frame_count(), i.frame_time(), i.source(), i.metres_per_unit()});
   }
   return out;
 }

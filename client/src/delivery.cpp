@@ -13,8 +13,8 @@ std::uint64_t frames_to_come(const SubscriptionEnd& e) {
 }
 
 SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
-  return SubscriptionEnd{e.subscription_id(), e.frames_sent(), e.frames_dropped(), e.reason(), e.frames_skipped(),
-                         e.frames_stale()};
+  return SubscriptionEnd{e.subscription_id(), e.frames_sent(),    e.frames_dropped(),
+                         e.reason(),          e.frames_skipped(), e.frames_stale()};
 }
 
 }  // namespace

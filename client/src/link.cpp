@@ -105,7 +105,8 @@ void Client::Impl::fail(const std::string& reason) {
   for (auto& [id, p] : orphans) p.promise.set_value(std::nullopt);
 }
 
-Result<pb::ServerMessage> Client::Impl::call(pb::ClientMessage m, std::function<void(const pb::ServerMessage&)> on_reply) {
+Result<pb::ServerMessage> Client::Impl::call(pb::ClientMessage m,
+                                             std::function<void(const pb::ServerMessage&)> on_reply) {
   const std::uint64_t id = next_request++;
   m.set_request_id(id);
   auto framed = wire::frame_message(m, 1u << 30);
@@ -139,7 +140,7 @@ Result<pb::ServerMessage> Client::Impl::call(pb::ClientMessage m, std::function<
 }
 
 Result<pb::ServerMessage> Client::Impl::expect(pb::ClientMessage m, pb::ServerMessage::BodyCase expected,
-                                 std::function<void(const pb::ServerMessage&)> on_reply) {
+                                               std::function<void(const pb::ServerMessage&)> on_reply) {
   auto r = call(std::move(m), std::move(on_reply));
   if (!r.ok()) return r;
   if (r->has_error()) {
@@ -155,8 +156,8 @@ Status Client::Impl::start_tls(const std::string& where) {
   boost::system::error_code ec;
   tls_context.emplace(net::ssl::context::tls_client);
   auto& ctx = *tls_context;
-  ctx.set_options(net::ssl::context::default_workarounds | net::ssl::context::no_sslv2 |
-                  net::ssl::context::no_sslv3 | net::ssl::context::no_tlsv1 | net::ssl::context::no_tlsv1_1);
+  ctx.set_options(net::ssl::context::default_workarounds | net::ssl::context::no_sslv2 | net::ssl::context::no_sslv3 |
+                  net::ssl::context::no_tlsv1 | net::ssl::context::no_tlsv1_1);
   if (t.ca_file.empty()) {
     ctx.set_default_verify_paths(ec);
   } else {
@@ -169,12 +170,12 @@ Status Client::Impl::start_tls(const std::string& where) {
   }
   ctx.set_verify_mode(net::ssl::verify_peer);
   auto name_matched = std::make_shared<bool>(true);
-  ctx.set_verify_callback([check = net::ssl::host_name_verification(name), name_matched](
-                              bool preverified, net::ssl::verify_context& v) {
-    const bool ok = check(preverified, v);
-    if (preverified && !ok) *name_matched = false;
-    return ok;
-  });
+  ctx.set_verify_callback(
+      [check = net::ssl::host_name_verification(name), name_matched](bool preverified, net::ssl::verify_context& v) {
+        const bool ok = check(preverified, v);
+        if (preverified && !ok) *name_matched = false;
+        return ok;
+      });
   socket.use_tls(ctx);
   // Server Name Indication for a name (never for an address).
   net::ip::make_address(name, ec);
@@ -186,7 +187,10 @@ Status Client::Impl::start_tls(const std::string& where) {
                                               [done](const boost::system::error_code& e) { done->set_value(e); });
   });
   if (result.wait_for(options.timeout) != std::future_status::ready) {
-    net::post(strand, [self = shared_from_this()] { boost::system::error_code e; self->socket.tcp().close(e); });
+    net::post(strand, [self = shared_from_this()] {
+      boost::system::error_code e;
+      self->socket.tcp().close(e);
+    });
     result.wait();
     return make_error("TLS handshake with " + where + ": timed out");
   }

@@ -28,7 +28,8 @@ Status Client::publish_frame(std::uint32_t publication, std::span<const double> 
     if (!impl_->open) return make_error("not connected: " + impl_->close_reason);
   }
   if (!impl_->send(std::move(framed).value())) {
-    return make_error(ErrorKind::kResourceExhausted, "write queue full: the server is not reading this client's frames");
+    return make_error(ErrorKind::kResourceExhausted,
+                      "write queue full: the server is not reading this client's frames");
   }
   return Ok{};
 }

@@ -23,7 +23,8 @@ Status Client::register_udp() {
     d.udp_cv.wait_for(lock, std::chrono::milliseconds(50));
   }
   if (d.udp_registered) return Ok{};
-  return make_error(d.open ? "the server did not confirm the UDP registration in time" : "not connected: " + d.close_reason);
+  return make_error(d.open ? "the server did not confirm the UDP registration in time"
+                           : "not connected: " + d.close_reason);
 }
 
 Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOptions& o, FrameCallback on_frame,
@@ -49,34 +50,37 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   to_proto(o.conventions, *s->mutable_conventions());
   s->set_max_frames(o.max_frames);
   // Zero: no bound, which the wire says with the largest (0 there is the server's default).
-  const auto staleness_ms = o.max_staleness.count() <= 0 ? std::numeric_limits<std::uint32_t>::max()
-                                                          : static_cast<std::uint32_t>(std::min<std::int64_t>(
-                                                                o.max_staleness.count(), std::numeric_limits<std::uint32_t>::max()));
+  const auto staleness_ms = o.max_staleness.count() <= 0
+                                ? std::numeric_limits<std::uint32_t>::max()
+                                : static_cast<std::uint32_t>(std::min<std::int64_t>(
+                                      o.max_staleness.count(), std::numeric_limits<std::uint32_t>::max()));
   s->set_max_staleness_ms(staleness_ms);
-  auto sub = std::make_shared<Impl::Sub>(Impl::Sub{std::move(on_frame), std::move(on_end), std::move(on_skeleton),
-                                                   o.max_staleness.count() > 0 ? std::int64_t{o.max_staleness.count()} * 1000000 : 0});
+  auto sub = std::make_shared<Impl::Sub>(
+      Impl::Sub{std::move(on_frame), std::move(on_end), std::move(on_skeleton),
+                o.max_staleness.count() > 0 ? std::int64_t{o.max_staleness.count()} * 1000000 : 0});
   // Registered on the I/O thread as the reply is read, before any frame.
   {
     std::lock_guard lock(impl_->mutex);
     ++impl_->subscribes_in_flight;
   }
   auto replied = std::make_shared<std::atomic<bool>>(false);
-  auto r = impl_->expect(m, pb::ServerMessage::kSubscribed, [impl = impl_.get(), sub, replied](const pb::ServerMessage& reply) {
-    std::deque<std::pair<pb::ServerMessage, bool>> replay;
-    {
-      std::lock_guard lock(impl->mutex);
-      *replied = true;
-      --impl->subscribes_in_flight;
-      if (reply.has_subscribed()) {
-        sub->stream_id = reply.subscribed().stream_id();
-        sub->skeleton_version = reply.subscribed().skeleton_version();
-        sub->multicast = !reply.subscribed().multicast_group().empty();
-        impl->subs[reply.subscribed().subscription_id()] = sub;
-      }
-      if (impl->subscribes_in_flight == 0) replay.swap(impl->early_frames);
-    }
-    for (auto& [frame, via_udp] : replay) impl->on_message(frame, via_udp);
-  });
+  auto r = impl_->expect(m, pb::ServerMessage::kSubscribed,
+                         [impl = impl_.get(), sub, replied](const pb::ServerMessage& reply) {
+                           std::deque<std::pair<pb::ServerMessage, bool>> replay;
+                           {
+                             std::lock_guard lock(impl->mutex);
+                             *replied = true;
+                             --impl->subscribes_in_flight;
+                             if (reply.has_subscribed()) {
+                               sub->stream_id = reply.subscribed().stream_id();
+                               sub->skeleton_version = reply.subscribed().skeleton_version();
+                               sub->multicast = !reply.subscribed().multicast_group().empty();
+                               impl->subs[reply.subscribed().subscription_id()] = sub;
+                             }
+                             if (impl->subscribes_in_flight == 0) replay.swap(impl->early_frames);
+                           }
+                           for (auto& [frame, via_udp] : replay) impl->on_message(frame, via_udp);
+                         });
   {
     std::lock_guard lock(impl_->mutex);
     if (!*replied) --impl_->subscribes_in_flight;  // timed out or lost: no reply will come
@@ -103,9 +107,8 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
     // Joined on the strand, as every socket of this client is used.
     auto joined = std::make_shared<std::promise<Status>>();
     auto done = joined->get_future();
-    net::post(impl_->strand, [impl = impl_, joined, group = info.multicast_group] {
-      joined->set_value(impl->join_multicast(group));
-    });
+    net::post(impl_->strand,
+              [impl = impl_, joined, group = info.multicast_group] { joined->set_value(impl->join_multicast(group)); });
     if (Status joined_status = done.get(); !joined_status.ok()) {
       (void)unsubscribe(info.id);
       return joined_status.error();

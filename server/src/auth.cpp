@@ -33,10 +33,14 @@ std::string_view next_word(std::string_view line, std::size_t& pos) {
 
 const char* role_name(Role role) {
   switch (role) {
-    case Role::kNone: return "none";
-    case Role::kRead: return "read";
-    case Role::kControl: return "control";
-    case Role::kPublish: return "publish";
+    case Role::kNone:
+      return "none";
+    case Role::kRead:
+      return "read";
+    case Role::kControl:
+      return "control";
+    case Role::kPublish:
+      return "publish";
   }
   return "none";
 }
@@ -70,7 +74,8 @@ Result<Credentials> Credentials::parse(std::string_view text, const std::string&
     if (role_word.empty() || role_word.front() == '#') continue;
     auto role = parse_role(role_word);
     if (!role.ok() || *role == Role::kNone) {
-      return fail("unknown role '" + std::string(role_word).substr(0, 32) + "': a line is 'read TOKEN', 'control TOKEN' or 'publish TOKEN'");
+      return fail("unknown role '" + std::string(role_word).substr(0, 32) +
+                  "': a line is 'read TOKEN', 'control TOKEN' or 'publish TOKEN'");
     }
     const std::string_view token = next_word(line, pos);
     if (token.empty() || token.front() == '#') return fail("a '" + std::string(role_word) + "' line without its token");

@@ -63,7 +63,8 @@ bool Catalog::serves(std::string_view name) const { return by_name_.contains(nam
 
 std::shared_ptr<LiveSource> Catalog::add_live(const std::string& name, Skeleton skeleton, double frame_time,
                                               double metres_per_unit) {
-  auto source = std::make_shared<LiveSource>(name, next_live_serial_++, std::move(skeleton), frame_time, metres_per_unit);
+  auto source =
+      std::make_shared<LiveSource>(name, next_live_serial_++, std::move(skeleton), frame_time, metres_per_unit);
   live_[name] = source;
   return source;
 }

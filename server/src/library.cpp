@@ -126,7 +126,8 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
     // symbolic link and name its target). An .amc's skeleton is found by
     // load_motion: the .asf of its folder, or of its subject among several.
     const fs::path relative = f.lexically_relative(dir);
-    Job job{f, limits, file_options, fs::path(relative).replace_extension().generic_string(), relative.generic_string(), {}};
+    Job job{f, limits, file_options, fs::path(relative).replace_extension().generic_string(), relative.generic_string(),
+            {}};
     if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") {
       jobs.push_back(std::move(job));
     } else if ((ext == ".c3d" || ext == ".trc") && !(job.model = marker_model_for(f)).empty()) {

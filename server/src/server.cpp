@@ -55,7 +55,9 @@ HttpServices Server::Impl::http_services() {
           },
       .open_websocket =
           [this](tcp::socket socket, http::request<http::string_body> upgrade, WsConnection::Format format,
-                 const std::string& address) { open_websocket(std::move(socket), std::move(upgrade), format, address); },
+                 const std::string& address) {
+            open_websocket(std::move(socket), std::move(upgrade), format, address);
+          },
   };
 }
 
@@ -74,7 +76,6 @@ void Server::Impl::connection_closed(std::uint64_t id) {
   if (entry->counted_on_lane) lanes->release(entry->lane);
   if (stopping && admission.connections().empty() && grace_timer) grace_timer->cancel();
 }
-
 
 void Server::Impl::accept_loop() {
   acceptor.async_accept([this](const boost::system::error_code& ec, tcp::socket socket) {
@@ -221,7 +222,8 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
 Server::Server(ServerConfig config, std::vector<LibraryEntry> library)
     : impl_(std::make_shared<Impl>(std::move(config), std::move(library), true)) {}
 
-Server::Server(ServerConfig config) : impl_(std::make_shared<Impl>(std::move(config), std::vector<LibraryEntry>{}, false)) {}
+Server::Server(ServerConfig config)
+    : impl_(std::make_shared<Impl>(std::move(config), std::vector<LibraryEntry>{}, false)) {}
 
 void Server::set_library(std::vector<LibraryEntry> library) {
   auto& d = *impl_;
@@ -246,11 +248,12 @@ void Server::start() {
     auto c = calibrate_send_budget();
     if (!c.ok()) throw std::runtime_error(c.error().to_string() + " (give --send-budget a figure)");
     d.cfg.send_budget = std::floor(c->budget);
-    spdlog::info("send budget {:.0f} frames/s: a frame-sized TCP send costs {:.0f} ns here (the slowest of {} CPUs; "
-                 "the fastest {:.0f}) against {:.0f} ns on the reference machine, which held {:.0f} (measured in "
-                 "{:.2f} s; --send-budget N to set it)",
-                 d.cfg.send_budget, c->ns_per_send, c->cpus, c->fastest_ns_per_send, kReferenceNsPerSend,
-                 kReferenceBudget, c->seconds);
+    spdlog::info(
+        "send budget {:.0f} frames/s: a frame-sized TCP send costs {:.0f} ns here (the slowest of {} CPUs; "
+        "the fastest {:.0f}) against {:.0f} ns on the reference machine, which held {:.0f} (measured in "
+        "{:.2f} s; --send-budget N to set it)",
+        d.cfg.send_budget, c->ns_per_send, c->cpus, c->fastest_ns_per_send, kReferenceNsPerSend, kReferenceBudget,
+        c->seconds);
   }
   d.tls = make_tls_context(d.cfg);
   boost::system::error_code ec;
@@ -260,7 +263,9 @@ void Server::start() {
   d.acceptor.open(tcp_ep.protocol());
   d.acceptor.set_option(tcp::acceptor::reuse_address(true));
   d.acceptor.bind(tcp_ep, ec);
-  if (ec) throw std::runtime_error("cannot bind TCP " + d.cfg.bind_address + ":" + std::to_string(d.cfg.port) + ": " + ec.message());
+  if (ec)
+    throw std::runtime_error("cannot bind TCP " + d.cfg.bind_address + ":" + std::to_string(d.cfg.port) + ": " +
+                             ec.message());
   d.acceptor.listen(net::socket_base::max_listen_connections);
   d.tcp_port = d.acceptor.local_endpoint().port();
   // The same number as TCP only when that number was chosen: an ephemeral TCP
@@ -279,20 +284,23 @@ void Server::start() {
   if (d.cfg.http_port >= 0) d.http.open(address, static_cast<std::uint16_t>(d.cfg.http_port));
   if (!address.is_loopback()) {
     if (!d.cfg.credentials || d.cfg.anonymous >= Role::kControl) {
-      spdlog::warn("listening on {} without tokens: any host that can reach it may edit views and read "
-                   "statistics; give --auth-file (docs/security.md), or --bind 127.0.0.1 (the default)",
-                   d.cfg.bind_address);
+      spdlog::warn(
+          "listening on {} without tokens: any host that can reach it may edit views and read "
+          "statistics; give --auth-file (docs/security.md), or --bind 127.0.0.1 (the default)",
+          d.cfg.bind_address);
     }
     if (!d.tls) {
-      spdlog::warn("listening on {} without TLS: requests, frames{} cross the network in the clear "
-                   "(--tls-cert and --tls-key, docs/security.md)",
-                   d.cfg.bind_address, d.cfg.credentials ? " and tokens" : "");
+      spdlog::warn(
+          "listening on {} without TLS: requests, frames{} cross the network in the clear "
+          "(--tls-cert and --tls-key, docs/security.md)",
+          d.cfg.bind_address, d.cfg.credentials ? " and tokens" : "");
     }
     if (d.http.port() != 0) {
-      spdlog::warn("the HTTP port {} (viewer, WebSocket, /metrics) listens on {} in plain HTTP: WebSocket "
-                   "tokens and frames cross the network in the clear; put a TLS proxy in front or use "
-                   "--http-port -1 (docs/security.md)",
-                   d.http.port(), d.cfg.bind_address);
+      spdlog::warn(
+          "the HTTP port {} (viewer, WebSocket, /metrics) listens on {} in plain HTTP: WebSocket "
+          "tokens and frames cross the network in the clear; put a TLS proxy in front or use "
+          "--http-port -1 (docs/security.md)",
+          d.http.port(), d.cfg.bind_address);
     }
   }
   d.replicas.start();
@@ -301,14 +309,15 @@ void Server::start() {
   if (d.ready) d.accept_loop();
   d.udp.start();
   d.http.start();
-  spdlog::info("serving {} on tcp{} {}:{} and udp {}:{}{}{} ({} I/O thread{})",
-               d.ready ? std::to_string(d.catalog.library().size()) + " motions" : std::string("(library loading)"),
-               d.tls ? " (TLS)" : "", d.cfg.bind_address, d.tcp_port, d.cfg.bind_address, d.udp.port(),
-               d.http.port() != 0 ? ", http " + d.cfg.bind_address + ":" + std::to_string(d.http.port()) : std::string(),
-               d.cfg.credentials ? ", " + std::to_string(d.cfg.credentials->size()) + " tokens, anonymous clients " +
-                                       role_name(d.cfg.anonymous)
-                                 : std::string(),
-               d.lanes->size(), d.lanes->size() == 1 ? "" : "s");
+  spdlog::info(
+      "serving {} on tcp{} {}:{} and udp {}:{}{}{} ({} I/O thread{})",
+      d.ready ? std::to_string(d.catalog.library().size()) + " motions" : std::string("(library loading)"),
+      d.tls ? " (TLS)" : "", d.cfg.bind_address, d.tcp_port, d.cfg.bind_address, d.udp.port(),
+      d.http.port() != 0 ? ", http " + d.cfg.bind_address + ":" + std::to_string(d.http.port()) : std::string(),
+      d.cfg.credentials ? ", " + std::to_string(d.cfg.credentials->size()) + " tokens, anonymous clients " +
+                              role_name(d.cfg.anonymous)
+                        : std::string(),
+      d.lanes->size(), d.lanes->size() == 1 ? "" : "s");
   d.lanes->start();
   d.thread = std::thread([impl = impl_] {
     ::pthread_setname_np(::pthread_self(), "gmr-control");  // lane 0: requests, streams, and its connections
@@ -339,7 +348,7 @@ void Server::wait() {
   d.stopped_future.wait();
   if (d.thread.joinable()) d.thread.join();
   if (d.lanes) d.lanes->join();  // their connections closed with the control loop's last work
-  d.edit_pool.join();  // an edit still running finishes; its answer has no loop to run in
+  d.edit_pool.join();            // an edit still running finishes; its answer has no loop to run in
   d.replicas.close();
   d.recordings.wait();  // the I/O thread is done: nobody adds one
 }

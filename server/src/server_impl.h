@@ -75,8 +75,8 @@ struct Server::Impl {
   // edits queue rather than take the I/O thread's core. After io: joined
   // before io goes (a finished edit posts its answer to io).
   net::thread_pool edit_pool{1};
-  Services services{cfg,   io,     edit_pool, catalog,    admission, streams, counters,
-                    udp,   multicast, replicas, recordings, metrics,   lanes};
+  Services services{cfg, io,        edit_pool, catalog,    admission, streams, counters,
+                    udp, multicast, replicas,  recordings, metrics,   lanes};
   std::thread thread;
   std::uint16_t tcp_port = 0;
   bool started = false;

@@ -20,8 +20,8 @@
 namespace gmr {
 namespace {
 namespace fs = std::filesystem;
-using ::testing::HasSubstr;
 using test::shell_quote;
+using ::testing::HasSubstr;
 
 class BenchHarness : public test::CliTest {};
 
@@ -35,9 +35,9 @@ TEST_F(BenchHarness, FkJsonHasEveryPathAndTheFilesSizes) {
   EXPECT_EQ(j.at("frames").get<std::size_t>(), m.frame_count);
   EXPECT_EQ(j.at("joints").get<std::size_t>(), m.skeleton.size());
   EXPECT_EQ(j.at("repeats").get<int>(), 3);
-  const std::vector<std::string> paths = {"bvh_reference_double", "bvh_scalar", "bvh_fast", "bvh_fast_frame_major",
-                                          "gmr_one_root", "gmr_one_root_frame_major", "gmr_all_roots",
-                                          "single_frame", "single_frame_bvh"};
+  const std::vector<std::string> paths = {"bvh_reference_double", "bvh_scalar",   "bvh_fast",
+                                          "bvh_fast_frame_major", "gmr_one_root", "gmr_one_root_frame_major",
+                                          "gmr_all_roots",        "single_frame", "single_frame_bvh"};
   for (const char* key : {"ns_per_frame", "ns_per_frame_min"}) {
     SCOPED_TRACE(key);
     const auto& ns = j.at(key);
@@ -95,7 +95,7 @@ TEST_F(BenchHarness, Figure4WritesOneRowPerConfigurationAndAPlot) {
   }
   ASSERT_EQ(seen.size(), 2u);
   for (const auto& [name, file] : std::map<std::string, std::string>{{"a.bvh", "bvh/cmu/cmu_unidentified_75f.bvh"},
-                                                                       {"sub/b.BVH", "bvh/cmu/02_01.bvh"}}) {
+                                                                     {"sub/b.BVH", "bvh/cmu/02_01.bvh"}}) {
     SCOPED_TRACE(name);
     const std::size_t n = load_motion(test::data_file(file)).value().skeleton.size();
     EXPECT_EQ(joints_of[name], n);
@@ -134,7 +134,8 @@ TEST_F(BenchHarness, MisuseFailsWithOneLine) {
   fs::create_directories(dir_ / "empty");
   expect_one_line_error("figure4 " + path("empty") + " --out " + path("x.csv"), "no .bvh files");
   expect_one_line_error("figure4 " + path("empty") + " --out " + path("x.csv") + " --sets 0", "--sets");
-  ASSERT_TRUE(write_file_atomic(dir_ / "bad.csv", "file,frames,joints,method,roots,set,ns_per_frame\na.bvh,1,2\n").ok());
+  ASSERT_TRUE(
+      write_file_atomic(dir_ / "bad.csv", "file,frames,joints,method,roots,set,ns_per_frame\na.bvh,1,2\n").ok());
   expect_one_line_error("figure4 --replot " + path("bad.csv") + " --plot " + path("p.png"), "bad.csv:2");
   expect_one_line_error("figure4 --replot " + path("bad.csv"), "--plot");
   EXPECT_FALSE(fs::exists(dir_ / "x.csv"));

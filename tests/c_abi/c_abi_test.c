@@ -14,14 +14,14 @@
 
 #include "gmr_client_c.h"
 
-#define CHECK(cond, ...)                          \
-  do {                                            \
-    if (!(cond)) {                                \
+#define CHECK(cond, ...)                           \
+  do {                                             \
+    if (!(cond)) {                                 \
       fprintf(stderr, "FAIL line %d: ", __LINE__); \
-      fprintf(stderr, __VA_ARGS__);               \
-      fprintf(stderr, "\n");                      \
-      exit(1);                                    \
-    }                                             \
+      fprintf(stderr, __VA_ARGS__);                \
+      fprintf(stderr, "\n");                       \
+      exit(1);                                     \
+    }                                              \
   } while (0)
 
 enum { kMaxJoints = 256 };
@@ -112,12 +112,14 @@ int main(int argc, char** argv) {
         mul(own + 9 * p, q, own + 9 * j);
         for (int k = 0; k < 3; ++k) {
           const double* o3 = own + 9 * p + 3 * k;
-          composed[3 * j + k] = composed[3 * p + k] + o3[0] * trans[3 * j] + o3[1] * trans[3 * j + 1] + o3[2] * trans[3 * j + 2];
+          composed[3 * j + k] =
+              composed[3 * p + k] + o3[0] * trans[3 * j] + o3[1] * trans[3 * j + 1] + o3[2] * trans[3 * j + 2];
         }
       }
       for (int k = 0; k < 3; ++k) worst = fmax(worst, fabs(composed[3 * j + k] - pos[3 * j + k]));
     }
-    CHECK(worst < 1e-9, "frame %llu: the locals compose %.3g off the positions", (unsigned long long)f.frame_index, worst);
+    CHECK(worst < 1e-9, "frame %llu: the locals compose %.3g off the positions", (unsigned long long)f.frame_index,
+          worst);
     /* On one host: encoded, then written to this subscriber, then parsed here. */
     int64_t sent_ns = 0, written_ns = 0, received_ns = 0;
     CHECK(gmr_last_frame_times(sub, &sent_ns, &written_ns, &received_ns) == GMR_OK, "times: %s", gmr_last_error());

@@ -3,7 +3,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-
 #include <Eigen/Core>
 #include <cstdio>
 #include <cstdlib>
@@ -24,8 +23,8 @@ namespace {
 namespace fs = std::filesystem;
 
 using Outcome = test::CliOutcome;
-using ::testing::HasSubstr;
 using test::shell_quote;
+using ::testing::HasSubstr;
 
 class CliAsf : public test::CliTest {};
 
@@ -48,7 +47,8 @@ const std::string kAmc = "asfamc/09/09_06-run.amc";
 
 TEST_F(CliAsf, InfoAndPositions) {
   GMR_REQUIRE_DATA();
-  const std::string args = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
+  const std::string args =
+      shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
   const Outcome info = gmr("info " + args);
   ASSERT_EQ(info.status, 0) << info.err;
   EXPECT_NE(info.out.find("141"), std::string::npos) << info.out;
@@ -70,7 +70,8 @@ TEST_F(CliAsf, InfoAndPositions) {
 // reaches what is written (the BVH's Frame Time).
 TEST_F(CliAsf, FrameRateOfAnAmc) {
   GMR_REQUIRE_DATA();
-  const std::string args = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
+  const std::string args =
+      shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
   EXPECT_THAT(gmr("info " + args).out, HasSubstr("(120 fps)"));
   EXPECT_THAT(gmr("info " + args + " --fps 60").out, HasSubstr("(60 fps)"));
   const std::string bvh = shell_quote((dir_ / "at60.bvh").string());
@@ -83,7 +84,8 @@ TEST_F(CliAsf, FrameRateOfAnAmc) {
 
 TEST_F(CliAsf, ConvertToGmrAndToAmc) {
   GMR_REQUIRE_DATA();
-  const std::string in = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
+  const std::string in =
+      shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
   const std::string gmr_out = (dir_ / "run.gmr").string();
   const std::string amc_out = (dir_ / "run.amc").string();
   ASSERT_EQ(gmr("convert " + in + " " + shell_quote(gmr_out)).status, 0);
@@ -93,8 +95,8 @@ TEST_F(CliAsf, ConvertToGmrAndToAmc) {
 
   const auto ref = csv_positions(gmr("positions " + in).out);
   const auto from_gmr = csv_positions(gmr("positions " + shell_quote(gmr_out)).out);
-  const auto from_amc =
-      csv_positions(gmr("positions " + shell_quote(amc_out) + " --asf " + shell_quote((dir_ / "run.asf").string())).out);
+  const auto from_amc = csv_positions(
+      gmr("positions " + shell_quote(amc_out) + " --asf " + shell_quote((dir_ / "run.asf").string())).out);
   ASSERT_EQ(from_gmr.size(), ref.size());
   ASSERT_EQ(from_amc.size(), ref.size());
   for (std::size_t i = 0; i < ref.size(); ++i) {
@@ -107,7 +109,8 @@ TEST_F(CliAsf, ConvertToGmrAndToAmc) {
 // holds another skeleton is kept unless --force, and a failure writes neither.
 TEST_F(CliAsf, AmcOutputNeverClobbersAnotherSkeletonOrHalfWritesThePair) {
   GMR_REQUIRE_DATA();
-  const std::string in = shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
+  const std::string in =
+      shell_quote(test::data_file(kAmc).string()) + " --asf " + shell_quote(test::data_file(kAsf).string());
   ASSERT_TRUE(write_file_atomic(dir_ / "run.asf", ":version 1.10\n# another subject's skeleton\n").ok());
   expect_one_line_error("convert " + in + " " + path("run.amc"), "holds another skeleton");
   EXPECT_EQ(read_file(dir_ / "run.asf").value(), ":version 1.10\n# another subject's skeleton\n");
@@ -133,8 +136,9 @@ TEST_F(CliAsf, AmcOutputNeverClobbersAnotherSkeletonOrHalfWritesThePair) {
 // once took 15 s and printed 1.6 GB of indentation).
 TEST_F(CliAsf, ADeepChainLoadsAndPrintsInLinearSize) {
   constexpr int kBones = 40000;
-  std::string asf = ":version 1.10\n:name chain\n:units\n  angle deg\n:root\n  order TX TY TZ RX RY RZ\n"
-                    "  axis XYZ\n  position 0 0 0\n  orientation 0 0 0\n:bonedata\n";
+  std::string asf =
+      ":version 1.10\n:name chain\n:units\n  angle deg\n:root\n  order TX TY TZ RX RY RZ\n"
+      "  axis XYZ\n  position 0 0 0\n  orientation 0 0 0\n:bonedata\n";
   for (int i = 1; i <= kBones; ++i) {
     asf += "  begin\n    id " + std::to_string(i) + "\n    name b" + std::to_string(i) +
            "\n    direction 0 1 0\n    length 1\n    axis 0 0 0 XYZ\n    dof rx\n  end\n";

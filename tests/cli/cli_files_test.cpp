@@ -2,7 +2,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-
 #include <Eigen/Core>
 #include <algorithm>
 #include <cstdio>
@@ -151,12 +150,14 @@ TEST_F(CliFiles, RunningOutOfMemoryIsOneClearLine) {
   // A 38 MB BVH (31 joints, 100,000 frames) converted by a process allowed
   // 200 MB of address space: the allocation fails, and the user reads what
   // happened instead of "std::bad_alloc".
-  std::string text = "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation "
-                     "Xrotation Yrotation\n";
+  std::string text =
+      "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation "
+      "Xrotation Yrotation\n";
   for (int j = 0; j < 30; ++j) {
     text += " JOINT J" + std::to_string(j) + "\n {\n  OFFSET 0 1 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n";
   }
-  text += "  End Site\n  {\n   OFFSET 0 1 0\n  }\n" + std::string(30, '}') + "\n}\nMOTION\nFrames: 100000\nFrame Time: 0.01\n";
+  text += "  End Site\n  {\n   OFFSET 0 1 0\n  }\n" + std::string(30, '}') +
+          "\n}\nMOTION\nFrames: 100000\nFrame Time: 0.01\n";
   std::string row;
   for (int v = 0; v < 96; ++v) row += v == 0 ? "1.5" : " 1.5";
   row += '\n';
@@ -177,8 +178,9 @@ TEST_F(CliFiles, AWriteCutShortLeavesNoTemporary) {
   // The file size limit stops `gmr convert` mid-write: one line, exit 1, and
   // neither the output nor its temporary is left (without gmr's handling the
   // limit's signal would end the process and leave the temporary).
-  std::string text = "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\n"
-                     "MOTION\nFrames: 20000\nFrame Time: 0.01\n";
+  std::string text =
+      "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n}\n"
+      "MOTION\nFrames: 20000\nFrame Time: 0.01\n";
   for (int f = 0; f < 20000; ++f) text += "1.25 2.5 " + std::to_string(f) + "\n";
   ASSERT_TRUE(write_file_atomic(dir_ / "in.bvh", text).ok());
   const std::string cmd = "ulimit -f 64; exec " + shell_quote(GMR_CLI_PATH) + " convert " + path("in.bvh") + " " +

@@ -17,9 +17,9 @@
 
 namespace gmr {
 namespace {
+using test::shell_quote;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
-using test::shell_quote;
 
 class CliMarkers : public test::CliTest {};
 
@@ -29,8 +29,9 @@ TEST_F(CliMarkers, InfoSummarisesC3dAndTrc) {
   GMR_REQUIRE_DATA();
   const auto c3d = gmr("info " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()));
   ASSERT_EQ(c3d.status, 0) << c3d.err;
-  EXPECT_THAT(c3d.out, HasSubstr("markers:     41\nframes:      343\nfirst frame: 50\nframe rate:  120 Hz\nunits:       mm\n"
-                                 "missing:     0 of 14063 points (0.0%)\n"));
+  EXPECT_THAT(c3d.out,
+              HasSubstr("markers:     41\nframes:      343\nfirst frame: 50\nframe rate:  120 Hz\nunits:       mm\n"
+                        "missing:     0 of 14063 points (0.0%)\n"));
   EXPECT_THAT(c3d.out, HasSubstr(" TakeoMonday:LFWT "));
   EXPECT_TRUE(c3d.err.empty()) << c3d.err;
 
@@ -76,7 +77,8 @@ TEST_F(CliMarkers, ConvertC3dToTrcAndTrcToTrc) {
   EXPECT_EQ(a->names, b->names);
   ASSERT_EQ(a->positions.size(), b->positions.size());
   for (std::size_t i = 0; i < a->positions.size(); ++i) {
-    ASSERT_TRUE(a->positions[i] == b->positions[i] || (std::isnan(a->positions[i]) && std::isnan(b->positions[i]))) << i;
+    ASSERT_TRUE(a->positions[i] == b->positions[i] || (std::isnan(a->positions[i]) && std::isnan(b->positions[i])))
+        << i;
   }
   const auto again = gmr("convert " + path("w.TRC") + " " + path("w2.trc"));
   ASSERT_EQ(again.status, 0) << again.err;
@@ -95,12 +97,12 @@ TEST_F(CliMarkers, OneLineErrors) {
   expect_one_line_error("convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.bvh"),
                         "markers become a motion through a skeleton model: add --model NAME or --model FILE "
                         "(built in: cmu41), or write .trc");
-  expect_one_line_error("convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.bvh") +
-                            " --model cmu99",
-                        "'cmu99' is neither a built-in marker model (cmu41) nor a file");
-  expect_one_line_error("convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.trc") +
-                            " --model cmu41",
-                        "a .trc output keeps the markers");
+  expect_one_line_error(
+      "convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.bvh") + " --model cmu99",
+      "'cmu99' is neither a built-in marker model (cmu41) nor a file");
+  expect_one_line_error(
+      "convert " + shell_quote(test::data_file("c3d/cmu_02_01.c3d").string()) + " " + path("x.trc") + " --model cmu41",
+      "a .trc output keeps the markers");
   // A take without the CMU markers: the model names what is missing.
   expect_one_line_error("convert " + shell_quote(test::data_file("c3d/opensim_walking2.c3d").string()) + " " +
                             path("x.bvh") + " --model cmu41",
@@ -153,8 +155,7 @@ TEST_F(CliMarkers, ConvertWithAModelWritesAMotionAndInfoReportsTheFit) {
   expect_one_line_error("info " + path("walk.gmr") + " --model cmu41", "--model applies to marker files");
   expect_one_line_error("convert " + path("walk.gmr") + " " + path("w.bvh") + " --roots head",
                         "--model and --roots apply to marker files");
-  expect_one_line_error("convert " + c3d + " " + path("w.bvh") + " --model cmu41 --roots nose",
-                        "unknown joint 'nose'");
+  expect_one_line_error("convert " + c3d + " " + path("w.bvh") + " --model cmu41 --roots nose", "unknown joint 'nose'");
 }
 
 }  // namespace

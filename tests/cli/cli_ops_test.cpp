@@ -3,7 +3,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-
 #include <Eigen/Core>
 #include <algorithm>
 #include <cstdio>
@@ -85,7 +84,8 @@ TEST_F(CliOps, PositionsWithRootsAndStripKeepTheContract) {
   const Outcome plain = gmr("positions " + bvh_ + " --frames 10:20");
   const Outcome rooted = gmr("positions " + bvh_ + " --frames 10:20 --roots LeftFoot,Head");
   ASSERT_EQ(rooted.status, 0) << rooted.err;
-  EXPECT_EQ(std::count(plain.out.begin(), plain.out.end(), '\n'), std::count(rooted.out.begin(), rooted.out.end(), '\n'));
+  EXPECT_EQ(std::count(plain.out.begin(), plain.out.end(), '\n'),
+            std::count(rooted.out.begin(), rooted.out.end(), '\n'));
   // Rows come in the file's joint order, like plain `gmr positions`.
   std::istringstream a(plain.out), b(rooted.out);
   std::string la, lb;

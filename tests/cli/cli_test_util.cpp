@@ -19,8 +19,8 @@ std::string shell_quote(const std::string& s) {
 
 CliOutcome CliTest::gmr(const std::string& args) {
   const fs::path out = dir_ / "stdout", err = dir_ / "stderr";
-  const std::string cmd = shell_quote(GMR_CLI_PATH) + " " + args + " >" + shell_quote(out.string()) + " 2>" +
-                          shell_quote(err.string());
+  const std::string cmd =
+      shell_quote(GMR_CLI_PATH) + " " + args + " >" + shell_quote(out.string()) + " 2>" + shell_quote(err.string());
   const int raw = std::system(cmd.c_str());
   CliOutcome r;
   r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;

@@ -30,7 +30,7 @@ class CliTest : public ::testing::Test {
   // starting with the program's name ("gmr: ") and containing `needle`.
   void expect_one_line_error(const std::string& args, const std::string& needle);
 
-  TempDir tmp_;                                // a fresh, empty folder per test, removed after it
+  TempDir tmp_;  // a fresh, empty folder per test, removed after it
   const std::filesystem::path& dir_ = tmp_.path;
 };
 

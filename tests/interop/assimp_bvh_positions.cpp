@@ -46,7 +46,8 @@ struct Reader {
     return aiMatrix4x4(s, q, p);
   }
 
-  void world(const aiNode* n, const aiMatrix4x4& parent, unsigned frame, std::map<const aiNode*, aiVector3D>& out) const {
+  void world(const aiNode* n, const aiMatrix4x4& parent, unsigned frame,
+             std::map<const aiNode*, aiVector3D>& out) const {
     const aiMatrix4x4 w = parent * local(n, frame);
     out[n] = aiVector3D(w.a4, w.b4, w.c4);
     for (unsigned i = 0; i < n->mNumChildren; ++i) world(n->mChildren[i], w, frame, out);

@@ -106,7 +106,8 @@ void RawConnection::shutdown_send() { ::shutdown(fd_, SHUT_WR); }
 bool RawConnection::read_exact(char* out, std::size_t n, std::chrono::steady_clock::time_point deadline) {
   std::size_t got = 0;
   while (got < n) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) return false;
     pollfd p{fd_, POLLIN, 0};
     if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return false;
@@ -141,7 +142,8 @@ bool RawConnection::readable(std::chrono::milliseconds timeout) {
 std::optional<pb::ServerMessage> RawConnection::reply(std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   for (;;) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) return std::nullopt;
     auto m = receive(left);
     if (!m) return m;
@@ -154,7 +156,8 @@ bool RawConnection::wait_closed(std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   char buf[4096];
   while (!closed_) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) return false;
     pollfd p{fd_, POLLIN, 0};
     if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return false;
@@ -254,7 +257,8 @@ Certificate::~Certificate() {
 std::unique_ptr<Certificate> self_signed(const std::string& names) {
   static int serial = 0;
   auto out = std::make_unique<Certificate>();
-  out->dir = std::filesystem::temp_directory_path() / ("gmr-tls-" + std::to_string(::getpid()) + "-" + std::to_string(++serial));
+  out->dir = std::filesystem::temp_directory_path() /
+             ("gmr-tls-" + std::to_string(::getpid()) + "-" + std::to_string(++serial));
   std::filesystem::create_directories(out->dir);
   out->cert = out->dir / "cert.pem";
   out->key = out->dir / "key.pem";
@@ -271,8 +275,8 @@ std::unique_ptr<Certificate> self_signed(const std::string& names) {
   X509V3_CTX ctx;
   X509V3_set_ctx_nodb(&ctx);
   X509V3_set_ctx(&ctx, x, x, nullptr, nullptr, 0);
-  for (auto [nid, value] : {std::pair{NID_subject_alt_name, names.c_str()},
-                            std::pair{NID_basic_constraints, "critical,CA:TRUE"}}) {
+  for (auto [nid, value] :
+       {std::pair{NID_subject_alt_name, names.c_str()}, std::pair{NID_basic_constraints, "critical,CA:TRUE"}}) {
     X509_EXTENSION* ext = X509V3_EXT_conf_nid(nullptr, &ctx, nid, value);
     X509_add_ext(x, ext, -1);
     X509_EXTENSION_free(ext);

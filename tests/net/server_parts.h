@@ -40,8 +40,8 @@ struct ServerParts {
   server::StreamRegistry streams{io, counters};
   server::Replicas replicas{io, cfg, catalog};
   server::net::thread_pool edit_pool{1};
-  server::Services services{cfg, io, edit_pool, catalog, admission, streams, counters,
-                            udp, multicast, replicas, recordings, metrics, lanes};
+  server::Services services{cfg, io,        edit_pool, catalog,    admission, streams, counters,
+                            udp, multicast, replicas,  recordings, metrics,   lanes};
 };
 
 }  // namespace gmr::test

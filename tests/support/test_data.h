@@ -64,23 +64,22 @@ PositionDiff compare_positions(std::span<const Eigen::Vector3d> a, std::span<con
 }  // namespace gmr::test
 
 // Skips the test (outside CI) or fails it (in CI) when the corpus is missing.
-#define GMR_REQUIRE_DATA()                                                                      \
-  do {                                                                                           \
-    if (!::gmr::test::have_data()) {                                                             \
-      if (::gmr::test::in_ci()) FAIL() << "CI=true but the shared data is missing at "           \
-                                       << ::gmr::test::data_dir();                               \
-      GTEST_SKIP() << "shared data not found at " << ::gmr::test::data_dir()                     \
-                   << " (set GMR_DATA_DIR or check out ../shared)";                              \
-    }                                                                                            \
+#define GMR_REQUIRE_DATA()                                                                                         \
+  do {                                                                                                             \
+    if (!::gmr::test::have_data()) {                                                                               \
+      if (::gmr::test::in_ci()) FAIL() << "CI=true but the shared data is missing at " << ::gmr::test::data_dir(); \
+      GTEST_SKIP() << "shared data not found at " << ::gmr::test::data_dir()                                       \
+                   << " (set GMR_DATA_DIR or check out ../shared)";                                                \
+    }                                                                                                              \
   } while (0)
 
 // Asserts that two frame-major position arrays agree within `tol`, naming the
 // worst frame and joint when they do not.
-#define EXPECT_POSITIONS_NEAR(skeleton, a, b, tol)                                               \
-  do {                                                                                           \
-    ASSERT_EQ((a).size(), (b).size());                                                           \
-    const auto gmr_diff_ = ::gmr::test::compare_positions((a), (b), (skeleton).size());          \
-    EXPECT_LE(gmr_diff_.max_error, (tol))                                                        \
-        << "worst at frame " << gmr_diff_.frame << ", joint "                                    \
-        << (gmr_diff_.joint >= 0 ? (skeleton).joint(gmr_diff_.joint).name : std::string("?"));  \
+#define EXPECT_POSITIONS_NEAR(skeleton, a, b, tol)                                             \
+  do {                                                                                         \
+    ASSERT_EQ((a).size(), (b).size());                                                         \
+    const auto gmr_diff_ = ::gmr::test::compare_positions((a), (b), (skeleton).size());        \
+    EXPECT_LE(gmr_diff_.max_error, (tol))                                                      \
+        << "worst at frame " << gmr_diff_.frame << ", joint "                                  \
+        << (gmr_diff_.joint >= 0 ? (skeleton).joint(gmr_diff_.joint).name : std::string("?")); \
   } while (0)

@@ -75,25 +75,25 @@ typedef struct gmr_motion_info {
 
 typedef struct gmr_joint_info {
   char name[128];
-  int32_t parent;              /* -1 for a root */
-  double rest_translation[3];  /* relative to the parent's frame, in the subscription's conventions */
-  double rest_rotation[4];     /* x, y, z, w */
+  int32_t parent;             /* -1 for a root */
+  double rest_translation[3]; /* relative to the parent's frame, in the subscription's conventions */
+  double rest_rotation[4];    /* x, y, z, w */
 } gmr_joint_info;
 
 typedef struct gmr_subscribe_options {
-  uint32_t struct_size;        /* sizeof(gmr_subscribe_options), set by gmr_subscribe_options_init */
-  double rate_hz;              /* 0: the motion's own rate times speed */
-  double speed;                /* 1: real time */
+  uint32_t struct_size; /* sizeof(gmr_subscribe_options), set by gmr_subscribe_options_init */
+  double rate_hz;       /* 0: the motion's own rate times speed */
+  double speed;         /* 1: real time */
   int32_t loop;
   int32_t udp;
   int32_t float64;
-  int32_t local_transforms;    /* each joint's rotation and translation relative to its parent */
-  int32_t orientations;        /* world orientations too */
-  uint64_t max_frames;         /* 0: no limit */
+  int32_t local_transforms; /* each joint's rotation and translation relative to its parent */
+  int32_t orientations;     /* world orientations too */
+  uint64_t max_frames;      /* 0: no limit */
   uint32_t start_frame, end_frame;
   gmr_preset preset;
   double source_metres_per_unit; /* 0: the library's */
-  uint32_t max_staleness_ms;   /* 0: 100 ms */
+  uint32_t max_staleness_ms;     /* 0: 100 ms */
 } gmr_subscribe_options;
 
 typedef struct gmr_frame {
@@ -102,8 +102,8 @@ typedef struct gmr_frame {
   uint64_t sequence;
   int64_t server_send_time_ns;
   uint32_t skeleton_version;
-  uint32_t joint_count;        /* values written per array */
-  int32_t skeleton_changed;    /* 1: the skeleton changed since the last poll (read it again) */
+  uint32_t joint_count;     /* values written per array */
+  int32_t skeleton_changed; /* 1: the skeleton changed since the last poll (read it again) */
   int32_t has_local_transforms;
   int32_t has_orientations;
 } gmr_frame;
@@ -187,9 +187,9 @@ typedef enum gmr_channel {
 
 typedef struct gmr_publish_joint {
   const char* name;
-  int32_t parent;           /* index of an earlier joint; -1: a root */
-  double offset[3];         /* from the parent (a root: its position) */
-  uint32_t channel_count;   /* 0 to 6 */
+  int32_t parent;         /* index of an earlier joint; -1: a root */
+  double offset[3];       /* from the parent (a root: its position) */
+  uint32_t channel_count; /* 0 to 6 */
   gmr_channel channels[6];
 } gmr_publish_joint;
 

@@ -77,7 +77,8 @@ namespace {
 template <class Op>
 gmr_status view_op(const char* what, gmr_client* client, const char* name, Op op) noexcept {
   return guarded([&] {
-    if (client == nullptr || name == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, std::string(what) + ": a NULL argument");
+    if (client == nullptr || name == nullptr)
+      return fail(GMR_ERROR_INVALID_ARGUMENT, std::string(what) + ": a NULL argument");
     auto r = op(*client->client, std::string(name));
     return r.ok() ? GMR_OK : status_of(r.error());
   });
@@ -193,7 +194,8 @@ gmr_status gmr_close_view(gmr_client* client, uint32_t view_id) {
 }
 
 gmr_status gmr_shift_root(gmr_client* client, uint32_t view_id, const char* joint) {
-  return view_op("gmr_shift_root", client, joint, [&](auto& c, const std::string& j) { return c.shift_root(view_id, j); });
+  return view_op("gmr_shift_root", client, joint,
+                 [&](auto& c, const std::string& j) { return c.shift_root(view_id, j); });
 }
 
 gmr_status gmr_set_roots(gmr_client* client, uint32_t view_id, const char* const* roots, size_t count) {
@@ -203,7 +205,8 @@ gmr_status gmr_set_roots(gmr_client* client, uint32_t view_id, const char* const
     }
     std::vector<std::string> names;
     for (std::size_t i = 0; i < count; ++i) {
-      if (roots[i] == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_set_roots: root " + std::to_string(i) + " is NULL");
+      if (roots[i] == nullptr)
+        return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_set_roots: root " + std::to_string(i) + " is NULL");
       names.emplace_back(roots[i]);
     }
     auto v = client->client->set_roots(view_id, names);
@@ -220,7 +223,8 @@ gmr_status gmr_join(gmr_client* client, uint32_t view_id, const char* root) {
 }
 
 gmr_status gmr_strip_dummies(gmr_client* client, uint32_t view_id) {
-  return view_op("gmr_strip_dummies", client, "", [&](auto& c, const std::string&) { return c.strip_dummies(view_id); });
+  return view_op("gmr_strip_dummies", client, "",
+                 [&](auto& c, const std::string&) { return c.strip_dummies(view_id); });
 }
 
 gmr_status gmr_query_positions(gmr_client* client, uint32_t view_id, uint32_t begin, uint32_t end, gmr_preset preset,
@@ -269,9 +273,11 @@ gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscri
     }
     *out = nullptr;
     if (options->struct_size != sizeof(gmr_subscribe_options)) {
-      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_subscribe: options not set up by gmr_subscribe_options_init "
-                                              "(struct_size " + std::to_string(options->struct_size) + ", expected " +
-                                              std::to_string(sizeof(gmr_subscribe_options)) + ")");
+      return fail(GMR_ERROR_INVALID_ARGUMENT,
+                  "gmr_subscribe: options not set up by gmr_subscribe_options_init "
+                  "(struct_size " +
+                      std::to_string(options->struct_size) + ", expected " +
+                      std::to_string(sizeof(gmr_subscribe_options)) + ")");
     }
     if (options->preset < GMR_PRESET_NATIVE || options->preset > GMR_PRESET_GODOT) {
       return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_subscribe: unknown preset " + std::to_string(options->preset));
@@ -340,7 +346,8 @@ void gmr_unsubscribe(gmr_subscription* subscription) {
       ended = subscription->state->ended;
     }
     // After this the client calls none of the subscription's callbacks.
-    if (!ended && subscription->owner->client->connected()) (void)subscription->owner->client->unsubscribe(subscription->id);
+    if (!ended && subscription->owner->client->connected())
+      (void)subscription->owner->client->unsubscribe(subscription->id);
   } catch (...) {
   }
   delete subscription;
@@ -348,7 +355,8 @@ void gmr_unsubscribe(gmr_subscription* subscription) {
 
 gmr_status gmr_subscription_joint_count(gmr_subscription* s, size_t* count) {
   return guarded([&] {
-    if (s == nullptr || count == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_subscription_joint_count: a NULL argument");
+    if (s == nullptr || count == nullptr)
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_subscription_joint_count: a NULL argument");
     SubscriptionState& st = *s->state;
     std::lock_guard lock(st.mutex);
     *count = st.skeleton.size();
@@ -358,7 +366,8 @@ gmr_status gmr_subscription_joint_count(gmr_subscription* s, size_t* count) {
 
 gmr_status gmr_subscription_joint(gmr_subscription* s, size_t index, gmr_joint_info* out) {
   return guarded([&] {
-    if (s == nullptr || out == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_subscription_joint: a NULL argument");
+    if (s == nullptr || out == nullptr)
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_subscription_joint: a NULL argument");
     SubscriptionState& st = *s->state;
     std::lock_guard lock(st.mutex);
     if (index >= st.skeleton.size()) {
@@ -478,7 +487,8 @@ gmr_status gmr_publish(gmr_client* client, const char* name, const gmr_publish_j
       const std::string where = "gmr_publish: joint " + std::to_string(i);
       if (in.name == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": a NULL name");
       if (in.channel_count > 6) {
-        return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": " + std::to_string(in.channel_count) + " channels (at most 6)");
+        return fail(GMR_ERROR_INVALID_ARGUMENT,
+                    where + ": " + std::to_string(in.channel_count) + " channels (at most 6)");
       }
       gmr::Joint j;
       j.name = in.name;
@@ -513,8 +523,9 @@ gmr_status gmr_publish_frame(gmr_client* client, uint32_t publication_id, const 
     }
     auto s = client->client->publish_frame(publication_id, std::span<const double>(values, count));
     if (!s.ok()) {
-      return s.error().kind == gmr::ErrorKind::kResourceExhausted ? fail(GMR_ERROR_RESOURCE_EXHAUSTED, s.error().message)
-                                                                  : status_of(s.error());
+      return s.error().kind == gmr::ErrorKind::kResourceExhausted
+                 ? fail(GMR_ERROR_RESOURCE_EXHAUSTED, s.error().message)
+                 : status_of(s.error());
     }
     // The server's word on an earlier frame.
     const auto errors = client->client->take_errors();

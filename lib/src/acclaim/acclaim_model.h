@@ -15,14 +15,23 @@ namespace gmr::acclaim_detail {
 
 inline constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 
-inline bool is_rotation_dof(AcclaimDof d) { return d == AcclaimDof::kRx || d == AcclaimDof::kRy || d == AcclaimDof::kRz; }
-inline bool is_translation_dof(AcclaimDof d) { return d == AcclaimDof::kTx || d == AcclaimDof::kTy || d == AcclaimDof::kTz; }
+inline bool is_rotation_dof(AcclaimDof d) {
+  return d == AcclaimDof::kRx || d == AcclaimDof::kRy || d == AcclaimDof::kRz;
+}
+inline bool is_translation_dof(AcclaimDof d) {
+  return d == AcclaimDof::kTx || d == AcclaimDof::kTy || d == AcclaimDof::kTz;
+}
 // Axis of an rx/ry/rz or tx/ty/tz dof.
 inline Axis dof_axis(AcclaimDof d) {
   switch (d) {
-    case AcclaimDof::kRx: case AcclaimDof::kTx: return Axis::kX;
-    case AcclaimDof::kRy: case AcclaimDof::kTy: return Axis::kY;
-    default: return Axis::kZ;
+    case AcclaimDof::kRx:
+    case AcclaimDof::kTx:
+      return Axis::kX;
+    case AcclaimDof::kRy:
+    case AcclaimDof::kTy:
+      return Axis::kY;
+    default:
+      return Axis::kZ;
   }
 }
 
@@ -45,9 +54,9 @@ inline Eigen::Matrix3d axis_frame(const AsfBone& b, double to_degrees) {
 
 // What every frame of a skeleton shares: value layout and axis frames C.
 struct Prepared {
-  std::vector<int> offsets;          // first AMC value of each bone within a frame
-  std::size_t stride = 0;            // AMC values per frame
-  std::vector<Eigen::Matrix3d> c;    // C of each bone
+  std::vector<int> offsets;        // first AMC value of each bone within a frame
+  std::size_t stride = 0;          // AMC values per frame
+  std::vector<Eigen::Matrix3d> c;  // C of each bone
 };
 
 inline Prepared prepare(const AsfSkeleton& s) {
@@ -67,9 +76,9 @@ inline Prepared prepare(const AsfSkeleton& s) {
 
 // The parts of one bone's local transform for one frame.
 struct BoneState {
-  Eigen::Matrix3d local;       // L = C M C^-1
-  Eigen::Vector3d t;           // (tx, ty, tz), in C's frame (the root: world)
-  double extra_length = 0.0;   // l
+  Eigen::Matrix3d local;      // L = C M C^-1
+  Eigen::Vector3d t;          // (tx, ty, tz), in C's frame (the root: world)
+  double extra_length = 0.0;  // l
 };
 
 inline BoneState bone_state(const AsfBone& b, const Eigen::Matrix3d& c, std::span<const double> v, bool amc_degrees) {
@@ -92,15 +101,15 @@ inline BoneState bone_state(const AsfBone& b, const Eigen::Matrix3d& c, std::spa
 }
 
 inline std::span<const double> bone_values(const AsfSkeleton& s, const AmcMotion& m, std::size_t frame, int b,
-                                    const Prepared& prep) {
-  return std::span<const double>(m.values)
-      .subspan(frame * prep.stride + static_cast<std::size_t>(prep.offsets[static_cast<std::size_t>(b)]),
-               s.bones[static_cast<std::size_t>(b)].dofs.size());
+                                           const Prepared& prep) {
+  return std::span<const double>(m.values).subspan(
+      frame * prep.stride + static_cast<std::size_t>(prep.offsets[static_cast<std::size_t>(b)]),
+      s.bones[static_cast<std::size_t>(b)].dofs.size());
 }
 
 inline void compute_frame_impl(const AsfSkeleton& s, const AmcMotion& m, std::size_t frame, const Prepared& prep,
-                        std::vector<Eigen::Matrix3d>& world, std::span<Eigen::Vector3d> pos,
-                        std::span<Eigen::Matrix3d> rot) {
+                               std::vector<Eigen::Matrix3d>& world, std::span<Eigen::Vector3d> pos,
+                               std::span<Eigen::Matrix3d> rot) {
   world.resize(s.bones.size());
   for (std::size_t b = 0; b < s.bones.size(); ++b) {
     const AsfBone& bone = s.bones[b];

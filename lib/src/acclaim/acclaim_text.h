@@ -25,9 +25,9 @@ struct Token {
 };
 
 struct Line {
-  int number = 0;                // 1-based
-  std::string_view raw;          // without the line break
-  std::vector<Token> tokens;     // comment stripped
+  int number = 0;             // 1-based
+  std::string_view raw;       // without the line break
+  std::vector<Token> tokens;  // comment stripped
 };
 
 inline bool is_separator(char c) {

@@ -10,15 +10,15 @@
 
 namespace gmr {
 
-using acclaim_detail::Line;
-using acclaim_detail::put;
-using acclaim_detail::put3;
-using acclaim_detail::put_order;
-using acclaim_detail::LineReader;
 using acclaim_detail::error_at;
+using acclaim_detail::Line;
+using acclaim_detail::LineReader;
 using acclaim_detail::lower;
 using acclaim_detail::parse_integer;
 using acclaim_detail::parse_number;
+using acclaim_detail::put;
+using acclaim_detail::put3;
+using acclaim_detail::put_order;
 using acclaim_detail::quote_text;
 using acclaim_detail::to_lower;
 
@@ -66,7 +66,8 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
   auto close_frame = [&]() -> Status {
     if (!in_frames) return Ok{};
     if (stride > 0 && listed == 0) {
-      return error_at(file, frame_line, 1, "expected bone data after frame number " + std::to_string(out.frame_numbers.back()));
+      return error_at(file, frame_line, 1,
+                      "expected bone data after frame number " + std::to_string(out.frame_numbers.back()));
     }
     for (std::size_t b = 0; b < skeleton.bones.size(); ++b) {
       if (!skeleton.bones[b].dofs.empty() && seen[b] == 0) {
@@ -84,7 +85,9 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
     if (l.tokens.empty()) continue;
     const auto& t0 = l.tokens[0];
     if (t0.text.front() == ':') {
-      if (in_frames) return error_at(file, l.number, t0.column, "expected a frame number or a bone name, found " + quote_text(t0.text));
+      if (in_frames)
+        return error_at(file, l.number, t0.column,
+                        "expected a frame number or a bone name, found " + quote_text(t0.text));
       const std::string kw = to_lower(t0.text);
       if (kw == ":fully-specified") {
         out.fully_specified = true;
@@ -93,7 +96,8 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
       } else if (kw == ":radians") {
         out.degrees = false;
       } else if (out_warnings != nullptr) {
-        out_warnings->push_back(error_at(file, l.number, t0.column, "unknown keyword " + quote_text(t0.text) + " skipped"));
+        out_warnings->push_back(
+            error_at(file, l.number, t0.column, "unknown keyword " + quote_text(t0.text) + " skipped"));
       }
       continue;
     }
@@ -109,12 +113,14 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
           if (*n != prev + 1 && !gap_warned && out_warnings != nullptr) {
             gap_warned = true;
             out_warnings->push_back(error_at(file, l.number, t0.column,
-                                             "frame numbers jump from " + std::to_string(prev) + " to " + std::to_string(*n) +
+                                             "frame numbers jump from " + std::to_string(prev) + " to " +
+                                                 std::to_string(*n) +
                                                  "; frames are kept in file order, not resampled"));
           }
         }
         if (out.values.size() + stride > max_values) {
-          return error_at(file, l.number, t0.column, "too many frames for the size of the file (frames list almost no bones)");
+          return error_at(file, l.number, t0.column,
+                          "too many frames for the size of the file (frames list almost no bones)");
         }
         if (auto s = check_frame_count(out.frame_count + 1, stride); !s.ok()) {
           return error_at(file, l.number, t0.column, "one frame too many: " + s.error().message);
@@ -130,7 +136,8 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
       }
     }
     if (!in_frames) {
-      return error_at(file, l.number, t0.column, "expected a frame number before bone data, found " + quote_text(t0.text));
+      return error_at(file, l.number, t0.column,
+                      "expected a frame number before bone data, found " + quote_text(t0.text));
     }
     key.assign(t0.text);
     for (char& c : key) c = lower(c);
@@ -141,8 +148,9 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
     const std::size_t b = static_cast<std::size_t>(it->second);
     const AsfBone& bone = skeleton.bones[b];
     if (seen[b] != 0) {
-      return error_at(file, l.number, t0.column,
-                      "bone " + quote_text(t0.text) + " listed twice in frame " + std::to_string(out.frame_numbers.back()));
+      return error_at(
+          file, l.number, t0.column,
+          "bone " + quote_text(t0.text) + " listed twice in frame " + std::to_string(out.frame_numbers.back()));
     }
     seen[b] = 1;
     ++listed;
@@ -150,8 +158,8 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
     if (n != bone.dofs.size()) {
       const int col = n > bone.dofs.size() ? l.tokens[bone.dofs.size() + 1].column : static_cast<int>(l.raw.size()) + 1;
       return error_at(file, l.number, col,
-                      "expected " + std::to_string(bone.dofs.size()) + " values for bone " + quote_text(bone.name) + " (" +
-                          dof_list(bone) + "), found " + std::to_string(n));
+                      "expected " + std::to_string(bone.dofs.size()) + " values for bone " + quote_text(bone.name) +
+                          " (" + dof_list(bone) + "), found " + std::to_string(n));
     }
     double* dst = out.values.data() + (out.frame_count - 1) * stride + offset[b];
     for (std::size_t i = 0; i < n; ++i) {
@@ -162,11 +170,13 @@ Result<AmcMotion> parse_amc(std::string_view text, std::string_view file, const 
     }
   }
   if (auto s = close_frame(); !s) return s.error();
-  if (out.frame_count == 0) return error_at(file, reader.last_line(), 1, "expected at least one frame (a frame number, then bone lines)");
+  if (out.frame_count == 0)
+    return error_at(file, reader.last_line(), 1, "expected at least one frame (a frame number, then bone lines)");
   if (missing_total > 0 && out_warnings != nullptr) {
-    out_warnings->push_back(error_at(file, first_missing_frame_line, 1,
-                                     std::to_string(missing_total) +
-                                         " bone entries missing from frames (first in the frame here); they keep the value 0"));
+    out_warnings->push_back(
+        error_at(file, first_missing_frame_line, 1,
+                 std::to_string(missing_total) +
+                     " bone entries missing from frames (first in the frame here); they keep the value 0"));
   }
   return out;
 }
@@ -211,12 +221,10 @@ Result<std::string> format_amc(const AsfSkeleton& s, const AmcMotion& m) {
   return out;
 }
 
-
 Status write_amc(const AsfSkeleton& skeleton, const AmcMotion& motion, const std::filesystem::path& path) {
   auto text = format_amc(skeleton, motion);
   if (!text) return text.error();
   return write_file_atomic(path, *text);
 }
-
 
 }  // namespace gmr

@@ -9,28 +9,35 @@
 
 namespace gmr {
 
+using acclaim_detail::error_at;
+using acclaim_detail::iequals;
 using acclaim_detail::Line;
+using acclaim_detail::LineReader;
+using acclaim_detail::parse_integer;
+using acclaim_detail::parse_number;
 using acclaim_detail::put;
 using acclaim_detail::put3;
 using acclaim_detail::put_order;
-using acclaim_detail::LineReader;
-using acclaim_detail::Token;
-using acclaim_detail::error_at;
-using acclaim_detail::iequals;
-using acclaim_detail::parse_integer;
-using acclaim_detail::parse_number;
 using acclaim_detail::quote_text;
 using acclaim_detail::to_lower;
+using acclaim_detail::Token;
 
 std::string_view acclaim_dof_name(AcclaimDof dof) {
   switch (dof) {
-    case AcclaimDof::kRx: return "rx";
-    case AcclaimDof::kRy: return "ry";
-    case AcclaimDof::kRz: return "rz";
-    case AcclaimDof::kTx: return "tx";
-    case AcclaimDof::kTy: return "ty";
-    case AcclaimDof::kTz: return "tz";
-    case AcclaimDof::kL: return "l";
+    case AcclaimDof::kRx:
+      return "rx";
+    case AcclaimDof::kRy:
+      return "ry";
+    case AcclaimDof::kRz:
+      return "rz";
+    case AcclaimDof::kTx:
+      return "tx";
+    case AcclaimDof::kTy:
+      return "ty";
+    case AcclaimDof::kTz:
+      return "tz";
+    case AcclaimDof::kL:
+      return "l";
   }
   return "?";
 }
@@ -99,7 +106,9 @@ class AsfParser {
   Result<AsfSkeleton> run();
 
  private:
-  Error err(const Line& l, const Token& t, std::string msg) const { return error_at(file_, l.number, t.column, std::move(msg)); }
+  Error err(const Line& l, const Token& t, std::string msg) const {
+    return error_at(file_, l.number, t.column, std::move(msg));
+  }
   Error err_eol(const Line& l, std::string msg) const {
     return error_at(file_, l.number, static_cast<int>(l.raw.size()) + 1, std::move(msg));
   }
@@ -128,7 +137,7 @@ class AsfParser {
   bool have_root_ = false;
   bool in_bone_ = false;
   PendingBone pending_;
-  std::vector<PendingBone> bones_;  // file order
+  std::vector<PendingBone> bones_;                   // file order
   std::unordered_map<std::string, int> bone_index_;  // lower-case name -> index in bones_
 
   // Hierarchy: parent of each bone (index into bones_, -1 = root, -2 = none yet).
@@ -145,11 +154,13 @@ Status AsfParser::numbers(const Line& l, std::size_t first, std::size_t count, s
   for (std::size_t i = 0; i < count; ++i) {
     const std::size_t k = first + i;
     if (k >= l.tokens.size()) {
-      return err_eol(l, "expected " + std::to_string(count) + (count == 1 ? " number" : " numbers") + " after '" + std::string(keyword) + "', found " +
-                            std::to_string(i));
+      return err_eol(l, "expected " + std::to_string(count) + (count == 1 ? " number" : " numbers") + " after '" +
+                            std::string(keyword) + "', found " + std::to_string(i));
     }
     const auto v = parse_number(l.tokens[k].text);
-    if (!v) return err(l, l.tokens[k], "expected a number after '" + std::string(keyword) + "', found " + quote_text(l.tokens[k].text));
+    if (!v)
+      return err(l, l.tokens[k],
+                 "expected a number after '" + std::string(keyword) + "', found " + quote_text(l.tokens[k].text));
     out[i] = *v;
   }
   return Ok{};
@@ -158,7 +169,10 @@ Status AsfParser::numbers(const Line& l, std::size_t first, std::size_t count, s
 Status AsfParser::section_line(const Line& l) {
   const Token& t = l.tokens[0];
   const std::string kw = to_lower(t.text);
-  if (in_bone_) return err(l, t, "expected 'end' to close the bone begun on line " + std::to_string(pending_.begin_line) + " before " + quote_text(t.text));
+  if (in_bone_)
+    return err(l, t,
+               "expected 'end' to close the bone begun on line " + std::to_string(pending_.begin_line) + " before " +
+                   quote_text(t.text));
   if (in_hierarchy_) return err(l, t, "expected 'end' to close :hierarchy before " + quote_text(t.text));
   if (kw == ":version") {
     section_ = Section::kVersion;
@@ -202,7 +216,8 @@ Status AsfParser::units_line(const Line& l) {
     if (k == "mass" || k == "length") {
       const auto v = parse_number(val.text);
       if (!v) return err(l, val, "expected a number after '" + k + "', found " + quote_text(val.text));
-      if (k == "length" && !(*v > 0.0)) return err(l, val, "expected a positive length unit, found " + quote_text(val.text));
+      if (k == "length" && !(*v > 0.0))
+        return err(l, val, "expected a positive length unit, found " + quote_text(val.text));
       (k == "mass" ? out_.units.mass : out_.units.length) = *v;
     } else if (k == "angle") {
       const std::string v = to_lower(val.text);
@@ -228,7 +243,8 @@ Status AsfParser::root_line(const Line& l) {
     for (std::size_t i = 1; i < l.tokens.size(); ++i) {
       const auto d = parse_dof(l.tokens[i].text);
       if (!d || *d == AcclaimDof::kL) {
-        return err(l, l.tokens[i], "expected TX, TY, TZ, RX, RY or RZ in the root order, found " + quote_text(l.tokens[i].text));
+        return err(l, l.tokens[i],
+                   "expected TX, TY, TZ, RX, RY or RZ in the root order, found " + quote_text(l.tokens[i].text));
       }
       if (std::find(root_.dofs.begin(), root_.dofs.end(), *d) != root_.dofs.end()) {
         return err(l, l.tokens[i], "root order lists " + quote_text(l.tokens[i].text) + " twice");
@@ -238,7 +254,9 @@ Status AsfParser::root_line(const Line& l) {
   } else if (kw == "axis") {
     if (l.tokens.size() < 2) return err_eol(l, "expected a rotation order such as XYZ after 'axis'");
     const auto o = parse_axis_order(l.tokens[1].text);
-    if (!o) return err(l, l.tokens[1], "expected a rotation order such as XYZ after 'axis', found " + quote_text(l.tokens[1].text));
+    if (!o)
+      return err(l, l.tokens[1],
+                 "expected a rotation order such as XYZ after 'axis', found " + quote_text(l.tokens[1].text));
     root_.axis_order = *o;
   } else if (kw == "position" || kw == "orientation") {
     double v[3];
@@ -260,7 +278,8 @@ Status AsfParser::bonedata_line(const Line& l) {
     return Ok{};
   }
   if (iequals(t.text, "end")) return finish_bone(l);
-  if (iequals(t.text, "begin")) return err(l, t, "expected 'end' to close the bone begun on line " + std::to_string(pending_.begin_line));
+  if (iequals(t.text, "begin"))
+    return err(l, t, "expected 'end' to close the bone begun on line " + std::to_string(pending_.begin_line));
   return bone_field(l);
 }
 
@@ -271,11 +290,14 @@ Status AsfParser::bone_field(const Line& l) {
   if (kw == "id") {
     if (l.tokens.size() < 2) return err_eol(l, "expected a number after 'id'");
     const auto v = parse_integer(l.tokens[1].text);
-    if (!v || *v > 1000000000) return err(l, l.tokens[1], "expected a whole number after 'id', found " + quote_text(l.tokens[1].text));
+    if (!v || *v > 1000000000)
+      return err(l, l.tokens[1], "expected a whole number after 'id', found " + quote_text(l.tokens[1].text));
     b.id = static_cast<int>(*v);
   } else if (kw == "name") {
     if (l.tokens.size() < 2) return err_eol(l, "expected a bone name after 'name'");
-    if (l.tokens.size() > 2) return err(l, l.tokens[2], "expected one bone name (no spaces), found another word " + quote_text(l.tokens[2].text));
+    if (l.tokens.size() > 2)
+      return err(l, l.tokens[2],
+                 "expected one bone name (no spaces), found another word " + quote_text(l.tokens[2].text));
     const Token& n = l.tokens[1];
     const std::string key = to_lower(n.text);
     if (key == "root") return err(l, n, "a bone may not be named " + quote_text(n.text) + " (the root's name)");
@@ -284,8 +306,10 @@ Status AsfParser::bone_field(const Line& l) {
       return err(l, n, "a bone may not be named " + quote_text(n.text) + " (a keyword of the hierarchy)");
     }
     if (auto it = bone_index_.find(key); it != bone_index_.end()) {
-      return err(l, n, "bone name " + quote_text(n.text) + " repeats the bone begun on line " +
-                           std::to_string(bones_[static_cast<std::size_t>(it->second)].begin_line) + " (names are case-insensitive)");
+      return err(l, n,
+                 "bone name " + quote_text(n.text) + " repeats the bone begun on line " +
+                     std::to_string(bones_[static_cast<std::size_t>(it->second)].begin_line) +
+                     " (names are case-insensitive)");
     }
     b.name = std::string(n.text);
     pending_.has_name = true;
@@ -308,14 +332,19 @@ Status AsfParser::bone_field(const Line& l) {
     b.axis = Eigen::Vector3d(v[0], v[1], v[2]);
     if (l.tokens.size() > 4) {
       const auto o = parse_axis_order(l.tokens[4].text);
-      if (!o) return err(l, l.tokens[4], "expected a rotation order such as XYZ after the axis angles, found " + quote_text(l.tokens[4].text));
+      if (!o)
+        return err(
+            l, l.tokens[4],
+            "expected a rotation order such as XYZ after the axis angles, found " + quote_text(l.tokens[4].text));
       b.axis_order = *o;
     }
   } else if (kw == "dof") {
     b.dofs.clear();
     for (std::size_t i = 1; i < l.tokens.size(); ++i) {
       const auto d = parse_dof(l.tokens[i].text);
-      if (!d) return err(l, l.tokens[i], "expected rx, ry, rz, tx, ty, tz or l after 'dof', found " + quote_text(l.tokens[i].text));
+      if (!d)
+        return err(l, l.tokens[i],
+                   "expected rx, ry, rz, tx, ty, tz or l after 'dof', found " + quote_text(l.tokens[i].text));
       if (std::find(b.dofs.begin(), b.dofs.end(), *d) != b.dofs.end()) {
         return err(l, l.tokens[i], "dof " + quote_text(l.tokens[i].text) + " listed twice");
       }
@@ -328,7 +357,9 @@ Status AsfParser::bone_field(const Line& l) {
     auto take = [&](const Line& line, std::size_t first) -> Status {
       for (std::size_t i = first; i < line.tokens.size(); ++i) {
         const auto x = parse_number(line.tokens[i].text, /*allow_non_finite=*/true);
-        if (!x || std::isnan(*x)) return err(line, line.tokens[i], "expected a limit (a number or inf), found " + quote_text(line.tokens[i].text));
+        if (!x || std::isnan(*x))
+          return err(line, line.tokens[i],
+                     "expected a limit (a number or inf), found " + quote_text(line.tokens[i].text));
         v.push_back(*x);
       }
       return Ok{};
@@ -342,7 +373,8 @@ Status AsfParser::bone_field(const Line& l) {
       reader_.next(cont);
       if (auto s = take(cont, 0); !s) return s;
     }
-    if (v.size() % 2 != 0) return err(l, t, "expected pairs of limits (min max), found " + std::to_string(v.size()) + " numbers");
+    if (v.size() % 2 != 0)
+      return err(l, t, "expected pairs of limits (min max), found " + std::to_string(v.size()) + " numbers");
     b.limits.clear();
     for (std::size_t i = 0; i < v.size(); i += 2) b.limits.push_back(AsfLimit{v[i], v[i + 1]});
   } else if (kw == "bodymass" || kw == "cofmass") {
@@ -386,9 +418,11 @@ Status AsfParser::finish_bone(const Line& l) {
 
 Status AsfParser::hierarchy_line(const Line& l) {
   const Token& t = l.tokens[0];
-  if (hierarchy_done_) return err(l, t, "expected a section (':name') after the hierarchy's 'end', found " + quote_text(t.text));
+  if (hierarchy_done_)
+    return err(l, t, "expected a section (':name') after the hierarchy's 'end', found " + quote_text(t.text));
   if (!in_hierarchy_) {
-    if (!iequals(t.text, "begin")) return err(l, t, "expected 'begin' to start the hierarchy, found " + quote_text(t.text));
+    if (!iequals(t.text, "begin"))
+      return err(l, t, "expected 'begin' to start the hierarchy, found " + quote_text(t.text));
     in_hierarchy_ = true;
     parent_.assign(bones_.size(), -2);
     children_.assign(bones_.size() + 1, {});
@@ -413,7 +447,8 @@ Status AsfParser::hierarchy_line(const Line& l) {
     if (it == bone_index_.end()) return err(l, c, "unknown bone " + quote_text(c.text) + " in the hierarchy");
     const int child = it->second;
     if (child == parent) return err(l, c, "bone " + quote_text(c.text) + " cannot be its own child");
-    if (parent_[static_cast<std::size_t>(child)] != -2) return err(l, c, "bone " + quote_text(c.text) + " already has a parent");
+    if (parent_[static_cast<std::size_t>(child)] != -2)
+      return err(l, c, "bone " + quote_text(c.text) + " already has a parent");
     parent_[static_cast<std::size_t>(child)] = parent;
     children_[static_cast<std::size_t>(parent + 1)].push_back(child);
   }
@@ -423,11 +458,15 @@ Status AsfParser::hierarchy_line(const Line& l) {
 Result<AsfSkeleton> AsfParser::assemble() {
   const int last = reader_.last_line();
   const int end_col = 1;
-  if (in_bone_) return error_at(file_, last, end_col, "file ends inside the bone begun on line " + std::to_string(pending_.begin_line) + "; expected 'end'");
+  if (in_bone_)
+    return error_at(
+        file_, last, end_col,
+        "file ends inside the bone begun on line " + std::to_string(pending_.begin_line) + "; expected 'end'");
   if (in_hierarchy_) return error_at(file_, last, end_col, "file ends inside :hierarchy; expected 'end'");
   if (!have_root_) return error_at(file_, last, end_col, "expected a :root section");
   if (!bones_.empty() && !have_hierarchy_) return error_at(file_, last, end_col, "expected a :hierarchy section");
-  if (have_hierarchy_ && !hierarchy_done_) return error_at(file_, last, end_col, "expected 'begin' ... 'end' in :hierarchy");
+  if (have_hierarchy_ && !hierarchy_done_)
+    return error_at(file_, last, end_col, "expected 'begin' ... 'end' in :hierarchy");
 
   root_.name = "root";
   root_.id = 0;
@@ -488,14 +527,24 @@ Result<AsfSkeleton> AsfParser::run() {
         doc_lines_.emplace_back(r);
         break;
       }
-      case Section::kUnits: s = units_line(l); break;
-      case Section::kRoot: s = root_line(l); break;
-      case Section::kBoneData: s = bonedata_line(l); break;
-      case Section::kHierarchy: s = hierarchy_line(l); break;
+      case Section::kUnits:
+        s = units_line(l);
+        break;
+      case Section::kRoot:
+        s = root_line(l);
+        break;
+      case Section::kBoneData:
+        s = bonedata_line(l);
+        break;
+      case Section::kHierarchy:
+        s = hierarchy_line(l);
+        break;
       case Section::kVersion:
       case Section::kName:
-        return err(l, l.tokens[0], "expected a section keyword such as ':units', found " + quote_text(l.tokens[0].text));
-      case Section::kUnknown: break;
+        return err(l, l.tokens[0],
+                   "expected a section keyword such as ':units', found " + quote_text(l.tokens[0].text));
+      case Section::kUnknown:
+        break;
     }
     if (!s) return s.error();
   }
@@ -589,7 +638,8 @@ std::string format_asf(const AsfSkeleton& s) {
   std::vector<std::vector<int>> children(s.bones.size());
   for (std::size_t i = 1; i < s.bones.size(); ++i) {
     const int p = s.bones[i].parent;
-    if (p >= 0 && static_cast<std::size_t>(p) < s.bones.size()) children[static_cast<std::size_t>(p)].push_back(static_cast<int>(i));
+    if (p >= 0 && static_cast<std::size_t>(p) < s.bones.size())
+      children[static_cast<std::size_t>(p)].push_back(static_cast<int>(i));
   }
   for (std::size_t p = 0; p < s.bones.size(); ++p) {
     if (children[p].empty()) continue;
@@ -601,10 +651,8 @@ std::string format_asf(const AsfSkeleton& s) {
   return out;
 }
 
-
 Status write_asf(const AsfSkeleton& skeleton, const std::filesystem::path& path) {
   return write_file_atomic(path, format_asf(skeleton));
 }
-
 
 }  // namespace gmr

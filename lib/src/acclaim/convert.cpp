@@ -39,7 +39,6 @@ std::string root_name(const AsfSkeleton& s) {
 
 }  // namespace
 
-
 using namespace acclaim_detail;
 
 Result<Motion> acclaim_to_gmr(const AsfSkeleton& s, const AmcMotion& m, const AcclaimToGmrOptions& options) {
@@ -59,9 +58,9 @@ Result<Motion> acclaim_to_gmr(const AsfSkeleton& s, const AmcMotion& m, const Ac
   enum class RotationMode { kNone, kDirect, kDecomposed };
   struct Plan {
     RotationMode rotation = RotationMode::kNone;
-    bool bone_translation = false;         // 3 position channels, per frame
-    std::vector<int> root_position_dofs;   // root: index of the TX/TY/TZ values, in channel order
-    std::vector<int> direct_dofs;          // kDirect: value index of each rotation channel
+    bool bone_translation = false;        // 3 position channels, per frame
+    std::vector<int> root_position_dofs;  // root: index of the TX/TY/TZ values, in channel order
+    std::vector<int> direct_dofs;         // kDirect: value index of each rotation channel
   };
   std::vector<Plan> plans(s.bones.size());
   std::vector<Joint> joints(s.bones.size());
@@ -73,7 +72,8 @@ Result<Motion> acclaim_to_gmr(const AsfSkeleton& s, const AmcMotion& m, const Ac
     Plan& p = plans[b];
     j.name = bone.parent < 0 ? root_name(s) : bone.name;
     j.parent = bone.parent;
-    j.offset = bone.parent < 0 ? Eigen::Vector3d(bone.position * scale) : Eigen::Vector3d(bone.direction * (bone.length * scale));
+    j.offset = bone.parent < 0 ? Eigen::Vector3d(bone.position * scale)
+                               : Eigen::Vector3d(bone.direction * (bone.length * scale));
     if (!j.offset.allFinite()) {
       return make_error("ASF bone '" + bone.name + "': its offset times the length scale " + std::to_string(scale) +
                         " is not finite");
@@ -122,7 +122,8 @@ Result<Motion> acclaim_to_gmr(const AsfSkeleton& s, const AmcMotion& m, const Ac
       const AsfBone& bone = s.bones[b];
       const Plan& p = plans[b];
       const auto v = bone_values(s, m, f, static_cast<int>(b), prep);
-      double* dst = out.values.data() + f * stride + static_cast<std::size_t>(out.skeleton.channel_offset(static_cast<int>(b)));
+      double* dst =
+          out.values.data() + f * stride + static_cast<std::size_t>(out.skeleton.channel_offset(static_cast<int>(b)));
       std::size_t k = 0;
       const bool need_state = p.rotation == RotationMode::kDecomposed || p.bone_translation;
       const BoneState st = need_state ? bone_state(bone, prep.c[b], v, m.degrees) : BoneState{};
@@ -176,7 +177,8 @@ Result<AcclaimModel> gmr_to_acclaim(const Motion& motion) {
   const Skeleton& sk = motion.skeleton;
   if (sk.empty()) return make_error("ASF/AMC export needs at least one joint");
   if (sk.roots().size() != 1) {
-    return make_error("ASF holds a single tree; this motion has " + std::to_string(sk.roots().size()) + " roots (join them first)");
+    return make_error("ASF holds a single tree; this motion has " + std::to_string(sk.roots().size()) +
+                      " roots (join them first)");
   }
   std::unordered_set<std::string> names;
   for (std::size_t j = 0; j < sk.size(); ++j) {
@@ -184,13 +186,15 @@ Result<AcclaimModel> gmr_to_acclaim(const Motion& motion) {
     if (sk.is_root(static_cast<int>(j))) continue;  // written as `root`
     bool ok = !n.empty() && n.front() != ':';
     for (char c : n) ok = ok && !(acclaim_detail::is_separator(c) || c == '#' || c == '\n' || c == '\r');
-    if (!ok) return make_error("joint name '" + n + "' cannot be written to ASF (empty, whitespace, `,()#` or a leading ':')");
+    if (!ok)
+      return make_error("joint name '" + n + "' cannot be written to ASF (empty, whitespace, `,()#` or a leading ':')");
     const std::string key = to_lower(n);
     if (key == "root" || key == "begin" || key == "end") {
       return make_error("joint '" + n + "' cannot be written to ASF: '" + key + "' is reserved for " +
                         (key == "root" ? "the root" : "the hierarchy's keywords"));
     }
-    if (!names.insert(key).second) return make_error("joint names differ only in case ('" + n + "'); ASF names are case-insensitive");
+    if (!names.insert(key).second)
+      return make_error("joint names differ only in case ('" + n + "'); ASF names are case-insensitive");
   }
 
   // Bones in depth-first order (the order parse_asf gives back).
@@ -285,7 +289,6 @@ Result<AcclaimModel> gmr_to_acclaim(const Motion& motion) {
   return out;
 }
 
-
 Status write_asf_amc(const Motion& motion, const std::filesystem::path& asf, const std::filesystem::path& amc,
                      bool replace_other_asf) {
   auto model = gmr_to_acclaim(motion);
@@ -311,6 +314,5 @@ Status write_asf_amc(const Motion& motion, const std::filesystem::path& asf, con
   const FileContent pair[] = {{asf, asf_text}, {amc, *amc_text}};
   return write_files_atomic(pair);
 }
-
 
 }  // namespace gmr

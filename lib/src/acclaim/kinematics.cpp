@@ -31,5 +31,4 @@ std::vector<Eigen::Vector3d> acclaim_positions(const AsfSkeleton& skeleton, cons
   return out;
 }
 
-
 }  // namespace gmr

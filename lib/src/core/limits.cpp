@@ -5,8 +5,8 @@ namespace gmr {
 Status check_frame_count(std::uint64_t frames, std::uint64_t bytes_per_frame, std::uint64_t bytes_available) {
   const std::string declared = "frame count " + std::to_string(frames);
   if (frames > kMaxFrames) {
-    return make_error(ErrorKind::kInvalidData, declared + " is above gmr's limit of " + std::to_string(kMaxFrames) +
-                                                   " frames per file");
+    return make_error(ErrorKind::kInvalidData,
+                      declared + " is above gmr's limit of " + std::to_string(kMaxFrames) + " frames per file");
   }
   if (bytes_per_frame == 0 && frames > kMaxEmptyFrames) {
     return make_error(ErrorKind::kInvalidData, declared + " is above gmr's limit of " +

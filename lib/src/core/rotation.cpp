@@ -10,22 +10,18 @@ namespace {
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 
-constexpr std::string_view kNames[] = {"Xposition", "Yposition", "Zposition",
-                                       "Xrotation", "Yrotation", "Zrotation"};
+constexpr std::string_view kNames[] = {"Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"};
 
 bool iequals(std::string_view a, std::string_view b) {
   if (a.size() != b.size()) return false;
   for (std::size_t i = 0; i < a.size(); ++i) {
-    if (std::tolower(static_cast<unsigned char>(a[i])) != std::tolower(static_cast<unsigned char>(b[i])))
-      return false;
+    if (std::tolower(static_cast<unsigned char>(a[i])) != std::tolower(static_cast<unsigned char>(b[i]))) return false;
   }
   return true;
 }
 
 // Wraps `angle` by multiples of 360 to the value nearest `target`.
-double nearest_turn(double angle, double target) {
-  return angle + 360.0 * std::round((target - angle) / 360.0);
-}
+double nearest_turn(double angle, double target) { return angle + 360.0 * std::round((target - angle) / 360.0); }
 
 }  // namespace
 
@@ -43,9 +39,15 @@ Eigen::Matrix3d axis_rotation(Axis axis, double degrees) {
   const double c = std::cos(r), s = std::sin(r);
   Eigen::Matrix3d m;
   switch (axis) {
-    case Axis::kX: m << 1, 0, 0, 0, c, -s, 0, s, c; break;
-    case Axis::kY: m << c, 0, s, 0, 1, 0, -s, 0, c; break;
-    case Axis::kZ: m << c, -s, 0, s, c, 0, 0, 0, 1; break;
+    case Axis::kX:
+      m << 1, 0, 0, 0, c, -s, 0, s, c;
+      break;
+    case Axis::kY:
+      m << c, 0, s, 0, 1, 0, -s, 0, c;
+      break;
+    case Axis::kZ:
+      m << c, -s, 0, s, c, 0, 0, 0, 1;
+      break;
   }
   return m;
 }
@@ -80,8 +82,7 @@ Eigen::Vector3d decompose_euler(const Eigen::Matrix3d& R, const Axis order[3], c
 
   // Residual rotation about axis i: Ri(a) = R * Rk(-c) * Rj(-b).
   auto solve_a = [&](double bb, double cc) {
-    const Eigen::Matrix3d res =
-        R * axis_rotation(order[2], -cc * kRadToDeg) * axis_rotation(order[1], -bb * kRadToDeg);
+    const Eigen::Matrix3d res = R * axis_rotation(order[2], -cc * kRadToDeg) * axis_rotation(order[1], -bb * kRadToDeg);
     // For a rotation about axis i: entry (j, j) = cos a, entry (k, j) = sign * sin a.
     return std::atan2(sign * res(k, j), res(j, j));
   };

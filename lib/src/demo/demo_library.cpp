@@ -18,27 +18,13 @@ struct JointSpec {
 
 // Offsets in cm from the parent. Legs hang down, arms stretch out in a T-pose.
 constexpr JointSpec kJoints[] = {
-    {"pelvis", nullptr, 0, 95, 0},
-    {"l_hip", "pelvis", 9, -5, 0},
-    {"l_knee", "l_hip", 0, -42, 0},
-    {"l_ankle", "l_knee", 0, -40, 0},
-    {"l_toe", "l_ankle", 0, -6, 14},
-    {"r_hip", "pelvis", -9, -5, 0},
-    {"r_knee", "r_hip", 0, -42, 0},
-    {"r_ankle", "r_knee", 0, -40, 0},
-    {"r_toe", "r_ankle", 0, -6, 14},
-    {"spine", "pelvis", 0, 12, 0},
-    {"chest", "spine", 0, 24, 0},
-    {"neck", "chest", 0, 20, 0},
-    {"head", "neck", 0, 9, 0},
-    {"head_top", "head", 0, 18, 0},
-    {"l_shoulder", "chest", 16, 16, 0},
-    {"l_elbow", "l_shoulder", 28, 0, 0},
-    {"l_wrist", "l_elbow", 25, 0, 0},
-    {"l_hand", "l_wrist", 9, 0, 0},
-    {"r_shoulder", "chest", -16, 16, 0},
-    {"r_elbow", "r_shoulder", -28, 0, 0},
-    {"r_wrist", "r_elbow", -25, 0, 0},
+    {"pelvis", nullptr, 0, 95, 0},       {"l_hip", "pelvis", 9, -5, 0},        {"l_knee", "l_hip", 0, -42, 0},
+    {"l_ankle", "l_knee", 0, -40, 0},    {"l_toe", "l_ankle", 0, -6, 14},      {"r_hip", "pelvis", -9, -5, 0},
+    {"r_knee", "r_hip", 0, -42, 0},      {"r_ankle", "r_knee", 0, -40, 0},     {"r_toe", "r_ankle", 0, -6, 14},
+    {"spine", "pelvis", 0, 12, 0},       {"chest", "spine", 0, 24, 0},         {"neck", "chest", 0, 20, 0},
+    {"head", "neck", 0, 9, 0},           {"head_top", "head", 0, 18, 0},       {"l_shoulder", "chest", 16, 16, 0},
+    {"l_elbow", "l_shoulder", 28, 0, 0}, {"l_wrist", "l_elbow", 25, 0, 0},     {"l_hand", "l_wrist", 9, 0, 0},
+    {"r_shoulder", "chest", -16, 16, 0}, {"r_elbow", "r_shoulder", -28, 0, 0}, {"r_wrist", "r_elbow", -25, 0, 0},
     {"r_hand", "r_wrist", -9, 0, 0},
 };
 constexpr int kJointCount = static_cast<int>(std::size(kJoints));
@@ -85,8 +71,8 @@ void walk(double t, Pose& p, const Skeleton& s) {
   const double ph = kTwoPi * t;
   p.root[2] = 120.0 * t;
   p.root[1] = 95.0 + 2.0 * std::cos(2 * ph);
-  p.root[4] = 3.0 * std::sin(2 * ph);     // pelvis pitch
-  p.root[3] = 4.0 * std::sin(ph);         // pelvis roll
+  p.root[4] = 3.0 * std::sin(2 * ph);  // pelvis pitch
+  p.root[3] = 4.0 * std::sin(ph);      // pelvis roll
   const double l = std::sin(ph), r = std::sin(ph + std::numbers::pi);
   // Thigh swing (bone hip->knee), knee bend (knee->ankle): rotations are
   // relative to the parent bone, so the knee only adds its own bend.
@@ -106,10 +92,10 @@ void walk(double t, Pose& p, const Skeleton& s) {
 void wave(double t, Pose& p, const Skeleton& s) {
   const double w = std::sin(kTwoPi * 1.5 * t);
   p.root[1] = 95.0 + 0.5 * std::sin(kTwoPi * 0.5 * t);
-  p.set(s, "r_elbow", -20, 0, 0);            // upper arm lifted above the shoulder
-  p.set(s, "r_wrist", -70 + 25 * w, 0, 0);   // forearm up, waving side to side
+  p.set(s, "r_elbow", -20, 0, 0);           // upper arm lifted above the shoulder
+  p.set(s, "r_wrist", -70 + 25 * w, 0, 0);  // forearm up, waving side to side
   p.set(s, "r_hand", 20 * w, 0, 0);
-  p.set(s, "head", 8 * w, -5, 10);           // the head follows a little
+  p.set(s, "head", 8 * w, -5, 10);  // the head follows a little
 }
 
 // Crouch, jump straight up, land: a 2-second cycle.
@@ -117,9 +103,9 @@ void jump(double t, Pose& p, const Skeleton& s) {
   const double c = std::fmod(t, 2.0);
   double crouch = 0.0, height = 0.0;
   if (c < 0.6) {
-    crouch = std::sin(std::numbers::pi * c / 0.6);       // down and up again
+    crouch = std::sin(std::numbers::pi * c / 0.6);  // down and up again
   } else if (c < 1.2) {
-    const double u = (c - 0.6) / 0.6;                     // flight: parabola
+    const double u = (c - 0.6) / 0.6;  // flight: parabola
     height = 40.0 * 4.0 * u * (1.0 - u);
   } else {
     crouch = 0.6 * std::sin(std::numbers::pi * (c - 1.2) / 0.8);

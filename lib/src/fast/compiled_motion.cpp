@@ -69,7 +69,8 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
     const Joint& joint = sk.joint(static_cast<int>(j));
     JointPlan& p = out.plan_->joints[j];
     p.parent = joint.parent;
-    p.parent_slot = joint.parent == kNoParent ? kIdentitySlot : out.plan_->joints[static_cast<std::size_t>(joint.parent)].world_slot;
+    p.parent_slot = joint.parent == kNoParent ? kIdentitySlot
+                                              : out.plan_->joints[static_cast<std::size_t>(joint.parent)].world_slot;
     for (int a = 0; a < 3; ++a) p.offset[a] = static_cast<float>(joint.offset[a]);
     int rotation_channel[3] = {0, 0, 0};  // index of each rotation channel in joint.channels
     for (std::size_t i = 0; i < joint.channels.size(); ++i) {
@@ -184,7 +185,8 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
       // Angles are reduced to [-180, 180] in double before rounding to float,
       // so a file's 7200 degrees keeps the precision of 0 degrees.
       if (angle) {
-        for (std::size_t f = 0; f < motion.frame_count; ++f) dst[f] = static_cast<float>(std::remainder(src[f * stride], 360.0));
+        for (std::size_t f = 0; f < motion.frame_count; ++f)
+          dst[f] = static_cast<float>(std::remainder(src[f * stride], 360.0));
       } else {
         for (std::size_t f = 0; f < motion.frame_count; ++f) dst[f] = static_cast<float>(src[f * stride]);
       }
@@ -196,7 +198,8 @@ Result<CompiledMotion> CompiledMotion::compile(const Motion& motion) {
       out.rotation_offsets_.push_back(p.rotation_stream[r] * static_cast<std::int32_t>(out.frame_stride_));
     }
   }
-  out.rotation_offsets_.resize((out.rotation_offsets_.size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment, 0);
+  out.rotation_offsets_.resize((out.rotation_offsets_.size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment,
+                               0);
 
   out.build_frame_program();
 
@@ -247,7 +250,8 @@ void CompiledMotion::build_frame_program() {
     group.count = static_cast<std::uint8_t>(p0.rotation_count);
     for (int r = 0; r < 3; ++r) group.axes[r] = r < p0.rotation_count ? p0.axes[r] : 0;
     group.first = static_cast<std::uint32_t>(next);
-    group.size = static_cast<std::uint32_t>((members[g].size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment);
+    group.size =
+        static_cast<std::uint32_t>((members[g].size() + kFrameAlignment - 1) / kFrameAlignment * kFrameAlignment);
     for (std::size_t i = 0; i < members[g].size(); ++i) local_of[members[g][i]] = static_cast<std::int32_t>(next + i);
     next += group.size;
     prog.groups.push_back(group);
@@ -268,8 +272,8 @@ void CompiledMotion::build_frame_program() {
       if (p.parent == kNoParent || all_roots_) continue;  // W = identity (or its twin's), P = t: nothing to run
       // W_j is its twin's or its parent's (pre-rotation), W_p (post); both are
       // computed by an earlier step, or are the identity.
-      const FrameProgram::PosOp op{p.zero_offset ? 0 : world_off(pre ? p.world_slot : p.parent_slot), (p.parent + 1) * 4,
-                                   (jj + 1) * 4, jj * 4};
+      const FrameProgram::PosOp op{p.zero_offset ? 0 : world_off(pre ? p.world_slot : p.parent_slot),
+                                   (p.parent + 1) * 4, (jj + 1) * 4, jj * 4};
       if (!has_child[j]) {
         prog.leaves.push_back(op);
       } else {
@@ -289,7 +293,8 @@ void CompiledMotion::build_frame_program() {
     step.pos = p.parent == kNoParent ? static_cast<std::int32_t>(joints + 1) * 4 : (jj + 1) * 4;
     const auto i = static_cast<std::size_t>(local_of[j]);
     for (int r = 0; r < p.rotation_count; ++r) {
-      prog.gather[static_cast<std::size_t>(r) * next + i] = p.rotation_stream[r] * static_cast<std::int32_t>(frame_stride_);
+      prog.gather[static_cast<std::size_t>(r) * next + i] =
+          p.rotation_stream[r] * static_cast<std::int32_t>(frame_stride_);
     }
     step.out = world_off(p.world_slot);
     step.local = local_of[j];
@@ -314,7 +319,8 @@ void CompiledMotion::build_frame_program() {
   // what the gather reads for them: stream 0 of the frame).
   const std::size_t per_frame = 3 * next;
   if (frame_count_ > 0 && stream_count_ > 0) {
-    prog.angles.reset(static_cast<float*>(::operator new[](frame_count_ * per_frame * sizeof(float), std::align_val_t{64})));
+    prog.angles.reset(
+        static_cast<float*>(::operator new[](frame_count_* per_frame * sizeof(float), std::align_val_t{64})));
     const float* base = streams_.get();
     for (std::size_t f = 0; f < frame_count_; ++f) {
       float* dst = prog.angles.get() + f * per_frame;
@@ -333,7 +339,9 @@ const float* CompiledMotion::stored_positions(std::size_t frame) const {
 }
 
 std::size_t CompiledMotion::bytes() const {
-  return (stream_count_ * frame_stride_ + stored_positions_.size() + (plan_->program.angles ? frame_count_ * 3 * plan_->program.local_count : 0)) * sizeof(float) +
+  return (stream_count_ * frame_stride_ + stored_positions_.size() +
+          (plan_->program.angles ? frame_count_ * 3 * plan_->program.local_count : 0)) *
+             sizeof(float) +
          plan_->joints.size() * sizeof(JointPlan);
 }
 

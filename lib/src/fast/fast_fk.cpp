@@ -13,7 +13,6 @@ namespace {
 
 constexpr float kIdentity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
 
-
 // Rotation channels computed per frame, rounded up to kFrameAlignment.
 std::size_t padded_rotations(const CompiledMotion& m) { return m.rotation_gather_offsets().size(); }
 
@@ -78,7 +77,8 @@ void frame_chain(const CompiledMotion& m, std::size_t f, const float* sines, con
     if (positions) {
       float t[3];
       for (int a = 0; a < 3; ++a) {
-        t[a] = p.offset_stream[a] == kNoStream ? p.offset[a] : m.stream(static_cast<std::size_t>(p.offset_stream[a]))[f];
+        t[a] =
+            p.offset_stream[a] == kNoStream ? p.offset[a] : m.stream(static_cast<std::size_t>(p.offset_stream[a]))[f];
       }
       float* pj = out_pos + j * 3;
       if (p.parent == kNoParent) {
@@ -113,7 +113,8 @@ Status check_frame_args(const CompiledMotion* m, std::size_t frame, std::span<fl
   }
   const std::size_t joints = m->joint_count();
   if (pos.size() < joints * 3) return make_error("positions output holds fewer than joints x 3 floats");
-  if (!ori.empty() && ori.size() < joints * 9) return make_error("orientations output holds fewer than joints x 9 floats");
+  if (!ori.empty() && ori.size() < joints * 9)
+    return make_error("orientations output holds fewer than joints x 9 floats");
   if (ws.size() < fk_workspace_size(*m)) return make_error("workspace smaller than fk_workspace_size()");
   return Ok{};
 }
@@ -214,7 +215,8 @@ bool FkFrameJob::run() const {
   const bool need_angles = !out_orientations.empty() || !m.all_roots();
   if (need_angles) {
     for (const JointPlan& p : joint_plans(m)) {
-      for (int i = 0; i < p.rotation_count; ++i) angles[k++] = m.stream(static_cast<std::size_t>(p.rotation_stream[i]))[frame];
+      for (int i = 0; i < p.rotation_count; ++i)
+        angles[k++] = m.stream(static_cast<std::size_t>(p.rotation_stream[i]))[frame];
     }
     std::fill(angles + k, angles + padded, 0.0f);
     detail::sincos_degrees(angles, k, sines, cosines);

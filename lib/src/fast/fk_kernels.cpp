@@ -137,21 +137,33 @@ using JointWorldFn = void (*)(D, const CompiledMotion&, const JointPlan&, std::s
 // JointWorld for a joint's axis order: index 0..2 (one axis), 3..11 (two),
 // 12..38 (three).
 JointWorldFn JointWorldFor(const JointPlan& p) {
-#define GMR_W3(a, b)                                                             \
-  &JointWorld<3, a, b, 0>, &JointWorld<3, a, b, 1>, &JointWorld<3, a, b, 2>
+#define GMR_W3(a, b) &JointWorld<3, a, b, 0>, &JointWorld<3, a, b, 1>, &JointWorld<3, a, b, 2>
 #define GMR_W2(a) &JointWorld<2, a, 0, 0>, &JointWorld<2, a, 1, 0>, &JointWorld<2, a, 2, 0>
-  static constexpr JointWorldFn kTable[39] = {
-      &JointWorld<1, 0, 0, 0>, &JointWorld<1, 1, 0, 0>, &JointWorld<1, 2, 0, 0>,
-      GMR_W2(0), GMR_W2(1), GMR_W2(2),
-      GMR_W3(0, 0), GMR_W3(0, 1), GMR_W3(0, 2), GMR_W3(1, 0), GMR_W3(1, 1), GMR_W3(1, 2),
-      GMR_W3(2, 0), GMR_W3(2, 1), GMR_W3(2, 2)};
+  static constexpr JointWorldFn kTable[39] = {&JointWorld<1, 0, 0, 0>,
+                                              &JointWorld<1, 1, 0, 0>,
+                                              &JointWorld<1, 2, 0, 0>,
+                                              GMR_W2(0),
+                                              GMR_W2(1),
+                                              GMR_W2(2),
+                                              GMR_W3(0, 0),
+                                              GMR_W3(0, 1),
+                                              GMR_W3(0, 2),
+                                              GMR_W3(1, 0),
+                                              GMR_W3(1, 1),
+                                              GMR_W3(1, 2),
+                                              GMR_W3(2, 0),
+                                              GMR_W3(2, 1),
+                                              GMR_W3(2, 2)};
 #undef GMR_W3
 #undef GMR_W2
   const int a0 = p.axes[0], a1 = p.axes[1], a2 = p.axes[2];
   switch (p.rotation_count) {
-    case 1: return kTable[a0];
-    case 2: return kTable[3 + a0 * 3 + a1];
-    default: return kTable[12 + a0 * 9 + a1 * 3 + a2];
+    case 1:
+      return kTable[a0];
+    case 2:
+      return kTable[3 + a0 * 3 + a1];
+    default:
+      return kTable[12 + a0 * 9 + a1 * 3 + a2];
   }
 }
 
@@ -195,7 +207,7 @@ void RangeKernel(const RangeArgs& a) {
   const CompiledMotion& m = *a.motion;
   const auto plans = joint_plans(m);
   const std::size_t joints = plans.size();
-  float* const world = a.workspace;                               // slot_count * 9 * n
+  float* const world = a.workspace;                                 // slot_count * 9 * n
   float* const pos = world + m.slot_count() * 9 * kFrameAlignment;  // joints * 3 * n
   const bool pre = m.convention() == Convention::kPreRotation;
   const bool want_world = a.orientations != nullptr;
@@ -206,7 +218,8 @@ void RangeKernel(const RangeArgs& a) {
     for (std::size_t j = 0; j < joints; ++j) {
       const JointPlan& p = plans[j];
       if (p.owns_slot && (want_world || p.world_for_positions)) {
-        const float* wp = p.parent_slot == kIdentitySlot ? nullptr : world + static_cast<std::size_t>(p.parent_slot) * 9 * n;
+        const float* wp =
+            p.parent_slot == kIdentitySlot ? nullptr : world + static_cast<std::size_t>(p.parent_slot) * 9 * n;
         JointWorldFor(p)(d, m, p, f0, wp, world + static_cast<std::size_t>(p.world_slot) * 9 * n);
       }
       if (!a.positions) continue;
@@ -311,18 +324,31 @@ using LocalGroupFn = void (*)(const float*, const float*, float*, std::size_t, s
 LocalGroupFn LocalGroupFor(const FrameProgram::Group& g) {
 #define GMR_L3(a, b) &LocalGroup<3, a, b, 0>, &LocalGroup<3, a, b, 1>, &LocalGroup<3, a, b, 2>
 #define GMR_L2(a) &LocalGroup<2, a, 0, 0>, &LocalGroup<2, a, 1, 0>, &LocalGroup<2, a, 2, 0>
-  static constexpr LocalGroupFn kTable[39] = {
-      &LocalGroup<1, 0, 0, 0>, &LocalGroup<1, 1, 0, 0>, &LocalGroup<1, 2, 0, 0>,
-      GMR_L2(0), GMR_L2(1), GMR_L2(2),
-      GMR_L3(0, 0), GMR_L3(0, 1), GMR_L3(0, 2), GMR_L3(1, 0), GMR_L3(1, 1), GMR_L3(1, 2),
-      GMR_L3(2, 0), GMR_L3(2, 1), GMR_L3(2, 2)};
+  static constexpr LocalGroupFn kTable[39] = {&LocalGroup<1, 0, 0, 0>,
+                                              &LocalGroup<1, 1, 0, 0>,
+                                              &LocalGroup<1, 2, 0, 0>,
+                                              GMR_L2(0),
+                                              GMR_L2(1),
+                                              GMR_L2(2),
+                                              GMR_L3(0, 0),
+                                              GMR_L3(0, 1),
+                                              GMR_L3(0, 2),
+                                              GMR_L3(1, 0),
+                                              GMR_L3(1, 1),
+                                              GMR_L3(1, 2),
+                                              GMR_L3(2, 0),
+                                              GMR_L3(2, 1),
+                                              GMR_L3(2, 2)};
 #undef GMR_L3
 #undef GMR_L2
   const int a0 = g.axes[0], a1 = g.axes[1], a2 = g.axes[2];
   switch (g.count) {
-    case 1: return kTable[a0];
-    case 2: return kTable[3 + a0 * 3 + a1];
-    default: return kTable[12 + a0 * 9 + a1 * 3 + a2];
+    case 1:
+      return kTable[a0];
+    case 2:
+      return kTable[3 + a0 * 3 + a1];
+    default:
+      return kTable[12 + a0 * 9 + a1 * 3 + a2];
   }
 }
 

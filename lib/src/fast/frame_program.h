@@ -21,16 +21,16 @@ inline constexpr std::int32_t kIdentitySlot = -1;
 // What forward kinematics needs to know about one joint.
 struct JointPlan {
   std::int32_t parent = kNoParent;
-  std::int32_t rotation_count = 0;               // 0..3 rotation channels computed (0: none, always identity, or a twin's)
-  std::uint8_t axes[3] = {0, 0, 0};              // Axis of each rotation channel, listed order
+  std::int32_t rotation_count = 0;   // 0..3 rotation channels computed (0: none, always identity, or a twin's)
+  std::uint8_t axes[3] = {0, 0, 0};  // Axis of each rotation channel, listed order
   std::int32_t rotation_stream[3] = {kNoStream, kNoStream, kNoStream};
   std::int32_t offset_stream[3] = {kNoStream, kNoStream, kNoStream};  // per axis: stream or static
-  float offset[3] = {0, 0, 0};                   // static offset components (used where no stream)
-  std::int32_t world_slot = kIdentitySlot;       // where W_j lives (shared with the parent without rotation)
-  std::int32_t parent_slot = kIdentitySlot;      // where W_p lives (roots: identity)
-  bool owns_slot = false;                        // W_j is computed into world_slot (it has rotation channels)
-  bool world_for_positions = false;              // W_j must be computed even when no orientation is asked
-  bool zero_offset = false;                      // t_j is statically zero
+  float offset[3] = {0, 0, 0};                                        // static offset components (used where no stream)
+  std::int32_t world_slot = kIdentitySlot;   // where W_j lives (shared with the parent without rotation)
+  std::int32_t parent_slot = kIdentitySlot;  // where W_p lives (roots: identity)
+  bool owns_slot = false;                    // W_j is computed into world_slot (it has rotation channels)
+  bool world_for_positions = false;          // W_j must be computed even when no orientation is asked
+  bool zero_offset = false;                  // t_j is statically zero
 };
 
 // The one-frame kernel's program, built once by compile() so that FkFrameJob
@@ -61,18 +61,18 @@ struct JointPlan {
 //      nothing (W = identity, P = t).
 struct FrameProgram {
   struct Group {
-    std::uint8_t count = 0;        // rotation channels: 1..3
+    std::uint8_t count = 0;  // rotation channels: 1..3
     std::uint8_t axes[3] = {0, 0, 0};
-    std::uint32_t first = 0;       // first local index (multiple of kFrameAlignment)
-    std::uint32_t size = 0;        // local indices, padded to kFrameAlignment
+    std::uint32_t first = 0;  // first local index (multiple of kFrameAlignment)
+    std::uint32_t size = 0;   // local indices, padded to kFrameAlignment
   };
   struct Step {
-    std::int32_t from = 0;       // float offset of W_s in the world buffer ((slot + 1) * 12; identity: 0)
-    std::int32_t out = 0;        // float offset W_s R_j is stored to
-    std::int32_t local = 0;      // local index of R_j
-    std::int32_t parent = 0;     // float offset of P_p in the position buffer ((parent + 1) * 4; roots: 0)
-    std::int32_t pos = 0;        // float offset P_j is stored to ((j + 1) * 4; roots: a scratch entry)
-    std::int32_t t = 0;          // float offset of t_j in the offsets buffer (j * 4)
+    std::int32_t from = 0;        // float offset of W_s in the world buffer ((slot + 1) * 12; identity: 0)
+    std::int32_t out = 0;         // float offset W_s R_j is stored to
+    std::int32_t local = 0;       // local index of R_j
+    std::int32_t parent = 0;      // float offset of P_p in the position buffer ((parent + 1) * 4; roots: 0)
+    std::int32_t pos = 0;         // float offset P_j is stored to ((j + 1) * 4; roots: a scratch entry)
+    std::int32_t t = 0;           // float offset of t_j in the offsets buffer (j * 4)
     std::uint32_t ops_begin = 0;  // position-only ops run after this step: ops[ops_begin, ops_end)
     std::uint32_t ops_end = 0;
   };
@@ -88,7 +88,7 @@ struct FrameProgram {
     std::int32_t stream = 0;  // stream supplying it
   };
   std::size_t local_count = 0;
-  std::vector<std::int32_t> gather;    // 3 * local_count stream offsets (stream * frame_stride)
+  std::vector<std::int32_t> gather;  // 3 * local_count stream offsets (stream * frame_stride)
   // The same angles stored frame-major at compile time: frame f's 3 *
   // local_count angles (gather order, padding included) start at
   // angles.get() + f * 3 * local_count, 64-byte aligned, so the kernel reads
@@ -98,14 +98,14 @@ struct FrameProgram {
   };
   std::unique_ptr<float[], AngleFree> angles;
   std::vector<Group> groups;
-  std::vector<Step> steps;             // one per joint with rotation channels of its own
-  std::vector<PosOp> ops;              // position-only ops: the first `prologue` before the steps, the rest after theirs
+  std::vector<Step> steps;  // one per joint with rotation channels of its own
+  std::vector<PosOp> ops;   // position-only ops: the first `prologue` before the steps, the rest after theirs
   std::uint32_t prologue = 0;
-  std::vector<PosOp> leaves;           // non-root joints without rotation channels or children (empty if all roots)
-  std::vector<std::int32_t> roots;     // root joints: P_j = t_j, written before the steps
-  std::vector<float> offsets;          // joints * 4: static t_j (stream components: 0, patched per frame)
-  std::vector<Patch> patches;          // offset components that come from position channels
-  std::size_t workspace_floats = 0;    // scratch the kernel needs (64-byte aligned start)
+  std::vector<PosOp> leaves;         // non-root joints without rotation channels or children (empty if all roots)
+  std::vector<std::int32_t> roots;   // root joints: P_j = t_j, written before the steps
+  std::vector<float> offsets;        // joints * 4: static t_j (stream components: 0, patched per frame)
+  std::vector<Patch> patches;        // offset components that come from position channels
+  std::size_t workspace_floats = 0;  // scratch the kernel needs (64-byte aligned start)
 };
 
 namespace detail {

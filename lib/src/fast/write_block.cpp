@@ -24,7 +24,8 @@ void write_block(const RangeArgs& a, std::size_t f0, std::size_t count, std::siz
         for (std::size_t k = 0; k < comps; ++k) dst[k] = pos[k * lanes + l];
       }
     } else {
-      for (std::size_t k = 0; k < comps; ++k) std::memcpy(a.positions_out + k * a.stride + first, pos + k * lanes, count * sizeof(float));
+      for (std::size_t k = 0; k < comps; ++k)
+        std::memcpy(a.positions_out + k * a.stride + first, pos + k * lanes, count * sizeof(float));
     }
   }
   if (a.orientations == nullptr) return;

@@ -46,7 +46,6 @@ T from_le(T v) {
 
 std::size_t round_up(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
 
-
 // Reads fixed-size fields from a byte range, failing past its end.
 class Reader {
  public:
@@ -88,7 +87,8 @@ struct Header {
 // there, exactly, before anything is allocated.
 Result<Header> parse_header(std::string_view head, std::uint64_t file_size, std::string_view label) {
   if (head.size() < kHeaderSize) {
-    return byte_error(label, head.size(), "file too short for a .gmrb header (" + std::to_string(head.size()) + " of 64 bytes)");
+    return byte_error(label, head.size(),
+                      "file too short for a .gmrb header (" + std::to_string(head.size()) + " of 64 bytes)");
   }
   if (std::memcmp(head.data(), kMagic, sizeof kMagic) != 0) return byte_error(label, 0, "not a .gmrb file (bad magic)");
   Reader r(head.substr(8, kHeaderSize - 8), 8);
@@ -104,42 +104,51 @@ Result<Header> parse_header(std::string_view head, std::uint64_t file_size, std:
   r.get(h.frame_time);
   r.get(h.skeleton_bytes);
   if (version != kGmrbVersion) {
-    return byte_error(label, 8, "unsupported .gmrb version " + std::to_string(version) + " (this build reads version " +
-                            std::to_string(kGmrbVersion) + ")");
+    return byte_error(label, 8,
+                      "unsupported .gmrb version " + std::to_string(version) + " (this build reads version " +
+                          std::to_string(kGmrbVersion) + ")");
   }
   if (bom != kByteOrderMark) return byte_error(label, 12, "bad byte-order mark (expected 0x01020304 little-endian)");
-  if (header_size != kHeaderSize) return byte_error(label, 16, "header size " + std::to_string(header_size) + ", expected 64");
-  if (convention > 1) return byte_error(label, 20, "convention " + std::to_string(convention) + ", expected 0 (GMR) or 1 (BVH)");
+  if (header_size != kHeaderSize)
+    return byte_error(label, 16, "header size " + std::to_string(header_size) + ", expected 64");
+  if (convention > 1)
+    return byte_error(label, 20, "convention " + std::to_string(convention) + ", expected 0 (GMR) or 1 (BVH)");
   h.convention = convention == 0 ? Convention::kPreRotation : Convention::kPostRotation;
-  if (!std::isfinite(h.frame_time) || h.frame_time < 0) return byte_error(label, 48, "frame time must be finite and >= 0");
+  if (!std::isfinite(h.frame_time) || h.frame_time < 0)
+    return byte_error(label, 48, "frame time must be finite and >= 0");
   const std::uint64_t after_header = file_size - kHeaderSize;
   if (h.skeleton_bytes > after_header) {
-    return byte_error(label, 56, "skeleton of " + std::to_string(h.skeleton_bytes) + " bytes, but only " +
-                             std::to_string(after_header) + " bytes follow the header");
+    return byte_error(label, 56,
+                      "skeleton of " + std::to_string(h.skeleton_bytes) + " bytes, but only " +
+                          std::to_string(after_header) + " bytes follow the header");
   }
   if (h.joints > h.skeleton_bytes / kMinJointRecord) {
-    return byte_error(label, 24, std::to_string(h.joints) + " joints cannot fit in a skeleton of " +
-                             std::to_string(h.skeleton_bytes) + " bytes");
+    return byte_error(label, 24,
+                      std::to_string(h.joints) + " joints cannot fit in a skeleton of " +
+                          std::to_string(h.skeleton_bytes) + " bytes");
   }
   if (h.channels > h.joints * 6) {
-    return byte_error(label, 32, std::to_string(h.channels) + " channels for " + std::to_string(h.joints) +
-                             " joints (at most 6 each)");
+    return byte_error(
+        label, 32,
+        std::to_string(h.channels) + " channels for " + std::to_string(h.joints) + " joints (at most 6 each)");
   }
   h.data_offset = round_up(kHeaderSize + h.skeleton_bytes, kDataAlignment);
   const std::uint64_t data_bytes = file_size >= h.data_offset ? file_size - h.data_offset : 0;
   if (file_size < h.data_offset) {
-    return byte_error(label, file_size, "file ends before the channel data (expected it at byte " +
-                                    std::to_string(h.data_offset) + ")");
+    return byte_error(label, file_size,
+                      "file ends before the channel data (expected it at byte " + std::to_string(h.data_offset) + ")");
   }
   // frames * channels * 8 == data_bytes, without overflow.
   if (h.channels == 0 ? data_bytes != 0
                       : (data_bytes % (h.channels * 8) != 0 || data_bytes / (h.channels * 8) != h.frames)) {
     const std::uint64_t have = h.channels == 0 ? 0 : data_bytes / (h.channels * 8);
-    return byte_error(label, 40, "header announces " + std::to_string(h.frames) + " frames of " + std::to_string(h.channels) +
-                             " channels, but the file holds " + std::to_string(data_bytes) + " data bytes (" +
-                             std::to_string(have) + " whole frames): truncated or corrupt");
+    return byte_error(label, 40,
+                      "header announces " + std::to_string(h.frames) + " frames of " + std::to_string(h.channels) +
+                          " channels, but the file holds " + std::to_string(data_bytes) + " data bytes (" +
+                          std::to_string(have) + " whole frames): truncated or corrupt");
   }
-  if (auto s = check_frame_count(h.frames, h.channels * 8, data_bytes); !s.ok()) return byte_error(label, 40, s.error().message);
+  if (auto s = check_frame_count(h.frames, h.channels * 8, data_bytes); !s.ok())
+    return byte_error(label, 40, s.error().message);
   return h;
 }
 
@@ -157,8 +166,9 @@ Result<Skeleton> parse_skeleton(std::string_view bytes, const Header& h, std::st
     std::uint32_t name_length = 0;
     if (!r.get(name_length)) return truncated();
     if (name_length == 0 || name_length > kMaxNameLength) {
-      return byte_error(label, start, "joint " + std::to_string(j) + " name length " + std::to_string(name_length) +
-                                  " (expected 1 to 4096)");
+      return byte_error(
+          label, start,
+          "joint " + std::to_string(j) + " name length " + std::to_string(name_length) + " (expected 1 to 4096)");
     }
     if (!r.get_string(name_length, joint.name)) return truncated();
     std::int32_t parent = 0, soft = 0;
@@ -173,11 +183,14 @@ Result<Skeleton> parse_skeleton(std::string_view bytes, const Header& h, std::st
     }
     std::uint8_t count = 0;
     if (!r.get(count)) return truncated();
-    if (count > 6) return byte_error(label, r.offset() - 1, "joint " + joint.name + " has " + std::to_string(count) + " channels (at most 6)");
+    if (count > 6)
+      return byte_error(label, r.offset() - 1,
+                        "joint " + joint.name + " has " + std::to_string(count) + " channels (at most 6)");
     for (std::uint8_t i = 0; i < count; ++i) {
       std::uint8_t c = 0;
       if (!r.get(c)) return truncated();
-      if (c > 5) return byte_error(label, r.offset() - 1, "joint " + joint.name + ": unknown channel code " + std::to_string(c));
+      if (c > 5)
+        return byte_error(label, r.offset() - 1, "joint " + joint.name + ": unknown channel code " + std::to_string(c));
       joint.channels.push_back(static_cast<ChannelType>(c));
     }
     channels += count;
@@ -187,8 +200,9 @@ Result<Skeleton> parse_skeleton(std::string_view bytes, const Header& h, std::st
     return byte_error(label, r.offset(), std::to_string(r.left()) + " unused bytes at the end of the skeleton section");
   }
   if (channels != h.channels) {
-    return byte_error(label, 32, "header announces " + std::to_string(h.channels) + " channels per frame, the joints list " +
-                             std::to_string(channels));
+    return byte_error(label, 32,
+                      "header announces " + std::to_string(h.channels) + " channels per frame, the joints list " +
+                          std::to_string(channels));
   }
   auto skeleton = Skeleton::create(std::move(joints));
   if (!skeleton) return byte_error(label, kHeaderSize, "invalid skeleton: " + skeleton.error().message);
@@ -215,8 +229,9 @@ Status finish_values(std::vector<double>& values, std::size_t channels, std::siz
     if ((carry >> 63) == 0) continue;
     for (std::size_t i = b; i < e; ++i) {
       if (!std::isfinite(values[i])) {
-        return byte_error(label, data_offset + i * 8, "value " + std::to_string(i % channels) + " of frame " +
-                                                   std::to_string(i / channels) + " is not finite");
+        return byte_error(
+            label, data_offset + i * 8,
+            "value " + std::to_string(i % channels) + " of frame " + std::to_string(i / channels) + " is not finite");
       }
     }
   }
@@ -282,7 +297,8 @@ Result<std::size_t> read_fully(int fd, char* dst, std::size_t n, const std::file
 Result<Motion> parse_gmrb(std::string_view bytes, std::string_view file_label) {
   auto h = parse_header(bytes.substr(0, std::min(bytes.size(), kHeaderSize)), bytes.size(), file_label);
   if (!h) return h.error();
-  auto skeleton = parse_skeleton(bytes.substr(kHeaderSize, static_cast<std::size_t>(h->skeleton_bytes)), *h, file_label);
+  auto skeleton =
+      parse_skeleton(bytes.substr(kHeaderSize, static_cast<std::size_t>(h->skeleton_bytes)), *h, file_label);
   if (!skeleton) return skeleton.error();
   Motion m = make_motion(std::move(*skeleton), *h);
   size_values(m.values, m.frame_count * m.stride());
@@ -315,14 +331,16 @@ Result<Motion> read_gmrb(const std::filesystem::path& path) {
   got = read_fully(fd, skel.data(), skel.size(), path);
   if (!got) return got.error();
   if (*got != skel.size()) return byte_error(label, kHeaderSize + *got, "file ends inside the skeleton section");
-  auto skeleton = parse_skeleton(std::string_view(skel).substr(0, static_cast<std::size_t>(h->skeleton_bytes)), *h, label);
+  auto skeleton =
+      parse_skeleton(std::string_view(skel).substr(0, static_cast<std::size_t>(h->skeleton_bytes)), *h, label);
   if (!skeleton) return skeleton.error();
   Motion m = make_motion(std::move(*skeleton), *h);
   size_values(m.values, m.frame_count * m.stride());
   const std::size_t data_bytes = m.values.size() * sizeof(double);
   got = read_fully(fd, reinterpret_cast<char*>(m.values.data()), data_bytes, path);
   if (!got) return got.error();
-  if (*got != data_bytes) return byte_error(label, h->data_offset + *got, "file ends inside the channel data (it shrank while read)");
+  if (*got != data_bytes)
+    return byte_error(label, h->data_offset + *got, "file ends inside the channel data (it shrank while read)");
   if (Status s = finish_values(m.values, m.stride(), h->data_offset, label); !s) return s.error();
   return m;
 }
@@ -332,7 +350,8 @@ Result<std::string> format_gmrb(const Motion& motion) {
   const Skeleton& sk = motion.skeleton;
   std::string skel;
   for (const Joint& j : sk.joints()) {
-    if (j.name.size() > kMaxNameLength) return make_error("joint name longer than 4096 bytes: " + j.name.substr(0, 40) + "...");
+    if (j.name.size() > kMaxNameLength)
+      return make_error("joint name longer than 4096 bytes: " + j.name.substr(0, 40) + "...");
     put(skel, static_cast<std::uint32_t>(j.name.size()));
     skel += j.name;
     put(skel, static_cast<std::int32_t>(j.parent));
@@ -357,7 +376,8 @@ Result<std::string> format_gmrb(const Motion& motion) {
   out += skel;
   out.resize(data_offset, '\0');
   if constexpr (std::endian::native == std::endian::little) {
-    if (!motion.values.empty()) out.append(reinterpret_cast<const char*>(motion.values.data()), motion.values.size() * sizeof(double));
+    if (!motion.values.empty())
+      out.append(reinterpret_cast<const char*>(motion.values.data()), motion.values.size() * sizeof(double));
   } else {
     for (double v : motion.values) put(out, v);
   }

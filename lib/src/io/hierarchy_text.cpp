@@ -101,7 +101,7 @@ inline const char* read_double_slow(const char* p, const char* end, double& out)
 }
 
 constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
-                              1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+                             1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
 
 // Same result as read_double_slow(). Fast path for the plain decimals that
 // mocap files are made of ("-12.345678", "0"): when the digits form an integer
@@ -152,9 +152,9 @@ class Parser {
     bool end_site = false;
     bool has_offset = false;
     bool has_channels = false;
-    std::string soft_link;        // GMR: name after SOFTLINK
+    std::string soft_link;  // GMR: name after SOFTLINK
     std::size_t soft_link_offset = 0;
-    int next_end_site = 1;        // see default_end_site_name()
+    int next_end_site = 1;  // see default_end_site_name()
   };
 
   // --- locations and messages
@@ -244,8 +244,7 @@ class Parser {
     if (e != t.data() + t.size()) {
       return error_at(token_offset_ + static_cast<std::size_t>(e - t.data()),
                       "malformed number " + quote(t) + ": expected whitespace after " +
-                          quote(t.substr(0, static_cast<std::size_t>(e - t.data()))) +
-                          " (numbers run together?)");
+                          quote(t.substr(0, static_cast<std::size_t>(e - t.data()))) + " (numbers run together?)");
     }
     if (!std::isfinite(out)) return error_at(token_offset_, std::string(what) + " is not finite: " + quote(t));
     return Ok{};
@@ -285,8 +284,8 @@ Status Parser::read_header() {
   if (dialect_ == Dialect::kGmr) {
     const std::string_view t = next_token();
     if (t != "GMR")
-      return error_at(token_offset_, "expected the format line 'GMR " + std::to_string(kGmrFormatVersion) +
-                                         "', found " + quote(t));
+      return error_at(token_offset_,
+                      "expected the format line 'GMR " + std::to_string(kGmrFormatVersion) + "', found " + quote(t));
     const std::string_view v = next_token();
     std::uint64_t version = 0;
     if (auto s = read_count(v, token_offset_, version, "a format version"); !s) return s;
@@ -307,8 +306,7 @@ Status Parser::read_joint_name(std::string_view keyword, std::string& out_name, 
     while (!name.empty() && is_space(name.back())) name.remove_suffix(1);
     out_brace_taken = true;
   }
-  if (name.empty() && keyword != "End Site")
-    return error_at(at, "expected a joint name after " + std::string(keyword));
+  if (name.empty() && keyword != "End Site") return error_at(at, "expected a joint name after " + std::string(keyword));
   if (auto bad = control_char(name); bad != std::string_view::npos)
     return error_at(static_cast<std::size_t>(name.data() - text_.data()) + bad,
                     "joint name " + quote(name) + " contains a control character");
@@ -319,9 +317,9 @@ Status Parser::read_joint_name(std::string_view keyword, std::string& out_name, 
 Status Parser::add_joint(Pending pending, std::size_t name_offset) {
   const auto [it, inserted] = names_.emplace(pending.joint.name, static_cast<int>(joints_.size()));
   if (!inserted) {
-    return error_at(name_offset, "duplicate joint name " + quote(pending.joint.name) + " (first at line " +
-                                     std::to_string(line_of(joints_[static_cast<std::size_t>(it->second)].decl_offset)) +
-                                     ")");
+    return error_at(name_offset,
+                    "duplicate joint name " + quote(pending.joint.name) + " (first at line " +
+                        std::to_string(line_of(joints_[static_cast<std::size_t>(it->second)].decl_offset)) + ")");
   }
   joints_.push_back(std::move(pending));
   return Ok{};
@@ -355,8 +353,8 @@ Status Parser::read_channels(Pending& j) {
   }
   // More names than the count declares would shift every value of the row.
   if (const std::string_view extra = peek_token(); parse_channel(extra)) {
-    return error_at(pos_, "CHANNELS declares " + std::to_string(n) + " channel(s) but more names follow: " +
-                              quote(extra));
+    return error_at(pos_,
+                    "CHANNELS declares " + std::to_string(n) + " channel(s) but more names follow: " + quote(extra));
   }
   return Ok{};
 }
@@ -380,8 +378,8 @@ Status Parser::read_tree() {
     if (auto s = read_joint_name(keyword, name, brace_taken); !s) return s;
     if (end_site && name.empty()) {
       Pending& pj = joints_[static_cast<std::size_t>(parent)];
-      name = default_end_site_name(pj.joint.name, [&](const std::string& n) { return names_.count(n) != 0; },
-                                   pj.next_end_site);
+      name = default_end_site_name(
+          pj.joint.name, [&](const std::string& n) { return names_.count(n) != 0; }, pj.next_end_site);
     }
     Pending p;
     p.joint.name = std::move(name);
@@ -447,9 +445,8 @@ Status Parser::read_tree() {
       J().soft_link.assign(name);
       J().soft_link_offset = name_at;
     } else {
-      const std::string expected = dialect_ == Dialect::kBvh
-                                       ? "OFFSET, CHANNELS, JOINT, End Site or '}'"
-                                       : "OFFSET, CHANNELS, SOFTLINK, JOINT or '}'";
+      const std::string expected = dialect_ == Dialect::kBvh ? "OFFSET, CHANNELS, JOINT, End Site or '}'"
+                                                             : "OFFSET, CHANNELS, SOFTLINK, JOINT or '}'";
       if (t.empty() || iequals(t, "ROOT") || iequals(t, "MOTION")) {
         return error_at(at, "expected " + expected + " (joint " + quote(J().joint.name) + " opened at line " +
                                 std::to_string(line_of(stack.back().brace_offset)) + " is not closed), found " +
@@ -506,7 +503,9 @@ Result<Motion> Parser::read_motion() {
       pos_ = token_offset_ + 5;  // the number is glued to the colon
     }
     if (auto s = read_number(frame_time, "the frame time (seconds) after 'Frame Time:'"); !s) return s.error();
-    if (frame_time < 0) return error_at(token_offset_, "frame time must not be negative, found " + quote(text_.substr(token_offset_, pos_ - token_offset_)));
+    if (frame_time < 0)
+      return error_at(token_offset_, "frame time must not be negative, found " +
+                                         quote(text_.substr(token_offset_, pos_ - token_offset_)));
     if (frame_time == 0) warn_at(token_offset_, "Frame Time is 0: the frame rate is unknown (duration shows as 0)");
   } else {
     warn_at(pos_, "no 'Frame Time:' line after 'Frames:'; the frame rate is unknown (frame time set to 0)");
@@ -521,7 +520,8 @@ Result<Motion> Parser::read_motion() {
     if (p.soft_link.empty()) continue;
     const auto it = names_.find(p.soft_link);
     if (it == names_.end()) return error_at(p.soft_link_offset, "SOFTLINK names unknown joint " + quote(p.soft_link));
-    if (it->second == static_cast<int>(j)) return error_at(p.soft_link_offset, "a joint cannot be soft-linked to itself");
+    if (it->second == static_cast<int>(j))
+      return error_at(p.soft_link_offset, "a joint cannot be soft-linked to itself");
     joints[j].soft_parent = it->second;
   }
   auto skeleton = Skeleton::create(std::move(joints));
@@ -545,7 +545,9 @@ Result<Motion> Parser::read_motion() {
   const std::size_t max_values = bytes_left / 2 + 1;
   if (stride == 0) {
     while (p < end && is_space(*p)) ++p;
-    if (p < end) return error_at(static_cast<std::size_t>(p - begin), "unexpected value after 'Frame Time:': the hierarchy has no channels");
+    if (p < end)
+      return error_at(static_cast<std::size_t>(p - begin),
+                      "unexpected value after 'Frame Time:': the hierarchy has no channels");
     // Without channels the frame count cannot be checked against the data: capped (gmr/core/limits.h).
     if (auto s = check_frame_count(declared, 0); !s.ok()) return error_at(count_offset, s.error().message);
     m.frame_count = static_cast<std::size_t>(declared);
@@ -559,7 +561,8 @@ Result<Motion> Parser::read_motion() {
   while (true) {
     while (p < end && is_space(*p)) ++p;
     if (p == end) break;
-    if (n == values.size()) values.resize(std::min(std::max<std::size_t>(values.size() * 2, 1024), max_values + stride));
+    if (n == values.size())
+      values.resize(std::min(std::max<std::size_t>(values.size() * 2, 1024), max_values + stride));
     double v;
     const char* e = read_double(p, end, v);
     if (e == nullptr) {
@@ -601,9 +604,9 @@ Result<Motion> Parser::read_motion() {
                         " values: the file is truncated or a row is short");
   }
   if (frames == 0 && declared > 0) {
-    return error_at(static_cast<std::size_t>(end - begin),
-                    "no frame data: 'Frames: " + std::to_string(declared) + "' declared but the file ends after the " +
-                        "'Frame Time:' line (truncated file?)");
+    return error_at(static_cast<std::size_t>(end - begin), "no frame data: 'Frames: " + std::to_string(declared) +
+                                                               "' declared but the file ends after the " +
+                                                               "'Frame Time:' line (truncated file?)");
   }
   if (frames != declared) {
     warn_at(frames_offset, "'Frames: " + std::to_string(declared) + "' but the file holds " + std::to_string(frames) +
@@ -648,8 +651,10 @@ void indent(std::string& out, int depth) { out.append(static_cast<std::size_t>(d
 Status check_name(std::string_view name) {
   const bool ok = !name.empty() && !is_space(name.front()) && !is_space(name.back()) && name.back() != '{' &&
                   control_char(name) == std::string_view::npos;
-  if (!ok) return make_error("joint name " + quote(name) + " cannot be written: names must be non-empty, on one line, "
-                             "without leading or trailing space, and must not end in '{'");
+  if (!ok)
+    return make_error("joint name " + quote(name) +
+                      " cannot be written: names must be non-empty, on one line, "
+                      "without leading or trailing space, and must not end in '{'");
   return Ok{};
 }
 
@@ -718,8 +723,8 @@ Result<std::string> format_hierarchy_text(const Motion& motion, Dialect dialect)
     if (bvh && joint.parent != kNoParent && joint.channels.empty() && sk.children(j).empty()) {
       int& next = next_end_site[static_cast<std::size_t>(joint.parent)];
       int k = next;
-      const std::string def =
-          default_end_site_name(sk.joint(joint.parent).name, [&](const std::string& n) { return seen.count(n) != 0; }, k);
+      const std::string def = default_end_site_name(
+          sk.joint(joint.parent).name, [&](const std::string& n) { return seen.count(n) != 0; }, k);
       // The reader advances its counter only for unnamed End Sites: do the same.
       if (joint.name == def) {
         end_site = true;

@@ -21,11 +21,11 @@ Error unknown_extension(const std::filesystem::path& path, std::string_view verb
   Error e;
   e.file = path.string();
   const std::string ext = lower_extension(path);
-  e.message = "cannot " + std::string(verb) + " " + (ext.empty() ? std::string("a file without extension") : "'" + ext + "' files") +
+  e.message = "cannot " + std::string(verb) + " " +
+              (ext.empty() ? std::string("a file without extension") : "'" + ext + "' files") +
               ": expected .bvh, .gmr, .amc or .gmrb";
   return e;
 }
-
 
 // "07" for "07_05-walk" and "07-walk": the CMU subject number before the first '_' or '-'.
 std::string subject_of(const std::filesystem::path& p) {

@@ -180,8 +180,9 @@ Result<PositionsTable> parse_positions_csv(std::string_view text, const std::str
       } else if (line == "frame,joint,x,y,z,r00,r01,r02,r10,r11,r12,r20,r21,r22") {
         orientation_columns = 9;
       } else {
-        return fail(0, "not a positions CSV: the header is 'frame,joint,x,y,z' (with qw,qx,qy,qz or r00..r22 after "
-                       "it for orientations)");
+        return fail(0,
+                    "not a positions CSV: the header is 'frame,joint,x,y,z' (with qw,qx,qy,qz or r00..r22 after "
+                    "it for orientations)");
       }
       continue;
     }

@@ -35,7 +35,6 @@ constexpr std::size_t kMaxPoints = 65535;
 
 enum class Processor { kIntel, kDec, kMips };
 
-
 // Number decoding for one processor type. Offsets are checked by the caller.
 struct Decoder {
   Processor processor = Processor::kIntel;
@@ -54,7 +53,8 @@ struct Decoder {
       // 8-bit exponent (bias 128) and the top mantissa bits; the value is
       // 0.1mmm (binary) x 2^(e-128) = 1.mmm x 2^(e-129). Exponent 0 is zero
       // (or, with the sign set, a reserved operand: NaN).
-      const std::uint32_t bits = std::uint32_t{b[1]} << 24 | std::uint32_t{b[0]} << 16 | std::uint32_t{b[3]} << 8 | b[2];
+      const std::uint32_t bits =
+          std::uint32_t{b[1]} << 24 | std::uint32_t{b[0]} << 16 | std::uint32_t{b[3]} << 8 | b[2];
       const int e = static_cast<int>((bits >> 23) & 0xff);
       const bool negative = (bits >> 31) != 0;
       if (e == 0) return negative ? std::numeric_limits<double>::quiet_NaN() : 0.0;
@@ -62,9 +62,10 @@ struct Decoder {
       const double v = std::ldexp(m, e - 129);
       return negative ? -v : v;
     }
-    std::uint32_t bits = processor == Processor::kMips
-                             ? (std::uint32_t{b[0]} << 24 | std::uint32_t{b[1]} << 16 | std::uint32_t{b[2]} << 8 | b[3])
-                             : (std::uint32_t{b[3]} << 24 | std::uint32_t{b[2]} << 16 | std::uint32_t{b[1]} << 8 | b[0]);
+    std::uint32_t bits =
+        processor == Processor::kMips
+            ? (std::uint32_t{b[0]} << 24 | std::uint32_t{b[1]} << 16 | std::uint32_t{b[2]} << 8 | b[3])
+            : (std::uint32_t{b[3]} << 24 | std::uint32_t{b[2]} << 16 | std::uint32_t{b[1]} << 8 | b[0]);
     float f;
     std::memcpy(&f, &bits, 4);
     return f;
@@ -76,8 +77,8 @@ struct Decoder {
 struct Parameter {
   int type = 0;
   std::vector<std::size_t> dims;
-  std::size_t data = 0;  // byte offset of the first element
-  std::size_t count = 0; // elements
+  std::size_t data = 0;   // byte offset of the first element
+  std::size_t count = 0;  // elements
   std::size_t record = 0;
 };
 
@@ -117,10 +118,14 @@ class C3dReader {
     const Parameter* p = find(group, name);
     if (!p || i >= p->count) return std::nullopt;
     switch (p->type) {
-      case 1: return static_cast<double>(static_cast<unsigned char>(bytes_[p->data + i]));
-      case 2: return unsigned16 ? dec_.u16(p->data + 2 * i) : dec_.i16(p->data + 2 * i);
-      case 4: return dec_.f32(p->data + 4 * i);
-      default: return std::nullopt;
+      case 1:
+        return static_cast<double>(static_cast<unsigned char>(bytes_[p->data + i]));
+      case 2:
+        return unsigned16 ? dec_.u16(p->data + 2 * i) : dec_.i16(p->data + 2 * i);
+      case 4:
+        return dec_.f32(p->data + 4 * i);
+      default:
+        return std::nullopt;
     }
   }
   // A count (int16 read unsigned, byte, or float): nothing unless it is a
@@ -173,7 +178,8 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
     if (name_length == 0 || id == 0) break;
     const std::size_t n = static_cast<std::size_t>(name_length < 0 ? -name_length : name_length);
     const std::size_t record = pos;
-    if (pos + 2 + n + 2 > end) return Status(byte_error(label_, record, "parameter record runs past the end of the file"));
+    if (pos + 2 + n + 2 > end)
+      return Status(byte_error(label_, record, "parameter record runs past the end of the file"));
     std::string name = upper(trim(bytes_.substr(pos + 2, n)));
     const std::size_t next_field = pos + 2 + n;
     const std::int16_t next = dec_.i16(next_field);
@@ -187,15 +193,16 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
       p.type = static_cast<std::int8_t>(bytes_[q]);
       const std::size_t ndims = static_cast<unsigned char>(bytes_[q + 1]);
       if (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4) {
-        return Status(byte_error(label_, q, "parameter " + name + " has type " + std::to_string(p.type) +
-                                        " (expected -1, 1, 2 or 4)"));
+        return Status(byte_error(
+            label_, q, "parameter " + name + " has type " + std::to_string(p.type) + " (expected -1, 1, 2 or 4)"));
       }
       if (ndims > kMaxDims) {
-        return Status(byte_error(label_, q + 1, "parameter " + name + " has " + std::to_string(ndims) +
-                                            " dimensions (at most 7)"));
+        return Status(byte_error(label_, q + 1,
+                                 "parameter " + name + " has " + std::to_string(ndims) + " dimensions (at most 7)"));
       }
       q += 2;
-      if (q + ndims > end) return Status(byte_error(label_, q, "parameter " + name + " dimensions run past the end of the file"));
+      if (q + ndims > end)
+        return Status(byte_error(label_, q, "parameter " + name + " dimensions run past the end of the file"));
       std::size_t count = 1;
       for (std::size_t d = 0; d < ndims; ++d) {
         p.dims.push_back(static_cast<unsigned char>(bytes_[q + d]));
@@ -204,8 +211,9 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
       q += ndims;
       const std::size_t size = static_cast<std::size_t>(p.type < 0 ? -p.type : p.type);
       if (count > (end - q) / size) {
-        return Status(byte_error(label_, q, "parameter " + name + " holds " + std::to_string(count) + " values of " +
-                                        std::to_string(size) + " bytes, past the end of the file"));
+        return Status(byte_error(label_, q,
+                                 "parameter " + name + " holds " + std::to_string(count) + " values of " +
+                                     std::to_string(size) + " bytes, past the end of the file"));
       }
       p.data = q;
       p.count = count;
@@ -224,29 +232,38 @@ std::optional<Status> C3dReader::read_parameters(std::size_t start) {
 
 Result<MarkerTrajectories> C3dReader::read() {
   if (bytes_.size() < kBlock) {
-    return byte_error(label_, bytes_.size(), "file too short for a C3D header (" + std::to_string(bytes_.size()) +
-                                         " of 512 bytes)");
+    return byte_error(label_, bytes_.size(),
+                      "file too short for a C3D header (" + std::to_string(bytes_.size()) + " of 512 bytes)");
   }
   const std::size_t param_block = static_cast<unsigned char>(bytes_[0]);
   if (static_cast<unsigned char>(bytes_[1]) != 0x50) {
-    return byte_error(label_, 1, "not a C3D file (byte 2 is " + std::to_string(static_cast<unsigned char>(bytes_[1])) +
-                             ", expected 80)");
+    return byte_error(
+        label_, 1,
+        "not a C3D file (byte 2 is " + std::to_string(static_cast<unsigned char>(bytes_[1])) + ", expected 80)");
   }
   if (param_block == 0) return byte_error(label_, 0, "parameter section at block 0 (blocks count from 1)");
   const std::size_t param_start = (param_block - 1) * kBlock;
   if (param_start + 4 > bytes_.size()) {
-    return byte_error(label_, 0, "parameter section at block " + std::to_string(param_block) + " (byte " +
-                             std::to_string(param_start) + ") is past the end of the file (" +
-                             std::to_string(bytes_.size()) + " bytes)");
+    return byte_error(label_, 0,
+                      "parameter section at block " + std::to_string(param_block) + " (byte " +
+                          std::to_string(param_start) + ") is past the end of the file (" +
+                          std::to_string(bytes_.size()) + " bytes)");
   }
   const int processor = static_cast<unsigned char>(bytes_[param_start + 3]);
   switch (processor) {
-    case 84: dec_.processor = Processor::kIntel; break;
-    case 85: dec_.processor = Processor::kDec; break;
-    case 86: dec_.processor = Processor::kMips; break;
+    case 84:
+      dec_.processor = Processor::kIntel;
+      break;
+    case 85:
+      dec_.processor = Processor::kDec;
+      break;
+    case 86:
+      dec_.processor = Processor::kMips;
+      break;
     default:
-      return byte_error(label_, param_start + 3, "unknown processor type " + std::to_string(processor) +
-                                             " (expected 84 Intel, 85 DEC or 86 MIPS)");
+      return byte_error(
+          label_, param_start + 3,
+          "unknown processor type " + std::to_string(processor) + " (expected 84 Intel, 85 DEC or 86 MIPS)");
   }
   dec_.bytes = bytes_;
   if (auto s = read_parameters(param_start)) return s->error();
@@ -320,8 +337,10 @@ Result<MarkerTrajectories> C3dReader::read() {
   if (data_block == 0) return byte_error(label_, 16, "data section at block 0 (blocks count from 1)");
   const std::size_t data_start = (data_block - 1) * kBlock;
   if (data_block <= param_block) {
-    return byte_error(label_, 16, "data section (block " + std::to_string(data_block) +
-                              ") starts before the end of the parameter section (block " + std::to_string(param_block) + ")");
+    return byte_error(label_, 16,
+                      "data section (block " + std::to_string(data_block) +
+                          ") starts before the end of the parameter section (block " + std::to_string(param_block) +
+                          ")");
   }
 
   // Frames: POINT:FRAMES (int16 read unsigned, or float), TRIAL:ACTUAL_*_FIELD
@@ -359,14 +378,14 @@ Result<MarkerTrajectories> C3dReader::read() {
   if (auto s = check_frame_count(frames, frame_bytes); !s.ok()) return byte_error(label_, 8, s.error().message);
   if (frames > 0 && frame_bytes > 0) {
     if (data_start > bytes_.size()) {
-      return byte_error(label_, 16, "data section at block " + std::to_string(data_block) + " (byte " +
-                                std::to_string(data_start) + ") is past the end of the file (" +
-                                std::to_string(bytes_.size()) + " bytes)");
+      return byte_error(label_, 16,
+                        "data section at block " + std::to_string(data_block) + " (byte " + std::to_string(data_start) +
+                            ") is past the end of the file (" + std::to_string(bytes_.size()) + " bytes)");
     }
     const std::size_t available = (bytes_.size() - data_start) / frame_bytes;
     if (frames_from_size && available != frames) {
-      warn(8, "header's last frame is 65535 (overflow) and no POINT:FRAMES: using the " +
-                  std::to_string(available) + " frames the file holds");
+      warn(8, "header's last frame is 65535 (overflow) and no POINT:FRAMES: using the " + std::to_string(available) +
+                  " frames the file holds");
       frames = available;
     }
     if (available < frames) {

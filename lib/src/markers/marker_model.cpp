@@ -185,7 +185,7 @@ void Parser::tokenize(std::string_view line) {
       t.text = line.substr(i, j - i);
       const char f = t.text[0];
       t.kind = (std::isdigit(static_cast<unsigned char>(f)) || f == '-' || f == '+' || f == '.') ? Token::kNumber
-                                                                                                   : Token::kWord;
+                                                                                                 : Token::kWord;
       if (!word_char(c)) t.kind = Token::kPunct;
       i = j;
     }
@@ -198,8 +198,9 @@ void Parser::tokenize(std::string_view line) {
 
 Result<std::string> Parser::word(std::string_view what) {
   if (peek().kind != Token::kWord) {
-    return error_here("expected " + std::string(what) +
-                      (at_end() ? std::string(" at the end of the line") : ", found '" + std::string(peek().text) + "'"));
+    return error_here(
+        "expected " + std::string(what) +
+        (at_end() ? std::string(" at the end of the line") : ", found '" + std::string(peek().text) + "'"));
   }
   return std::string(next().text);
 }
@@ -242,9 +243,9 @@ Status Parser::length(double& value, bool& absolute, bool relative_ok, std::stri
     value = v;
     absolute = false;
   } else {
-    return error_at(t.column, "'" + std::string(t.text) + "': " + std::string(what) +
-                                  (relative_ok ? " takes a number, or a length in mm, cm or m"
-                                               : " takes a length in mm, cm or m"));
+    return error_at(
+        t.column, "'" + std::string(t.text) + "': " + std::string(what) +
+                      (relative_ok ? " takes a number, or a length in mm, cm or m" : " takes a length in mm, cm or m"));
   }
   return Ok{};
 }
@@ -290,8 +291,9 @@ Status Parser::statement(MarkerModel& model) {
   if (*key == "gmr-marker-model") {
     auto v = number("the format version");
     if (!v) return v.error();
-    if (*v != 1) return error_at(first.column, "unsupported model format version " + std::string(tokens_[1].text) +
-                                                   " (this build reads version 1)");
+    if (*v != 1)
+      return error_at(first.column, "unsupported model format version " + std::string(tokens_[1].text) +
+                                        " (this build reads version 1)");
     header_seen_ = true;
   } else if (*key == "builtin") {
     auto n = word("a built-in model name");
@@ -350,8 +352,9 @@ Status Parser::statement(MarkerModel& model) {
       auto parent = word("the parent joint");
       if (!parent) return parent.error();
       j.parent = model.find_joint(*parent);
-      if (j.parent < 0) return error_at(first.column, "joint '" + j.name + "': parent '" + *parent +
-                                                          "' is not a joint defined above it");
+      if (j.parent < 0)
+        return error_at(first.column,
+                        "joint '" + j.name + "': parent '" + *parent + "' is not a joint defined above it");
       k = word("'in'");
       if (!k) return k.error();
     }
@@ -370,8 +373,8 @@ Status Parser::statement(MarkerModel& model) {
       if (!child) return child.error();
       j.child_part = model.find_part(*child);
       if (j.child_part < 0) return error_at(first.column, "joint '" + j.name + "': unknown part '" + *child + "'");
-      if (j.child_part == j.part) return error_at(first.column, "joint '" + j.name + "': centre of '" + *child +
-                                                                    "' within the same part");
+      if (j.child_part == j.part)
+        return error_at(first.column, "joint '" + j.name + "': centre of '" + *child + "' within the same part");
       auto p = word("'prior' or 'hinge'");
       if (!p) return p.error();
       if (*p == "hinge") {
@@ -383,8 +386,8 @@ Status Parser::statement(MarkerModel& model) {
         return error_at(first.column, "joint '" + j.name + "': expected '[hinge] prior EXPR' after the part");
       }
     } else {
-      return error_at(first.column, "joint '" + j.name + "': expected 'at EXPR' or 'centre PART prior EXPR', found '" +
-                                        *rule + "'");
+      return error_at(first.column,
+                      "joint '" + j.name + "': expected 'at EXPR' or 'centre PART prior EXPR', found '" + *rule + "'");
     }
     auto e = expr();
     if (!e) return e.error();
@@ -434,11 +437,13 @@ Status Parser::check(MarkerModel& model) {
   for (ModelPart& p : model.parts) {
     p.point_is_joint.assign(p.points.size(), false);
     for (std::size_t k = 0; k < p.points.size(); ++k) p.point_is_joint[k] = model.find_joint(p.points[k]) >= 0;
-    const std::size_t markers = static_cast<std::size_t>(std::count(p.point_is_joint.begin(), p.point_is_joint.end(), false));
+    const std::size_t markers =
+        static_cast<std::size_t>(std::count(p.point_is_joint.begin(), p.point_is_joint.end(), false));
     if (markers == 0) return fail(p.line, "part '" + p.name + "' has no marker");
     if (p.points.size() == 2 && !p.point_is_joint[0]) {
-      return fail(p.line, "part '" + p.name + "' has 2 points: the first must be a joint (its twist comes from that "
-                          "joint's part)");
+      return fail(p.line, "part '" + p.name +
+                              "' has 2 points: the first must be a joint (its twist comes from that "
+                              "joint's part)");
     }
   }
   for (int k = 0; k < n; ++k) {
@@ -456,7 +461,8 @@ Status Parser::check(MarkerModel& model) {
     if (p.points.size() == 2) {
       const int first = model.find_joint(p.points[0]);
       if (model.joints[static_cast<std::size_t>(first)].part == j.part) {
-        return fail(p.line, "part '" + p.name + "': its first point '" + p.points[0] + "' must be fixed in another part");
+        return fail(p.line,
+                    "part '" + p.name + "': its first point '" + p.points[0] + "' must be fixed in another part");
       }
     }
   }

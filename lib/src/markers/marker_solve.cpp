@@ -213,8 +213,10 @@ Status Solver::calibrate(int index) {
     if (all) complete.push_back(f);
   }
   if (complete.empty()) {
-    return error("part '" + mp.name + "': its points are never all visible in one frame, so its layout cannot be "
-                 "calibrated", mp.line);
+    return error("part '" + mp.name +
+                     "': its points are never all visible in one frame, so its layout cannot be "
+                     "calibrated",
+                 mp.line);
   }
   // At most 1,000 frames, evenly spread, make the mean.
   if (complete.size() > 1000) {
@@ -393,7 +395,8 @@ Status Solver::place_joint(int index) {
   }
   if (xs.empty()) {
     return error("joint '" + mj.name + "': its " + (mj.rule == ModelJoint::Rule::kAt ? "position" : "prior") +
-                 " needs markers that are never all visible in one frame", mj.line);
+                     " needs markers that are never all visible in one frame",
+                 mj.line);
   }
   const Vector3d expr_local(median(xs), median(ys), median(zs));
   Vector3d local = expr_local;
@@ -468,7 +471,8 @@ Status Solver::place_joint(int index) {
       jf.fit_rms = std::sqrt(sum_sq / static_cast<double>(count));
     } else {
       warnings_.push_back(error("joint '" + mj.name + "': part '" + child.name +
-                                "' has no marker seen in 10 fitted frames; the joint is at its prior", mj.line));
+                                    "' has no marker seen in 10 fitted frames; the joint is at its prior",
+                                mj.line));
     }
     jf.prior_distance = (local - expr_local).norm();
   }
@@ -574,16 +578,16 @@ Result<MarkerSolveResult> Solver::run(const MarkerSolveOptions& options) {
   if (m_.frame_count == 0) return make_error(ErrorKind::kInvalidData, "the marker file has no frames");
   unit_mm_ = millimetres_per_marker_unit(m_.units);
   if (!(unit_mm_ > 0)) {
-    return make_error(ErrorKind::kInvalidData, "the marker file's units '" + m_.units +
-                                                   "' are not a length (expected mm, cm, m or in)");
+    return make_error(ErrorKind::kInvalidData,
+                      "the marker file's units '" + m_.units + "' are not a length (expected mm, cm, m or in)");
   }
   if (m_.units.empty()) warnings_.push_back(make_error("the marker file gives no units: millimetres assumed"));
   if (auto s = resolve_markers(); !s) return s.error();
   std::vector<int> roots;
   for (const std::string& name : options.roots) {
     const int j = model_.find_joint(name);
-    if (j < 0) return make_error(ErrorKind::kNotFound, "unknown joint '" + name + "' (not in marker model " +
-                                                           model_.name + ")");
+    if (j < 0)
+      return make_error(ErrorKind::kNotFound, "unknown joint '" + name + "' (not in marker model " + model_.name + ")");
     roots.push_back(j);
   }
   parts_.assign(model_.parts.size(), Part{});

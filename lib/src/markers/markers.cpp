@@ -22,7 +22,8 @@ bool make_names_unique(std::vector<std::string>& names) {
     int k = ++count[n];
     if (k < 2) continue;
     std::string candidate;
-    do candidate = n + "_" + std::to_string(k++); while (used.count(candidate));
+    do candidate = n + "_" + std::to_string(k++);
+    while (used.count(candidate));
     used.insert(candidate);
     n = std::move(candidate);
     renamed = true;
@@ -49,12 +50,12 @@ Status MarkerTrajectories::validate() const {
   if (!std::isfinite(frame_rate) || frame_rate < 0) return make_error("frame rate must be finite and >= 0");
   if (!std::isfinite(start_time)) return make_error("start time must be finite");
   if (positions.size() != frame_count * names.size() * 3) {
-    return make_error("positions hold " + std::to_string(positions.size()) + " values, expected frames x markers x 3 = " +
-                      std::to_string(frame_count * names.size() * 3));
+    return make_error("positions hold " + std::to_string(positions.size()) +
+                      " values, expected frames x markers x 3 = " + std::to_string(frame_count * names.size() * 3));
   }
   if (!residuals.empty() && residuals.size() != frame_count * names.size()) {
-    return make_error("residuals hold " + std::to_string(residuals.size()) + " values, expected frames x markers = " +
-                      std::to_string(frame_count * names.size()));
+    return make_error("residuals hold " + std::to_string(residuals.size()) +
+                      " values, expected frames x markers = " + std::to_string(frame_count * names.size()));
   }
   for (double v : positions) {
     if (std::isinf(v)) return make_error("infinite marker coordinate");

@@ -138,14 +138,17 @@ Result<MarkerTrajectories> parse_trc(std::string_view text, std::string_view lab
               std::string("expected ") + what + (i < lines.size() ? "" : ", found the end of the file"));
   };
   if (lines.empty()) return at(label, 1, 1, "empty file: expected a TRC header (PathFileType ...)");
-  const Separator sep = lines[0].text.find('\t') != std::string_view::npos   ? Separator::kTab
+  const Separator sep = lines[0].text.find('\t') != std::string_view::npos  ? Separator::kTab
                         : lines[0].text.find(',') != std::string_view::npos ? Separator::kComma
                                                                             : Separator::kSpaces;
   const std::vector<Cell> first = split_cells(lines[0].text, sep);
   if (first.empty() || !iequals(first[0].text, "PathFileType")) {
     return at(label, 1, 1, "expected 'PathFileType' at the start of a TRC file");
   }
-  if (lines.size() < 4) return missing(lines.size(), lines.size() == 1 ? "the header keys line" : lines.size() == 2 ? "the header values line" : "the marker names line (Frame# Time ...)");
+  if (lines.size() < 4)
+    return missing(lines.size(), lines.size() == 1   ? "the header keys line"
+                                 : lines.size() == 2 ? "the header values line"
+                                                     : "the marker names line (Frame# Time ...)");
 
   MarkerTrajectories out;
   // Header keys and values, matched by position, keys case-insensitive.
@@ -161,14 +164,16 @@ Result<MarkerTrajectories> parse_trc(std::string_view text, std::string_view lab
     if (iequals(key, "DataRate") || (iequals(key, "CameraRate") && !have_rate)) {
       double r = 0;
       if (!parse_number(v.text, r, false) || r < 0) {
-        return at(label, lines[2].number, v.column, std::string(key) + " must be a number >= 0, found " + quote_cell(v.text));
+        return at(label, lines[2].number, v.column,
+                  std::string(key) + " must be a number >= 0, found " + quote_cell(v.text));
       }
       out.frame_rate = r;
       have_rate = have_rate || iequals(key, "DataRate");
     } else if (iequals(key, "NumFrames") || iequals(key, "NumMarkers")) {
       std::int64_t n = 0;
       if (!parse_integer(v.text, n) || n < 0) {
-        return at(label, lines[2].number, v.column, std::string(key) + " must be a whole number >= 0, found " + quote_cell(v.text));
+        return at(label, lines[2].number, v.column,
+                  std::string(key) + " must be a whole number >= 0, found " + quote_cell(v.text));
       }
       (iequals(key, "NumFrames") ? declared_frames : declared_markers) = n;
       (iequals(key, "NumFrames") ? frames_col : markers_col) = v.column;
@@ -191,8 +196,9 @@ Result<MarkerTrajectories> parse_trc(std::string_view text, std::string_view lab
   }
   const std::size_t markers = out.names.size();
   if (declared_markers >= 0 && static_cast<std::size_t>(declared_markers) != markers) {
-    warn(lines[2].number, markers_col, "NumMarkers is " + std::to_string(declared_markers) + " but " +
-                                           std::to_string(markers) + " marker names follow: using the names");
+    warn(lines[2].number, markers_col,
+         "NumMarkers is " + std::to_string(declared_markers) + " but " + std::to_string(markers) +
+             " marker names follow: using the names");
   }
 
   // Optional coordinate labels (X1 Y1 Z1 ..., from any number), then rows.
@@ -224,8 +230,8 @@ Result<MarkerTrajectories> parse_trc(std::string_view text, std::string_view lab
     if (cells.size() < columns) {
       const int end_col = static_cast<int>(line.text.size()) + 1;
       return at(label, line.number, end_col,
-                std::string(line.ended ? "row ends" : "file ends") + " after " + std::to_string(cells.size()) +
-                    " of " + std::to_string(columns) + " values (Frame#, Time and 3 per marker)" +
+                std::string(line.ended ? "row ends" : "file ends") + " after " + std::to_string(cells.size()) + " of " +
+                    std::to_string(columns) + " values (Frame#, Time and 3 per marker)" +
                     (line.ended ? "" : ": truncated"));
     }
     if (auto s = check_frame_count(out.frame_count + 1, 3 * markers); !s.ok()) {
@@ -245,16 +251,18 @@ Result<MarkerTrajectories> parse_trc(std::string_view text, std::string_view lab
       expected_frame = frame;
     }
     if (frame != expected_frame && !gap_warned) {
-      warn(line.number, cells[0].column, "frame number " + std::to_string(frame) + " where " +
-                                             std::to_string(expected_frame) + " was expected: rows kept in file order");
+      warn(line.number, cells[0].column,
+           "frame number " + std::to_string(frame) + " where " + std::to_string(expected_frame) +
+               " was expected: rows kept in file order");
       gap_warned = true;
     }
     expected_frame = frame + 1;
     if (out.frame_rate > 0 && !time_warned) {
       const double want = out.start_time + static_cast<double>(out.frame_count) / out.frame_rate;
       if (std::fabs(time - want) > 0.1 / out.frame_rate) {
-        warn(line.number, cells[1].column, "Time " + std::string(cells[1].text) + " does not match DataRate " +
-                                               format_double(out.frame_rate) + " (expected " + format_double(want) + ")");
+        warn(line.number, cells[1].column,
+             "Time " + std::string(cells[1].text) + " does not match DataRate " + format_double(out.frame_rate) +
+                 " (expected " + format_double(want) + ")");
         time_warned = true;
       }
     }
@@ -280,8 +288,9 @@ Result<MarkerTrajectories> parse_trc(std::string_view text, std::string_view lab
     ++out.frame_count;
   }
   if (declared_frames >= 0 && static_cast<std::size_t>(declared_frames) != out.frame_count) {
-    warn(lines[2].number, frames_col, "NumFrames is " + std::to_string(declared_frames) + " but the file holds " +
-                                          std::to_string(out.frame_count) + " rows: loaded the rows");
+    warn(lines[2].number, frames_col,
+         "NumFrames is " + std::to_string(declared_frames) + " but the file holds " + std::to_string(out.frame_count) +
+             " rows: loaded the rows");
   }
   return out;
 }
@@ -299,7 +308,8 @@ Result<std::string> format_trc(const MarkerTrajectories& data, std::string_view 
       return make_error("marker name " + quote_cell(n) + " cannot be written to TRC (tab, line break or edge space)");
     }
   }
-  if (data.units.find_first_of("\t\r\n") != std::string::npos) return make_error("units cannot hold tabs or line breaks");
+  if (data.units.find_first_of("\t\r\n") != std::string::npos)
+    return make_error("units cannot hold tabs or line breaks");
   std::string name(file_name.empty() ? std::string_view("markers.trc") : file_name);
   for (char& c : name) {
     if (c == '\t' || c == '\r' || c == '\n') c = '_';
@@ -322,8 +332,8 @@ Result<std::string> format_trc(const MarkerTrajectories& data, std::string_view 
   }
   out += "\n\n";
   for (std::size_t f = 0; f < data.frame_count; ++f) {
-    const double t = data.start_time + (data.frame_rate > 0 ? static_cast<double>(f) / data.frame_rate
-                                                           : static_cast<double>(f));
+    const double t =
+        data.start_time + (data.frame_rate > 0 ? static_cast<double>(f) / data.frame_rate : static_cast<double>(f));
     out += std::to_string(data.first_frame + static_cast<std::int64_t>(f));
     out += '\t';
     out += format_double(t);

@@ -72,7 +72,7 @@ Result<Motion> to_post_rotation(const Motion& motion) {
   // For each child: the index of its group's first child when the group hangs
   // under an inserted joint, else -1.
   std::vector<int> group_head(static_cast<std::size_t>(n), -1);
-  std::vector<Track> post(in.tracks);     // S_x of every joint, parents as in `in`
+  std::vector<Track> post(in.tracks);                        // S_x of every joint, parents as in `in`
   std::vector<Track> inserted(static_cast<std::size_t>(n));  // S of the joint inserted for a group, by its head
   for (int x = 0; x < n; ++x) {
     const std::vector<int> kids = in.children(x);
@@ -102,7 +102,8 @@ Result<Motion> to_post_rotation(const Motion& motion) {
     for (int h : heads) {
       std::size_t size = 0;
       for (int c : kids) {
-        if (group_head[static_cast<std::size_t>(c)] == h) size += static_cast<std::size_t>(subtree[static_cast<std::size_t>(c)]);
+        if (group_head[static_cast<std::size_t>(c)] == h)
+          size += static_cast<std::size_t>(subtree[static_cast<std::size_t>(c)]);
       }
       if (is_identity(in[h])) size = static_cast<std::size_t>(n) + 1;
       if (size > main_size) {

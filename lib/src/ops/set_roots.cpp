@@ -23,7 +23,8 @@ Result<Motion> set_roots(const Motion& motion, std::span<const int> roots) {
   std::vector<std::string> names;
   for (int r : roots) {
     if (Status st = check_joint(motion, r, "set roots"); !st) return st.error();
-    if (target[static_cast<std::size_t>(r)]) return make_error("set roots: " + quoted(s0.joint(r).name) + " is listed twice");
+    if (target[static_cast<std::size_t>(r)])
+      return make_error("set roots: " + quoted(s0.joint(r).name) + " is listed twice");
     target[static_cast<std::size_t>(r)] = 1;
     names.push_back(s0.joint(r).name);
   }
@@ -47,8 +48,9 @@ Result<Motion> set_roots(const Motion& motion, std::span<const int> roots) {
   for (int r : roots) covered[static_cast<std::size_t>(find(r))] = 1;
   for (int j = 0; j < n; ++j) {
     if (!covered[static_cast<std::size_t>(find(j))]) {
-      return make_error(ErrorKind::kFailedPrecondition, "set roots: no root given for the skeleton that holds " + quoted(s0.joint(j).name) +
-                        " (each connected skeleton needs at least one)");
+      return make_error(ErrorKind::kFailedPrecondition, "set roots: no root given for the skeleton that holds " +
+                                                            quoted(s0.joint(j).name) +
+                                                            " (each connected skeleton needs at least one)");
     }
   }
 
@@ -77,7 +79,8 @@ Result<Motion> set_roots(const Motion& motion, std::span<const int> roots) {
       if (b < 0 || s.depth(j) < s.depth(b) || (s.depth(j) == s.depth(b) && name < s.joint(b).name)) best[r] = j;
     }
     for (int r : s.roots()) {
-      if (best[static_cast<std::size_t>(r)] >= 0) tree_targets.push_back(s.joint(best[static_cast<std::size_t>(r)]).name);
+      if (best[static_cast<std::size_t>(r)] >= 0)
+        tree_targets.push_back(s.joint(best[static_cast<std::size_t>(r)]).name);
     }
   }
   for (const std::string& name : tree_targets) {

@@ -20,15 +20,17 @@ std::string quoted(const std::string& name) { return "'" + name + "'"; }
 
 Status check_pre(const Motion& m, const char* op) {
   if (m.convention != Convention::kPreRotation) {
-    return make_error(ErrorKind::kFailedPrecondition, std::string(op) + " needs a pre-rotation (GMR) motion: convert it with to_pre_rotation first");
+    return make_error(ErrorKind::kFailedPrecondition,
+                      std::string(op) + " needs a pre-rotation (GMR) motion: convert it with to_pre_rotation first");
   }
   return m.validate();
 }
 
 Status check_joint(const Motion& m, int j, const char* op) {
   if (j < 0 || j >= static_cast<int>(m.skeleton.size())) {
-    return make_error(ErrorKind::kNotFound, std::string(op) + ": joint index " + std::to_string(j) + " out of range (skeleton has " +
-                      std::to_string(m.skeleton.size()) + " joints)");
+    return make_error(ErrorKind::kNotFound, std::string(op) + ": joint index " + std::to_string(j) +
+                                                " out of range (skeleton has " + std::to_string(m.skeleton.size()) +
+                                                " joints)");
   }
   return Ok{};
 }
@@ -110,8 +112,9 @@ Result<Motion> join_many(const Motion& motion, const std::vector<int>& roots, st
     for (std::size_t steps = 0; link[static_cast<std::size_t>(t)] != kNoParent; ++steps) {
       t = link[static_cast<std::size_t>(t)];
       if (t == r || steps > s.size()) {
-        return make_error(ErrorKind::kFailedPrecondition, "cannot join " + quoted(s.joint(r).name) + ": soft links form a cycle (its soft link " +
-                          quoted(s.joint(s.joint(r).soft_parent).name) + " is in its own tree after the joins)");
+        return make_error(ErrorKind::kFailedPrecondition,
+                          "cannot join " + quoted(s.joint(r).name) + ": soft links form a cycle (its soft link " +
+                              quoted(s.joint(s.joint(r).soft_parent).name) + " is in its own tree after the joins)");
       }
     }
   }

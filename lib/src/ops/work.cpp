@@ -24,9 +24,7 @@ std::vector<Axis> axes_of(std::span<const ChannelType> ch) {
   return out;
 }
 
-bool near_zero_turn(double deg) {
-  return std::abs(deg - 360.0 * std::round(deg / 360.0)) <= kZeroAngleDegrees;
-}
+bool near_zero_turn(double deg) { return std::abs(deg - 360.0 * std::round(deg / 360.0)) <= kZeroAngleDegrees; }
 
 }  // namespace
 

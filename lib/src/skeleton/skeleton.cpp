@@ -23,8 +23,7 @@ Result<Skeleton> Skeleton::create(std::vector<Joint> joints) {
     if (!names.insert(joint.name).second) return make_error("duplicate joint name '" + joint.name + "'");
     if (joint.parent != kNoParent && (joint.parent < 0 || joint.parent >= n))
       return make_error(who + ": parent index " + std::to_string(joint.parent) + " out of range");
-    if (joint.parent != kNoParent && joint.parent >= j)
-      return make_error(who + ": parent must come before its child");
+    if (joint.parent != kNoParent && joint.parent >= j) return make_error(who + ": parent must come before its child");
     if (joint.soft_parent != kNoParent) {
       if (joint.parent != kNoParent) return make_error(who + ": only a root may have a soft link");
       if (joint.soft_parent < 0 || joint.soft_parent >= n || joint.soft_parent == j)

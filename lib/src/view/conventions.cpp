@@ -15,12 +15,18 @@ struct Target {
 
 Target target_of(const Conventions& c) {
   switch (c.preset) {
-    case ConventionPreset::kUnreal: return {3, 1, true, 0.01};
-    case ConventionPreset::kUnity: return {2, 3, true, 1.0};
-    case ConventionPreset::kBlender: return {3, -2, false, 1.0};
-    case ConventionPreset::kGodot: return {2, -3, false, 1.0};
-    case ConventionPreset::kCustom: return {c.up, c.forward, c.left_handed, c.target_metres_per_unit};
-    case ConventionPreset::kNative: break;
+    case ConventionPreset::kUnreal:
+      return {3, 1, true, 0.01};
+    case ConventionPreset::kUnity:
+      return {2, 3, true, 1.0};
+    case ConventionPreset::kBlender:
+      return {3, -2, false, 1.0};
+    case ConventionPreset::kGodot:
+      return {2, -3, false, 1.0};
+    case ConventionPreset::kCustom:
+      return {c.up, c.forward, c.left_handed, c.target_metres_per_unit};
+    case ConventionPreset::kNative:
+      break;
   }
   return {2, 3, false, 1.0};  // the source's own axes
 }
@@ -62,12 +68,18 @@ Result<OutputBasis> output_basis(const Conventions& c) {
 
 std::string_view preset_name(ConventionPreset p) {
   switch (p) {
-    case ConventionPreset::kNative: return "native";
-    case ConventionPreset::kUnreal: return "unreal";
-    case ConventionPreset::kUnity: return "unity";
-    case ConventionPreset::kBlender: return "blender";
-    case ConventionPreset::kGodot: return "godot";
-    case ConventionPreset::kCustom: return "custom";
+    case ConventionPreset::kNative:
+      return "native";
+    case ConventionPreset::kUnreal:
+      return "unreal";
+    case ConventionPreset::kUnity:
+      return "unity";
+    case ConventionPreset::kBlender:
+      return "blender";
+    case ConventionPreset::kGodot:
+      return "godot";
+    case ConventionPreset::kCustom:
+      return "custom";
   }
   return "native";
 }

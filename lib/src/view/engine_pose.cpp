@@ -46,7 +46,8 @@ void engine_locals(const Skeleton& skeleton, std::span<const int> sources, std::
     }
     const Eigen::Matrix3d& parent = orientations[static_cast<std::size_t>(sources[static_cast<std::size_t>(p)])];
     out_rotations[i] = Eigen::Quaterniond(Eigen::Matrix3d(parent.transpose() * own));
-    out_translations[i] = parent.transpose() * (positions[static_cast<std::size_t>(j)] - positions[static_cast<std::size_t>(p)]);
+    out_translations[i] =
+        parent.transpose() * (positions[static_cast<std::size_t>(j)] - positions[static_cast<std::size_t>(p)]);
   }
 }
 

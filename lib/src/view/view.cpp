@@ -31,8 +31,9 @@ Result<MotionView> apply_view(const Motion& source, const ViewSpec& spec) {
       const auto it = std::find_if(view.removed.begin(), view.removed.end(),
                                    [&](const RemovedJoint& r) { return r.name == spec.relative_to; });
       return make_error("unknown joint '" + spec.relative_to + "'" +
-                        (it != view.removed.end() ? " (zero-length: merged into '" + it->merged_into + "' by strip-dummies)"
-                                                  : std::string()));
+                        (it != view.removed.end()
+                             ? " (zero-length: merged into '" + it->merged_into + "' by strip-dummies)"
+                             : std::string()));
     }
   }
   for (const Joint& j : source.skeleton.joints()) {

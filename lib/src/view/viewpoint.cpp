@@ -10,8 +10,7 @@ namespace gmr {
 Viewpoint::Viewpoint(const Eigen::Vector3d& origin, const Eigen::Matrix3d& orientation)
     : world_(false), rt_(orientation.transpose()), origin_(origin) {}
 
-Viewpoint Viewpoint::of_joint(std::span<const float> positions, std::span<const float> orientations,
-                              std::size_t v) {
+Viewpoint Viewpoint::of_joint(std::span<const float> positions, std::span<const float> orientations, std::size_t v) {
   assert(positions.size() >= 3 * (v + 1) && orientations.size() >= 9 * (v + 1));
   const float* p = positions.data() + 3 * v;
   const float* w = orientations.data() + 9 * v;
@@ -74,8 +73,8 @@ void view_frame_float(std::span<const float> fk_positions, std::span<const float
                       const OutputBasis& basis) {
   assert(out_positions.size() >= 3 * joints.size());
   assert(out_quaternions.empty() || out_quaternions.size() >= 4 * joints.size());
-  const Viewpoint from = viewer < 0 ? Viewpoint()
-                                    : Viewpoint::of_joint(fk_positions, fk_orientations, static_cast<std::size_t>(viewer));
+  const Viewpoint from =
+      viewer < 0 ? Viewpoint() : Viewpoint::of_joint(fk_positions, fk_orientations, static_cast<std::size_t>(viewer));
   if (basis.identity) {
     view_joints<false>(fk_positions, fk_orientations, from, joints, out_positions, out_quaternions, basis);
   } else {

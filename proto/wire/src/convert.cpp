@@ -61,7 +61,8 @@ Result<Skeleton> from_proto(const pb::Skeleton& message) {
     j.soft_parent = m.soft_parent();
     j.offset = Eigen::Vector3d(m.offset().x(), m.offset().y(), m.offset().z());
     for (int c : m.channels()) {
-      if (c < 0 || c > 5) return make_error("joint " + std::to_string(i) + ": unknown channel type " + std::to_string(c));
+      if (c < 0 || c > 5)
+        return make_error("joint " + std::to_string(i) + ": unknown channel type " + std::to_string(c));
       j.channels.push_back(static_cast<ChannelType>(c));
     }
     joints.push_back(std::move(j));
@@ -71,29 +72,45 @@ Result<Skeleton> from_proto(const pb::Skeleton& message) {
 
 pb::ErrorCode error_code_for(ErrorKind kind) {
   switch (kind) {
-    case ErrorKind::kNotFound: return pb::ERROR_CODE_NOT_FOUND;
-    case ErrorKind::kFailedPrecondition: return pb::ERROR_CODE_FAILED_PRECONDITION;
-    case ErrorKind::kResourceExhausted: return pb::ERROR_CODE_RESOURCE_EXHAUSTED;
+    case ErrorKind::kNotFound:
+      return pb::ERROR_CODE_NOT_FOUND;
+    case ErrorKind::kFailedPrecondition:
+      return pb::ERROR_CODE_FAILED_PRECONDITION;
+    case ErrorKind::kResourceExhausted:
+      return pb::ERROR_CODE_RESOURCE_EXHAUSTED;
     case ErrorKind::kInvalidArgument:
-    case ErrorKind::kInvalidData: return pb::ERROR_CODE_BAD_REQUEST;
-    case ErrorKind::kIo: return pb::ERROR_CODE_INTERNAL;
+    case ErrorKind::kInvalidData:
+      return pb::ERROR_CODE_BAD_REQUEST;
+    case ErrorKind::kIo:
+      return pb::ERROR_CODE_INTERNAL;
   }
   return pb::ERROR_CODE_INTERNAL;
 }
 
 const char* error_code_name(pb::ErrorCode code) {
   switch (code) {
-    case pb::ERROR_CODE_BAD_REQUEST: return "BAD_REQUEST";
-    case pb::ERROR_CODE_UNKNOWN_REQUEST: return "UNKNOWN_REQUEST";
-    case pb::ERROR_CODE_VERSION_MISMATCH: return "VERSION_MISMATCH";
-    case pb::ERROR_CODE_NOT_FOUND: return "NOT_FOUND";
-    case pb::ERROR_CODE_FAILED_PRECONDITION: return "FAILED_PRECONDITION";
-    case pb::ERROR_CODE_RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
-    case pb::ERROR_CODE_HANDSHAKE_REQUIRED: return "HANDSHAKE_REQUIRED";
-    case pb::ERROR_CODE_INTERNAL: return "INTERNAL";
-    case pb::ERROR_CODE_UNAUTHENTICATED: return "UNAUTHENTICATED";
-    case pb::ERROR_CODE_PERMISSION_DENIED: return "PERMISSION_DENIED";
-    default: return "UNSPECIFIED";
+    case pb::ERROR_CODE_BAD_REQUEST:
+      return "BAD_REQUEST";
+    case pb::ERROR_CODE_UNKNOWN_REQUEST:
+      return "UNKNOWN_REQUEST";
+    case pb::ERROR_CODE_VERSION_MISMATCH:
+      return "VERSION_MISMATCH";
+    case pb::ERROR_CODE_NOT_FOUND:
+      return "NOT_FOUND";
+    case pb::ERROR_CODE_FAILED_PRECONDITION:
+      return "FAILED_PRECONDITION";
+    case pb::ERROR_CODE_RESOURCE_EXHAUSTED:
+      return "RESOURCE_EXHAUSTED";
+    case pb::ERROR_CODE_HANDSHAKE_REQUIRED:
+      return "HANDSHAKE_REQUIRED";
+    case pb::ERROR_CODE_INTERNAL:
+      return "INTERNAL";
+    case pb::ERROR_CODE_UNAUTHENTICATED:
+      return "UNAUTHENTICATED";
+    case pb::ERROR_CODE_PERMISSION_DENIED:
+      return "PERMISSION_DENIED";
+    default:
+      return "UNSPECIFIED";
   }
 }
 

@@ -72,9 +72,9 @@ std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id,
   put_varint(head, ids.size() + body_size);
   head += ids;
   if (length_prefix) {
-    write_length_prefix(static_cast<std::uint32_t>(head.size() - kLengthPrefixBytes + body_size),
-                        std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(head.data()),
-                                                                     kLengthPrefixBytes));
+    write_length_prefix(
+        static_cast<std::uint32_t>(head.size() - kLengthPrefixBytes + body_size),
+        std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(head.data()), kLengthPrefixBytes));
   }
   return head;
 }
@@ -93,7 +93,8 @@ template <class Values>
 Status unpack(const Values& positions, const Values& orientations, std::vector<Eigen::Vector3d>& out_positions,
               std::vector<Eigen::Quaterniond>& out_orientations) {
   if (positions.size() % 3 != 0) {
-    return make_error(ErrorKind::kInvalidData, std::to_string(positions.size()) + " position values are not whole xyz triples");
+    return make_error(ErrorKind::kInvalidData,
+                      std::to_string(positions.size()) + " position values are not whole xyz triples");
   }
   const auto n = static_cast<std::size_t>(positions.size() / 3);
   if (!orientations.empty() && static_cast<std::size_t>(orientations.size()) != 4 * n) {
@@ -110,8 +111,8 @@ Status unpack(const Values& positions, const Values& orientations, std::vector<E
   for (std::size_t i = 0; i < out_orientations.size(); ++i) {
     const int k = static_cast<int>(4 * i);
     // Eigen's constructor takes w first.
-    out_orientations[i] =
-        Eigen::Quaterniond(orientations.Get(k + 3), orientations.Get(k), orientations.Get(k + 1), orientations.Get(k + 2));
+    out_orientations[i] = Eigen::Quaterniond(orientations.Get(k + 3), orientations.Get(k), orientations.Get(k + 1),
+                                             orientations.Get(k + 2));
   }
   return Ok{};
 }
@@ -126,16 +127,17 @@ Status unpack_locals(const Values& rotations, const Values& translations, std::s
     return Ok{};
   }
   if (static_cast<std::size_t>(rotations.size()) != 4 * n || static_cast<std::size_t>(translations.size()) != 3 * n) {
-    return make_error(ErrorKind::kInvalidData, std::to_string(rotations.size()) + " local rotation and " +
-                                                   std::to_string(translations.size()) + " local translation values for " +
-                                                   std::to_string(n) + " positions (expected 0 and 0, or " +
-                                                   std::to_string(4 * n) + " and " + std::to_string(3 * n) + ")");
+    return make_error(ErrorKind::kInvalidData,
+                      std::to_string(rotations.size()) + " local rotation and " + std::to_string(translations.size()) +
+                          " local translation values for " + std::to_string(n) + " positions (expected 0 and 0, or " +
+                          std::to_string(4 * n) + " and " + std::to_string(3 * n) + ")");
   }
   out_rotations.resize(n);
   out_translations.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     const int k = static_cast<int>(4 * i), t = static_cast<int>(3 * i);
-    out_rotations[i] = Eigen::Quaterniond(rotations.Get(k + 3), rotations.Get(k), rotations.Get(k + 1), rotations.Get(k + 2));
+    out_rotations[i] =
+        Eigen::Quaterniond(rotations.Get(k + 3), rotations.Get(k), rotations.Get(k + 1), rotations.Get(k + 2));
     out_translations[i] = Eigen::Vector3d(translations.Get(t), translations.Get(t + 1), translations.Get(t + 2));
   }
   return Ok{};
@@ -163,7 +165,8 @@ Result<FrameValues> decode_frame(const pb::Frame& f) {
                   : unpack_locals(f.local_rotations(), f.local_translations(), d.positions.size(), d.local_rotations,
                                   d.local_translations);
   }
-  if (!s.ok()) return make_error(ErrorKind::kInvalidData, "frame " + std::to_string(d.frame_index) + ": " + s.error().message);
+  if (!s.ok())
+    return make_error(ErrorKind::kInvalidData, "frame " + std::to_string(d.frame_index) + ": " + s.error().message);
   return d;
 }
 

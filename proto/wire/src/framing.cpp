@@ -25,9 +25,9 @@ Status check_length(std::uint64_t length, std::uint32_t max_bytes) {
 
 std::string frame_bytes(std::string_view serialized) {
   std::string out(kLengthPrefixBytes + serialized.size(), '\0');
-  write_length_prefix(static_cast<std::uint32_t>(serialized.size()),
-                      std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(out.data()),
-                                                                   kLengthPrefixBytes));
+  write_length_prefix(
+      static_cast<std::uint32_t>(serialized.size()),
+      std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(out.data()), kLengthPrefixBytes));
   out.replace(kLengthPrefixBytes, serialized.size(), serialized);
   return out;
 }

@@ -31,7 +31,8 @@ T get_be(std::string_view in, std::size_t at) {
 
 bool header_is(std::string_view d, DatagramKind kind) {
   return d.size() >= kUdpHeaderBytes && std::memcmp(d.data(), kMagic, 4) == 0 &&
-         static_cast<std::uint8_t>(d[4]) == kUdpVersion && static_cast<std::uint8_t>(d[5]) == static_cast<std::uint8_t>(kind);
+         static_cast<std::uint8_t>(d[4]) == kUdpVersion &&
+         static_cast<std::uint8_t>(d[5]) == static_cast<std::uint8_t>(kind);
 }
 
 void put_token(std::string& out, const UdpToken& t) { out.append(reinterpret_cast<const char*>(t.data()), t.size()); }
@@ -88,7 +89,8 @@ std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::st
   return append_fragments(out, message_id, message, std::string_view());
 }
 
-std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view first, std::string_view rest) {
+std::size_t append_fragments(std::string& out, std::uint32_t message_id, std::string_view first,
+                             std::string_view rest) {
   const std::size_t total = first.size() + rest.size();
   const std::size_t count = fragment_count(total);
   out.reserve(out.size() + count * kFragmentHeaderBytes + total);
@@ -136,8 +138,9 @@ std::optional<std::string> Reassembler::add(std::string_view d) {
   // The header must describe a consistent message: count matches total, the
   // fragment has exactly the size its index implies.
   const std::size_t expect_count = std::max<std::size_t>(1, (total + kMaxFragmentPayload - 1) / kMaxFragmentPayload);
-  const std::size_t expect_size =
-      index + 1u < count ? kMaxFragmentPayload : total - std::min<std::size_t>(total, std::size_t{index} * kMaxFragmentPayload);
+  const std::size_t expect_size = index + 1u < count
+                                      ? kMaxFragmentPayload
+                                      : total - std::min<std::size_t>(total, std::size_t{index} * kMaxFragmentPayload);
   if (total > kMaxUdpMessageBytes || count != expect_count || index >= count || payload.size() != expect_size) {
     ++malformed_;
     return std::nullopt;

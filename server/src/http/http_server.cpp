@@ -102,8 +102,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     parser_->header_limit(kHeaderLimit);
     parser_->body_limit(0);  // GET and HEAD only: no body
     stream_.expires_after(server_.cfg.http_timeout);
-    http::async_read(stream_, buffer_, *parser_,
-                     [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) { self->on_read(ec); });
+    http::async_read(
+        stream_, buffer_, *parser_,
+        [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) { self->on_read(ec); });
   }
 
   void on_read(const boost::system::error_code& ec) {
@@ -115,8 +116,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       }
       // A request that does not parse, or passes a bound: say which, then close.
       const http::status status = ec == http::error::header_limit ? http::status::request_header_fields_too_large
-                                  : ec == http::error::body_limit   ? http::status::payload_too_large
-                                                                    : http::status::bad_request;
+                                  : ec == http::error::body_limit ? http::status::payload_too_large
+                                                                  : http::status::bad_request;
       respond(text_response(status, 11, false, "bad HTTP request: " + ec.message() + "\n"));
       return;
     }
@@ -297,7 +298,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   bool ended_ = false;
 };
 
-HttpListener::HttpListener(net::io_context& io, HttpServices services) : services_(std::move(services)), acceptor_(io) {}
+HttpListener::HttpListener(net::io_context& io, HttpServices services)
+    : services_(std::move(services)), acceptor_(io) {}
 
 void HttpListener::open(const net::ip::address& address, std::uint16_t port) {
   const tcp::endpoint ep(address, port);

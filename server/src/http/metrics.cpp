@@ -7,7 +7,6 @@
 #include <map>
 #include <sstream>
 
-
 namespace gmr::server {
 
 namespace {
@@ -17,8 +16,8 @@ using prometheus::MetricFamily;
 using prometheus::MetricType;
 
 // Seconds: from 10 us (a request, a frame on an idle loopback) to 1 s.
-const prometheus::Histogram::BucketBoundaries kLatencyBuckets = {
-    1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 2.5e-2, 5e-2, 0.1, 0.25, 1.0};
+const prometheus::Histogram::BucketBoundaries kLatencyBuckets = {1e-5, 2.5e-5, 5e-5,   1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3,
+                                                                 5e-3, 1e-2,   2.5e-2, 5e-2, 0.1,    0.25, 1.0};
 
 // Families built from the server's state at scrape time.
 class Families {
@@ -78,8 +77,9 @@ Metrics::Metrics() : registry_(std::make_shared<prometheus::Registry>()) {
                         .Add({}, kLatencyBuckets);
   auto& wait = prometheus::BuildHistogram()
                    .Name("gmr_frame_wait_seconds")
-                   .Help("From a frame queued for a connection to the end of the write that carried it "
-                         "(the oldest frame of each write)")
+                   .Help(
+                       "From a frame queued for a connection to the end of the write that carried it "
+                       "(the oldest frame of each write)")
                    .Register(*registry_);
   frame_wait_tcp_ = &wait.Add({{"transport", "tcp"}}, kLatencyBuckets);
   frame_wait_ws_ = &wait.Add({{"transport", "websocket"}}, kLatencyBuckets);
@@ -91,7 +91,9 @@ void Metrics::request(std::string_view kind, Clock::duration took, pb::ErrorCode
   if (code != pb::ERROR_CODE_UNSPECIFIED) request_errors_->Add({{"code", code_label(code)}}).Increment();
 }
 
-void Metrics::unparsable_request() { request_errors_->Add({{"code", code_label(pb::ERROR_CODE_BAD_REQUEST)}}).Increment(); }
+void Metrics::unparsable_request() {
+  request_errors_->Add({{"code", code_label(pb::ERROR_CODE_BAD_REQUEST)}}).Increment();
+}
 
 void Metrics::http_response(unsigned status) { http_responses_->Add({{"status", std::to_string(status)}}).Increment(); }
 
@@ -122,13 +124,15 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
     f.add("gmr_io_threads", "Threads the sockets' work runs on, the control loop included (--io-threads)", T::Gauge,
           static_cast<double>(s.lane_connections.size()));
     for (std::size_t lane = 0; lane < s.lane_connections.size(); ++lane) {
-      f.add("gmr_io_thread_connections", "TCP connections whose socket work runs on each I/O thread (0: the control loop)",
-            T::Gauge, static_cast<double>(s.lane_connections[lane]), {{"thread", std::to_string(lane)}});
+      f.add("gmr_io_thread_connections",
+            "TCP connections whose socket work runs on each I/O thread (0: the control loop)", T::Gauge,
+            static_cast<double>(s.lane_connections[lane]), {{"thread", std::to_string(lane)}});
     }
   }
   f.add("gmr_connections_refused_total", "Connections refused for a connection limit (TCP and WebSocket)", T::Counter,
         static_cast<double>(s.server.connections_refused));
-  f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter, static_cast<double>(s.server.hellos_refused));
+  f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter,
+        static_cast<double>(s.server.hellos_refused));
   f.add("gmr_views", "Views clients hold", T::Gauge, static_cast<double>(s.views));
   for (const char* transport : {"tcp", "udp", "websocket"}) {
     f.add("gmr_subscriptions", "Subscriptions, by the transport their frames take", T::Gauge,
@@ -146,8 +150,8 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   // Frames: computed and encoded once per stream, then sent per subscriber.
   f.add("gmr_frames_computed_total", "Forward-kinematics runs for streams", T::Counter,
         static_cast<double>(s.server.frames_computed));
-  f.add("gmr_fk_blocks_computed_total", "Float-path kinematics computed for streams, 16 frames at a time",
-        T::Counter, static_cast<double>(s.server.fk_blocks_computed));
+  f.add("gmr_fk_blocks_computed_total", "Float-path kinematics computed for streams, 16 frames at a time", T::Counter,
+        static_cast<double>(s.server.fk_blocks_computed));
   f.add("gmr_fk_block_hits_total", "Float-path frames streams read from kinematics already computed", T::Counter,
         static_cast<double>(s.server.fk_block_hits));
   f.add("gmr_fk_block_bytes", "Bytes of float-path kinematics kept for streams to share", T::Gauge,
@@ -171,16 +175,15 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
     const ConnectionCounters& t = by_transport[transport];
     f.add("gmr_frames_sent_total", "Frames sent to subscribers", T::Counter, static_cast<double>(t.frames_sent),
           {{"transport", transport}});
-    f.add("gmr_frames_dropped_total",
-          "Frames given up for a subscriber (a newer one replaced it, a bound, or its age)", T::Counter,
-          static_cast<double>(t.frames_dropped), {{"transport", transport}});
+    f.add("gmr_frames_dropped_total", "Frames given up for a subscriber (a newer one replaced it, a bound, or its age)",
+          T::Counter, static_cast<double>(t.frames_dropped), {{"transport", transport}});
   }
   for (const char* transport : {"tcp", "websocket"}) {
     const ConnectionCounters& t = by_transport[transport];
-    f.add("gmr_frames_stale_total", "Of the frames dropped: waited past their subscriber's staleness bound",
-          T::Counter, static_cast<double>(t.frames_stale), {{"transport", transport}});
-    f.add("gmr_bytes_sent_total", "Bytes written to client connections", T::Counter,
-          static_cast<double>(t.bytes_sent), {{"transport", transport}});
+    f.add("gmr_frames_stale_total", "Of the frames dropped: waited past their subscriber's staleness bound", T::Counter,
+          static_cast<double>(t.frames_stale), {{"transport", transport}});
+    f.add("gmr_bytes_sent_total", "Bytes written to client connections", T::Counter, static_cast<double>(t.bytes_sent),
+          {{"transport", transport}});
     f.add("gmr_bytes_received_total", "Bytes read from client connections", T::Counter,
           static_cast<double>(t.bytes_received), {{"transport", transport}});
   }
@@ -197,8 +200,8 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   f.add("gmr_relay_announces_refused_total",
         "Live sources other replicas announced and this one refused (invalid, or past --max-remote-sources)",
         T::Counter, static_cast<double>(s.relay_announces_refused));
-  f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm",
-        T::Counter, static_cast<double>(s.server.udp_rejected));
+  f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm", T::Counter,
+        static_cast<double>(s.server.udp_rejected));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,
         static_cast<double>(s.server.buffered_bytes));
   f.add("gmr_view_bytes", "Motion bytes edited views own", T::Gauge, static_cast<double>(s.server.view_bytes));

@@ -52,7 +52,6 @@ class NatsRelay {
   struct Shared;  // relay.cpp: what libnats's threads reach
 
  private:
-
   net::io_context& io_;
   std::string url_, subject_, origin_;
   std::shared_ptr<Shared> shared_;

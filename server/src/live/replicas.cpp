@@ -141,8 +141,8 @@ void Replicas::on_relay(relay_pb::LiveRelay m) {
                        printable(m.origin(), 64), printable(a.name(), 200), suppressed(more));
         }
       } else {
-        r.source = directory_.add_live(a.name(), std::move(std::get<Skeleton>(checked)), a.frame_time(),
-                                       a.metres_per_unit());
+        r.source =
+            directory_.add_live(a.name(), std::move(std::get<Skeleton>(checked)), a.frame_time(), a.metres_per_unit());
         r.source->set_origin(m.origin());
         spdlog::info("live {}: published on replica {}, served here too", printable(a.name(), 200),
                      printable(m.origin(), 64));
@@ -155,8 +155,8 @@ void Replicas::on_relay(relay_pb::LiveRelay m) {
       it->second.heard = Clock::now();
       const auto& f = m.frame();
       directory_.count_live_frame(
-          it->second.source->push(std::span<const double>(f.values().data(), static_cast<std::size_t>(f.values_size())),
-                                  f.index())
+          it->second.source
+              ->push(std::span<const double>(f.values().data(), static_cast<std::size_t>(f.values_size())), f.index())
               .ok());
       return;
     }
@@ -169,7 +169,8 @@ void Replicas::on_relay(relay_pb::LiveRelay m) {
       remote_.erase(it);
       return;
     }
-    default: return;
+    default:
+      return;
   }
 }
 

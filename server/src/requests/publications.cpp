@@ -18,8 +18,8 @@ namespace {
 std::filesystem::path recording_path(const std::string& dir, const std::string& name) {
   std::string stem;
   for (const char c : name) {
-    const bool plain = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
-                       c == '-' || c == '_';
+    const bool plain =
+        (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' || c == '-' || c == '_';
     stem += plain ? c : '_';
   }
   if (stem.empty() || stem.front() == '.') stem = "live" + stem;
@@ -51,8 +51,8 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
                    "a motion named '" + r.name() + "' is already served: publish under another name"};
   }
   if (publications_.size() >= cfg.max_publications_per_connection) {
-    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "at most " + std::to_string(cfg.max_publications_per_connection) +
-                                                          " live sources per connection"};
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "at most " + std::to_string(cfg.max_publications_per_connection) + " live sources per connection"};
   }
   std::string recording;
   if (r.record()) {
@@ -63,7 +63,7 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
     recording = recording_path(cfg.record_dir, r.name()).string();
   }
   auto source = link_.services.catalog.add_live(r.name(), std::move(std::get<Skeleton>(checked)), r.frame_time(),
-                                          r.metres_per_unit());
+                                                r.metres_per_unit());
   if (!recording.empty()) {
     source->record(cfg.max_record_bytes);
     recordings_[source.get()] = recording;
@@ -72,7 +72,8 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
   publications_[id] = source;
   link_.services.replicas.announce(*source);
   spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", link_.connection_id,
-               printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(), 1.0 / r.frame_time());
+               printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(),
+               1.0 / r.frame_time());
   pb::ServerMessage out;
   out.mutable_published()->set_publication_id(id);
   out.mutable_published()->set_motion(r.name());
@@ -93,7 +94,8 @@ Reply Publications::publish_frame(const pb::PublishFrame& r) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "live '" + source.name() + "': " + s.error().message};
   }
   link_.services.catalog.count_live_frame(true);
-  link_.services.replicas.frame(source, std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
+  link_.services.replicas.frame(source,
+                                std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
   return pb::ServerMessage{};  // no reply
 }
 

@@ -27,7 +27,8 @@ void RequestHandler::start() {
 void RequestHandler::on_stop() {
   stopped_ = true;
   if (log_limit_.pending() > 0) {
-    spdlog::warn("conn {}: {} more lines about its requests were suppressed", link_.connection_id, log_limit_.pending());
+    spdlog::warn("conn {}: {} more lines about its requests were suppressed", link_.connection_id,
+                 log_limit_.pending());
   }
   subscriptions_.clear();
   views_.clear();
@@ -48,7 +49,8 @@ void RequestHandler::on_message(const std::string& body) {
                    suppressed ? " (" + std::to_string(suppressed) + " more such lines suppressed)" : std::string());
     }
     link_.services.observer.unparsable_request();
-    link_.send(error_message(0, pb::ERROR_CODE_BAD_REQUEST, "cannot parse the message as a gmr.stream.v1.ClientMessage"));
+    link_.send(
+        error_message(0, pb::ERROR_CODE_BAD_REQUEST, "cannot parse the message as a gmr.stream.v1.ClientMessage"));
     return;
   }
   if (req.body_case() == pb::ClientMessage::kHeartbeat) return;  // the connection counted it as a read
@@ -100,10 +102,14 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point b
                        "': structural view edits and statistics need a 'control' token (docs/security.md)"};
   }
   switch (req.body_case()) {
-    case C::kListMotions: return views_.list_motions();
-    case C::kGetSkeleton: return views_.get_skeleton(req.get_skeleton());
-    case C::kCreateView: return views_.create(req.create_view());
-    case C::kCloseView: return close_view(req.close_view());
+    case C::kListMotions:
+      return views_.list_motions();
+    case C::kGetSkeleton:
+      return views_.get_skeleton(req.get_skeleton());
+    case C::kCreateView:
+      return views_.create(req.create_view());
+    case C::kCloseView:
+      return close_view(req.close_view());
     case C::kShiftRoot: {
       const auto& r = req.shift_root();
       return edit_view(req, began, r.view_id(), [&r](const View& v) { return v.edit_shift_root(r.joint()); });
@@ -114,31 +120,46 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point b
     }
     case C::kJoin: {
       const auto& r = req.join();
-      return edit_view(req, began, r.view_id(), [&r](const View& v) { return v.edit_join(r.root()); },
-                       [](const EditReport& e, pb::ViewInfo& info) { info.set_join_offset_spread(e.offset_spread); });
+      return edit_view(
+          req, began, r.view_id(), [&r](const View& v) { return v.edit_join(r.root()); },
+          [](const EditReport& e, pb::ViewInfo& info) { info.set_join_offset_spread(e.offset_spread); });
     }
     case C::kSetRoots: {
       const std::vector<std::string> roots(req.set_roots().roots().begin(), req.set_roots().roots().end());
       if (roots.empty()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, "set roots: give at least one root"};
-      return edit_view(req, began, req.set_roots().view_id(), [&roots](const View& v) { return v.edit_set_roots(roots); });
+      return edit_view(req, began, req.set_roots().view_id(),
+                       [&roots](const View& v) { return v.edit_set_roots(roots); });
     }
     case C::kStripDummies:
-      return edit_view(req, began, req.strip_dummies().view_id(), [](const View& v) { return v.edit_strip_dummies(); },
-                       [](const EditReport& e, pb::ViewInfo& info) {
-                         for (const auto& name : e.removed) info.add_removed(name);
-                       });
-    case C::kSetCoordinates: return views_.set_coordinates(req.set_coordinates());
-    case C::kQueryFrames: return views_.query(req.query_frames());
-    case C::kSubscribe: return subscriptions_.subscribe(req.subscribe());
-    case C::kUnsubscribe: return subscriptions_.unsubscribe(req.unsubscribe());
-    case C::kPause: return subscriptions_.pause(req.pause());
-    case C::kResume: return subscriptions_.resume(req.resume());
-    case C::kSeek: return subscriptions_.seek(req.seek());
-    case C::kGetStats: return stats();
-    case C::kPublish: return publications_.publish(req.publish(), role_);
-    case C::kPublishFrame: return publications_.publish_frame(req.publish_frame());
-    case C::kUnpublish: return publications_.unpublish(req.unpublish());
-    default: return Refusal{pb::ERROR_CODE_UNKNOWN_REQUEST, "unknown request"};
+      return edit_view(
+          req, began, req.strip_dummies().view_id(), [](const View& v) { return v.edit_strip_dummies(); },
+          [](const EditReport& e, pb::ViewInfo& info) {
+            for (const auto& name : e.removed) info.add_removed(name);
+          });
+    case C::kSetCoordinates:
+      return views_.set_coordinates(req.set_coordinates());
+    case C::kQueryFrames:
+      return views_.query(req.query_frames());
+    case C::kSubscribe:
+      return subscriptions_.subscribe(req.subscribe());
+    case C::kUnsubscribe:
+      return subscriptions_.unsubscribe(req.unsubscribe());
+    case C::kPause:
+      return subscriptions_.pause(req.pause());
+    case C::kResume:
+      return subscriptions_.resume(req.resume());
+    case C::kSeek:
+      return subscriptions_.seek(req.seek());
+    case C::kGetStats:
+      return stats();
+    case C::kPublish:
+      return publications_.publish(req.publish(), role_);
+    case C::kPublishFrame:
+      return publications_.publish_frame(req.publish_frame());
+    case C::kUnpublish:
+      return publications_.unpublish(req.unpublish());
+    default:
+      return Refusal{pb::ERROR_CODE_UNKNOWN_REQUEST, "unknown request"};
   }
 }
 
@@ -150,20 +171,21 @@ bool RequestHandler::needs_control(pb::ClientMessage::BodyCase request) {
     case C::kJoin:
     case C::kSetRoots:
     case C::kStripDummies:
-    case C::kGetStats: return true;
-    default: return false;
+    case C::kGetStats:
+      return true;
+    default:
+      return false;
   }
 }
 
 Reply RequestHandler::hello(const pb::Hello& h) {
   if (h.protocol_version() != wire::kProtocolVersion) {
-    spdlog::warn("conn {}: refused protocol version {} (this server speaks {})", link_.connection_id, h.protocol_version(),
-                 wire::kProtocolVersion);
+    spdlog::warn("conn {}: refused protocol version {} (this server speaks {})", link_.connection_id,
+                 h.protocol_version(), wire::kProtocolVersion);
     if (auto c = link_.connection()) c->close_after_reply();
-    return Refusal{pb::ERROR_CODE_VERSION_MISMATCH, "client speaks protocol version " +
-                                                        std::to_string(h.protocol_version()) +
-                                                        ", this server speaks version " +
-                                                        std::to_string(wire::kProtocolVersion)};
+    return Refusal{pb::ERROR_CODE_VERSION_MISMATCH,
+                   "client speaks protocol version " + std::to_string(h.protocol_version()) +
+                       ", this server speaks version " + std::to_string(wire::kProtocolVersion)};
   }
   const ServerConfig& cfg = link_.services.cfg;
   // The role: the token's, or the anonymous one. A token the server does not
@@ -197,11 +219,10 @@ Reply RequestHandler::hello(const pb::Hello& h) {
   r->set_max_message_bytes(cfg.max_message_bytes);
   r->set_heartbeat_interval_ms(static_cast<std::uint32_t>(cfg.heartbeat_interval.count()));
   r->set_idle_timeout_ms(static_cast<std::uint32_t>(cfg.idle_timeout.count()));
-  r->set_role(role_ == Role::kPublish   ? pb::ROLE_PUBLISH
-              : role_ == Role::kControl ? pb::ROLE_CONTROL
-                                        : pb::ROLE_READ);
+  r->set_role(role_ == Role::kPublish ? pb::ROLE_PUBLISH : role_ == Role::kControl ? pb::ROLE_CONTROL : pb::ROLE_READ);
   r->set_server_time_ns(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count());
   return out;
 }
 
@@ -261,27 +282,27 @@ Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point 
   // and everyone's frames go on.
   edit_deferred_ = true;
   if (auto c = link_.connection()) c->hold_reading(true);
-  net::post(link_.services.edit_pool, [self = weak_from_this(), &io = link_.services.io, edit = std::move(edit).value(),
-                                       view_id, decorate, request_id = req.request_id(), kind = request_kind(req),
-                                       began]() mutable {
-    auto next = [&]() -> Result<std::shared_ptr<const ViewContent>> {
-      try {
-        return edit.run();
-      } catch (const std::bad_alloc&) {
-        return make_error(ErrorKind::kResourceExhausted, "the server ran out of memory computing the edit");
-      } catch (const std::exception& e) {  // nothing may leave the edit thread's handler
-        return make_error(ErrorKind::kFailedPrecondition, std::string("the edit failed: ") + e.what());
-      }
-    }();
-    net::post(io, [self = std::move(self), edit = std::move(edit), next = std::move(next), view_id, decorate,
-                   request_id, kind, began]() mutable {
-      auto handler = self.lock();
-      if (!handler || handler->stopped_) return;
-      Reply reply = handler->views_.commit_edit(view_id, edit, std::move(next), decorate);
-      handler->answer(request_id, kind, began, std::move(reply));
-      if (auto c = handler->link_.connection()) c->hold_reading(false);
-    });
-  });
+  net::post(link_.services.edit_pool,
+            [self = weak_from_this(), &io = link_.services.io, edit = std::move(edit).value(), view_id, decorate,
+             request_id = req.request_id(), kind = request_kind(req), began]() mutable {
+              auto next = [&]() -> Result<std::shared_ptr<const ViewContent>> {
+                try {
+                  return edit.run();
+                } catch (const std::bad_alloc&) {
+                  return make_error(ErrorKind::kResourceExhausted, "the server ran out of memory computing the edit");
+                } catch (const std::exception& e) {  // nothing may leave the edit thread's handler
+                  return make_error(ErrorKind::kFailedPrecondition, std::string("the edit failed: ") + e.what());
+                }
+              }();
+              net::post(io, [self = std::move(self), edit = std::move(edit), next = std::move(next), view_id, decorate,
+                             request_id, kind, began]() mutable {
+                auto handler = self.lock();
+                if (!handler || handler->stopped_) return;
+                Reply reply = handler->views_.commit_edit(view_id, edit, std::move(next), decorate);
+                handler->answer(request_id, kind, began, std::move(reply));
+                if (auto c = handler->link_.connection()) c->hold_reading(false);
+              });
+            });
   return pb::ServerMessage{};
 }
 

@@ -61,8 +61,7 @@ class RequestHandler : public Connection::Handler,
   // while this connection's requests wait unread (the reply then comes from
   // there; dispatch gives none). `decorate` adds what the edit reports.
   Reply edit_view(const pb::ClientMessage& req, Clock::time_point began, std::uint32_t view_id,
-                  const std::function<Result<ViewEdit>(const View&)>& make,
-                  Views::EditDecoration decorate = nullptr);
+                  const std::function<Result<ViewEdit>(const View&)>& make, Views::EditDecoration decorate = nullptr);
   // Requests only a 'control' connection may make (docs/security.md).
   static bool needs_control(pb::ClientMessage::BodyCase request);
   // The request's kind for metrics: its ClientMessage field's name.

@@ -38,13 +38,18 @@ Result<OutputBasis> output_basis_of(const pb::Conventions& c, double motion_metr
 
 Refusal refusal_of(const Error& e) {
   switch (e.kind) {
-    case ErrorKind::kNotFound: return Refusal{pb::ERROR_CODE_NOT_FOUND, e.to_string()};
-    case ErrorKind::kResourceExhausted: return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, e.to_string()};
-    default: return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, e.to_string()};
+    case ErrorKind::kNotFound:
+      return Refusal{pb::ERROR_CODE_NOT_FOUND, e.to_string()};
+    case ErrorKind::kResourceExhausted:
+      return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, e.to_string()};
+    default:
+      return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, e.to_string()};
   }
 }
 
-Refusal unknown_view(std::uint32_t id) { return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(id)}; }
+Refusal unknown_view(std::uint32_t id) {
+  return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown view " + std::to_string(id)};
+}
 
 pb::ServerMessage ack() {
   pb::ServerMessage out;

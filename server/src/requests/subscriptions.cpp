@@ -24,8 +24,8 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   const Motion& m = v->motion();
   const ServerConfig& cfg = link_.services.cfg;
   if (subs_.size() >= cfg.max_subscriptions_per_connection) {
-    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "at most " + std::to_string(cfg.max_subscriptions_per_connection) +
-                                                          " subscriptions per connection"};
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "at most " + std::to_string(cfg.max_subscriptions_per_connection) + " subscriptions per connection"};
   }
   Stream::Settings settings;
   Stream::Schedule& s = settings.schedule;
@@ -65,8 +65,8 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   s.skip_repeats = r.skip_repeats();
   // proto3 keeps enum values it does not know: refuse them rather than guess.
   if (!pb::Transport_IsValid(r.transport()) || !pb::Precision_IsValid(r.precision())) {
-    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "unknown transport " + std::to_string(r.transport()) +
-                                                   " or precision " + std::to_string(r.precision()) +
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "unknown transport " + std::to_string(r.transport()) + " or precision " +
+                                                   std::to_string(r.precision()) +
                                                    " (this server speaks protocol version " +
                                                    std::to_string(wire::kProtocolVersion) + ")"};
   }
@@ -107,8 +107,7 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   // A live source's serial keeps a later source of the same name apart.
   const std::string shown = source ? v->motion_name() + "#live" + std::to_string(source->serial()) : v->motion_name();
   // Multicast is for shared streams: one send per frame for all their subscribers.
-  const std::string key =
-      r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
+  const std::string key = r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
   std::shared_ptr<Stream> stream = key.empty() ? nullptr : link_.services.streams.find_running(key);
   const bool joined = stream != nullptr;
   if (!stream) {
@@ -129,8 +128,8 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
                                                 : std::chrono::milliseconds(r.max_staleness_ms()));
   stream->add(target, r.max_frames());
-  subs_[id] = Subscription{v->id(), stream, target, names, rate_mhz, v->content()->skeleton_version, settings.basis,
-                           use_multicast};
+  subs_[id] = Subscription{v->id(),        stream,       target, names, rate_mhz, v->content()->skeleton_version,
+                           settings.basis, use_multicast};
   if (!joined) {
     stream->start();
     if (source) attach_live(*source, stream);
@@ -152,7 +151,11 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
     sub->set_multicast_group(group.address().to_string() + ":" + std::to_string(group.port()));
   }
   spdlog::debug("conn {}: subscription {} on view {} (stream {}, {}, {} Hz)", link_.connection_id, id, v->id(),
-                stream->id(), use_multicast ? "multicast" : use_udp ? "UDP" : "TCP", s.rate);
+                stream->id(),
+                use_multicast ? "multicast"
+                : use_udp     ? "UDP"
+                              : "TCP",
+                s.rate);
   return out;
 }
 

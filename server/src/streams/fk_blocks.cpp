@@ -17,9 +17,9 @@ bool same_owner(const std::weak_ptr<const CompiledForm>& a, const std::shared_pt
 // Frame `at` of a block's frame-major positions and (when wanted) orientations.
 FkBlocks::Pose pose_at(const std::vector<float>& positions, const std::vector<float>& rotations, std::size_t at,
                        std::size_t joints, bool orientations) {
-  return {std::span<const float>(positions).subspan(at * joints * 3, joints * 3),
-          orientations ? std::span<const float>(rotations).subspan(at * joints * 9, joints * 9)
-                       : std::span<const float>()};
+  return {
+      std::span<const float>(positions).subspan(at * joints * 3, joints * 3),
+      orientations ? std::span<const float>(rotations).subspan(at * joints * 9, joints * 9) : std::span<const float>()};
 }
 
 }  // namespace
@@ -83,8 +83,8 @@ std::optional<FkBlocks::Pose> FkBlocks::frame(const std::shared_ptr<const Compil
     // A block larger than the whole budget is computed for this frame and not kept.
     alone_positions_.resize(count * joints * 3);
     alone_rotations_.resize(orientations ? count * joints * 9 : 0);
-    fast::FkRangeJob job{cm, begin, begin + count, fast::Layout::kFrameMajor, 0, alone_positions_, alone_rotations_,
-                         workspace};
+    fast::FkRangeJob job{
+        cm, begin, begin + count, fast::Layout::kFrameMajor, 0, alone_positions_, alone_rotations_, workspace};
     if (!job.run()) return std::nullopt;
     ++computed_;
     return pose_at(alone_positions_, alone_rotations_, at, joints, orientations);

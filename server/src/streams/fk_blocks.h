@@ -55,11 +55,11 @@ class FkBlocks {
                             std::span<float> workspace);
 
   std::size_t budget() const { return budget_; }
-  std::size_t bytes() const { return bytes_; }            // taken by the kept blocks
-  std::size_t blocks() const { return lru_.size(); }      // kept
+  std::size_t bytes() const { return bytes_; }                 // taken by the kept blocks
+  std::size_t blocks() const { return lru_.size(); }           // kept
   std::uint64_t blocks_computed() const { return computed_; }  // range-kernel runs
-  std::uint64_t hits() const { return hits_; }            // frames read from a kept block
-  std::uint64_t frames_alone() const { return alone_; }   // frames computed on their own (budget 0)
+  std::uint64_t hits() const { return hits_; }                 // frames read from a kept block
+  std::uint64_t frames_alone() const { return alone_; }        // frames computed on their own (budget 0)
 
  private:
   struct Key {

@@ -101,7 +101,8 @@ std::shared_ptr<const std::string> encode_frame(const ViewContent& content, cons
         w.all_positions.resize(n);
         w.all_orientations.resize(n);
         const Viewpoint from =
-            viewer < 0 ? Viewpoint() : Viewpoint::of_joint(fk_positions, fk_orientations, static_cast<std::size_t>(viewer));
+            viewer < 0 ? Viewpoint()
+                       : Viewpoint::of_joint(fk_positions, fk_orientations, static_cast<std::size_t>(viewer));
         for (std::size_t j = 0; j < n; ++j) {
           const float* p = fk_positions.data() + 3 * j;
           const float* o = fk_orientations.data() + 9 * j;

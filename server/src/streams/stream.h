@@ -181,9 +181,9 @@ class Stream : public std::enable_shared_from_this<Stream> {
 
   bool live_ = false;
   std::uint32_t fan_out_start_ = 0;  // rotates: each tick the fan-out starts one target further
-  std::vector<char> ready_;  // per target, this tick: alive and not congested
-  std::vector<char> alive_;  // per target, this tick: alive
-  bool saw_dead_ = true;     // a target was found gone this tick (or it is not known)
+  std::vector<char> ready_;          // per target, this tick: alive and not congested
+  std::vector<char> alive_;          // per target, this tick: alive
+  bool saw_dead_ = true;             // a target was found gone this tick (or it is not known)
 };
 
 }  // namespace gmr::server

@@ -15,9 +15,8 @@ std::string StreamRegistry::share_key(const std::string& motion_name, const View
   const Stream::Schedule& c = s.schedule;
   // The skeleton version goes in too: every frame carries its view's own.
   std::string key = motion_name + "|" + std::to_string(content.skeleton_version) + "|" +
-                    std::to_string(std::hash<std::string>{}(structure)) + "|" +
-                    std::to_string(content.relative_to) + "|" + std::to_string(s.orientations) +
-                    std::to_string(s.local_transforms) +
+                    std::to_string(std::hash<std::string>{}(structure)) + "|" + std::to_string(content.relative_to) +
+                    "|" + std::to_string(s.orientations) + std::to_string(s.local_transforms) +
                     std::to_string(s.float64) + "|" + std::to_string(c.start) + ":" + std::to_string(c.end) + "|" +
                     std::to_string(c.loop) + "|" + std::to_string(c.speed) + "|" + std::to_string(c.rate) + "|" +
                     std::to_string(c.skip_repeats) + "|";

@@ -106,8 +106,9 @@ struct MulticastGroup {
 // channel's; its end, skips and drops are its own, told over its connection.
 class MulticastTarget final : public SubscriptionTarget {
  public:
-  MulticastTarget(std::weak_ptr<SubscriptionEvents> events, std::shared_ptr<Outbox> connection, std::uint32_t subscription,
-                  std::uint32_t view, UdpPublisher& publisher, std::shared_ptr<MulticastChannel> channel)
+  MulticastTarget(std::weak_ptr<SubscriptionEvents> events, std::shared_ptr<Outbox> connection,
+                  std::uint32_t subscription, std::uint32_t view, UdpPublisher& publisher,
+                  std::shared_ptr<MulticastChannel> channel)
       : SubscriptionTarget(std::move(events), std::move(connection), subscription, view),
         publisher_(publisher),
         channel_(std::move(channel)) {}

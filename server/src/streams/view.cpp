@@ -33,9 +33,10 @@ const fast::CompiledMotion* CompiledForm::get() const {
         return;
       }
       if (c->joint_count() != joints || c->frame_count() != frames) {
-        spdlog::warn("float32 streams of a motion ({} joints, {} frames) use the double path: "
-                     "its compiled form has {} joints, {} frames",
-                     joints, frames, c->joint_count(), c->frame_count());
+        spdlog::warn(
+            "float32 streams of a motion ({} joints, {} frames) use the double path: "
+            "its compiled form has {} joints, {} frames",
+            joints, frames, c->joint_count(), c->frame_count());
         return;
       }
       auto owned = std::make_unique<const fast::CompiledMotion>(std::move(c).value());
@@ -129,8 +130,7 @@ Result<int> find_joint(const Motion& m, const std::string& name) {
 
 }  // namespace
 
-void View::replace(std::shared_ptr<const Motion> motion, int relative_to,
-                   std::shared_ptr<const CompiledForm> compiled,
+void View::replace(std::shared_ptr<const Motion> motion, int relative_to, std::shared_ptr<const CompiledForm> compiled,
                    std::shared_ptr<const std::vector<LiveStep>> live_steps) {
   content_ = next_content(*content_, std::move(motion), relative_to, std::move(compiled), std::move(live_steps));
 }
@@ -213,16 +213,17 @@ Result<ViewEdit> View::edit_join(const std::string& root) const {
   if (auto j = joint_index(root); !j.ok()) return j.error();
   // The report of the last application: this edit's, read after run().
   auto report = std::make_shared<EditReport>();
-  return make_edit("join '" + root + "'",
-                   [root, report](const Motion& m) -> Result<Motion> {
-                     auto j = find_joint(m, root);
-                     if (!j.ok()) return j.error();
-                     JoinReport r;
-                     auto joined = join_tree(m, *j, &r);
-                     report->offset_spread = r.offset_spread;
-                     return joined;
-                   },
-                   report);
+  return make_edit(
+      "join '" + root + "'",
+      [root, report](const Motion& m) -> Result<Motion> {
+        auto j = find_joint(m, root);
+        if (!j.ok()) return j.error();
+        JoinReport r;
+        auto joined = join_tree(m, *j, &r);
+        report->offset_spread = r.offset_spread;
+        return joined;
+      },
+      report);
 }
 
 Result<ViewEdit> View::edit_set_roots(const std::vector<std::string>& roots) const {
@@ -243,15 +244,16 @@ Result<ViewEdit> View::edit_set_roots(const std::vector<std::string>& roots) con
 
 Result<ViewEdit> View::edit_strip_dummies() const {
   auto report = std::make_shared<EditReport>();
-  return make_edit("strip dummies",
-                   [report](const Motion& m) -> Result<Motion> {
-                     std::vector<RemovedJoint> removed;
-                     auto stripped = gmr::strip_dummies(m, &removed);
-                     report->removed.clear();
-                     for (const auto& r : removed) report->removed.push_back(r.name);
-                     return stripped;
-                   },
-                   report);
+  return make_edit(
+      "strip dummies",
+      [report](const Motion& m) -> Result<Motion> {
+        std::vector<RemovedJoint> removed;
+        auto stripped = gmr::strip_dummies(m, &removed);
+        report->removed.clear();
+        for (const auto& r : removed) report->removed.push_back(r.name);
+        return stripped;
+      },
+      report);
 }
 
 Status View::join(const std::string& root, double* out_offset_spread) {

@@ -5,7 +5,6 @@
 #include <stdexcept>
 #include <string>
 
-
 namespace gmr::server {
 
 Beacon::Beacon(net::io_context& io, const ServerConfig& cfg, std::function<pb::Beacon()> describe)

@@ -70,7 +70,8 @@ Result<double> ns_per_send(std::size_t bytes, std::size_t sends_per_round, int r
   }
   Fd writer(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
   if (writer.get() < 0) return system_error("socket");
-  if (::connect(writer.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) return system_error("connect");
+  if (::connect(writer.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
+    return system_error("connect");
   Fd reader(::accept4(listener.get(), nullptr, nullptr, SOCK_CLOEXEC));
   if (reader.get() < 0) return system_error("accept");
   const int one = 1;

@@ -10,7 +10,7 @@
 namespace gmr::server {
 
 struct SendCalibration {
-  double ns_per_send = 0;          // CPU per frame-sized TCP write, its loopback delivery and its read: the slowest CPU's
+  double ns_per_send = 0;  // CPU per frame-sized TCP write, its loopback delivery and its read: the slowest CPU's
   double fastest_ns_per_send = 0;  // the fastest CPU's
   double budget = 0;               // frames/s: the reference budget scaled by how fast this machine sends
   std::size_t cpus = 0;            // CPUs measured

@@ -2,7 +2,6 @@
 
 #include <spdlog/spdlog.h>
 
-
 #include <algorithm>
 #include <array>
 #include <optional>
@@ -312,8 +311,7 @@ std::optional<std::string> Connection::on_body(const boost::system::error_code& 
   body_received_ += got;
   counters_.bytes_received += got;
   if (ec) {
-    spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_,
-                 body_expected_);
+    spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_, body_expected_);
     stop(asio::TlsSocket::peer_closed(ec) ? std::string("truncated message") : "read failed: " + ec.message());
     return std::nullopt;
   }

@@ -124,8 +124,8 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
 
   std::vector<std::shared_ptr<const std::string>> hold_;  // what the write in flight points into
   std::vector<std::string> hold_heads_;
-  std::string tls_out_;  // with TLS: the write in flight in one piece (one record per 16 KiB, not per buffer)
-  bool secured_ = false;   // the TLS handshake is done (or there is no TLS): writing may start
+  std::string tls_out_;   // with TLS: the write in flight in one piece (one record per 16 KiB, not per buffer)
+  bool secured_ = false;  // the TLS handshake is done (or there is no TLS): writing may start
   net::steady_timer watchdog_;
 };
 

@@ -22,8 +22,8 @@ namespace gmr::server {
 
 struct PendingFrame {
   using Clock = std::chrono::steady_clock;
-  std::string head;  // this client's length prefix and ids
-  std::shared_ptr<const std::string> body;  // shared by every subscriber of the stream
+  std::string head;                                       // this client's length prefix and ids
+  std::shared_ptr<const std::string> body;                // shared by every subscriber of the stream
   Clock::time_point stale_at = Clock::time_point::max();  // not written after this
   Clock::time_point pushed_at{};
   std::uint64_t size() const { return head.size() + body->size(); }
@@ -33,7 +33,8 @@ class FrameQueue {
  public:
   using Clock = std::chrono::steady_clock;
 
-  FrameQueue(std::size_t per_key, std::size_t max_bytes) : per_key_(std::max<std::size_t>(1, per_key)), max_bytes_(max_bytes) {}
+  FrameQueue(std::size_t per_key, std::size_t max_bytes)
+      : per_key_(std::max<std::size_t>(1, per_key)), max_bytes_(max_bytes) {}
 
   // Queues `f` for `key`. `writing`: a write is in flight, behind which
   // frames wait for the client to read (the per-key and byte bounds apply).

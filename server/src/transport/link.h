@@ -55,8 +55,8 @@ struct ConnectionLimits {
   std::chrono::milliseconds handshake_timeout{0};  // 0: none
   std::chrono::milliseconds heartbeat_interval{0};
   std::chrono::milliseconds write_timeout{0};
-  int socket_send_buffer = 0;             // SO_SNDBUF; 0: the system's default
-  int socket_unsent_bytes = 0;            // TCP_NOTSENT_LOWAT; 0: the system's default
+  int socket_send_buffer = 0;   // SO_SNDBUF; 0: the system's default
+  int socket_unsent_bytes = 0;  // TCP_NOTSENT_LOWAT; 0: the system's default
 };
 
 // The limits cfg sets for each client connection.

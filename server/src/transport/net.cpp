@@ -53,7 +53,6 @@ bool LogLimiter::allow(std::uint64_t& suppressed) {
   return true;
 }
 
-
 pb::ServerMessage error_message(std::uint64_t request_id, pb::ErrorCode code, std::string text) {
   pb::ServerMessage m;
   m.set_request_id(request_id);

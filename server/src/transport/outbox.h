@@ -14,15 +14,15 @@ namespace gmr::server {
 
 struct ConnectionCounters {
   std::uint64_t frames_sent = 0;
-  std::uint64_t frames_dropped = 0;    // a newer frame replaced it, or (UDP) over the datagram bound
-  std::uint64_t frames_skipped = 0;    // the server was late and skipped the tick
-  std::uint64_t frames_stale = 0;      // of frames_dropped: waited past their staleness bound
-  std::uint64_t udp_frames_sent = 0;   // of frames_sent: over UDP
+  std::uint64_t frames_dropped = 0;      // a newer frame replaced it, or (UDP) over the datagram bound
+  std::uint64_t frames_skipped = 0;      // the server was late and skipped the tick
+  std::uint64_t frames_stale = 0;        // of frames_dropped: waited past their staleness bound
+  std::uint64_t udp_frames_sent = 0;     // of frames_sent: over UDP
   std::uint64_t udp_frames_dropped = 0;  // of frames_dropped: over UDP
-  std::uint64_t bytes_sent = 0;        // written to the connection's socket
-  std::uint64_t bytes_received = 0;    // read from it
-  std::uint64_t queued_bytes = 0;      // replies and frames waiting or being written
-  std::uint64_t max_queued_bytes = 0;  // high-water mark
+  std::uint64_t bytes_sent = 0;          // written to the connection's socket
+  std::uint64_t bytes_received = 0;      // read from it
+  std::uint64_t queued_bytes = 0;        // replies and frames waiting or being written
+  std::uint64_t max_queued_bytes = 0;    // high-water mark
 
   // Adds another connection's totals (the gauges, queued bytes, stay).
   void add_totals(const ConnectionCounters& k) {

@@ -19,9 +19,7 @@ void QueuedOutbox::account() {
   if (budget_ != nullptr) budget_->settle(accounted_, queued_bytes() + reading_bytes());
 }
 
-void QueuedOutbox::note_queue() {
-  counters_.max_queued_bytes = std::max(counters_.max_queued_bytes, queued_bytes());
-}
+void QueuedOutbox::note_queue() { counters_.max_queued_bytes = std::max(counters_.max_queued_bytes, queued_bytes()); }
 
 bool QueuedOutbox::closing() const {
   Lock lock(m_);

@@ -42,7 +42,7 @@ void UdpPublisher::open(const net::ip::address& address, std::uint16_t port, IoT
   socket_.non_blocking(true, ec);
   if (threads == nullptr) {
     senders_.push_back(std::make_unique<UdpSender>(static_cast<net::io_context&>(socket_.get_executor().context()),
-                                                socket_, max_in_flight_, nullptr, 0));
+                                                   socket_, max_in_flight_, nullptr, 0));
     return;
   }
   for (std::size_t lane = 0; lane < threads->size(); ++lane) {
@@ -51,7 +51,7 @@ void UdpPublisher::open(const net::ip::address& address, std::uint16_t port, IoT
 }
 
 std::shared_ptr<UdpPublisher::Registration> UdpPublisher::open_multicast(const std::string& group, std::uint16_t port,
-                                                                        int ttl) {
+                                                                         int ttl) {
   boost::system::error_code ec;
   const auto address = net::ip::make_address_v4(group, ec);
   if (ec || !address.is_multicast()) {

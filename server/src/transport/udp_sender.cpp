@@ -31,7 +31,8 @@ constexpr std::size_t kSendBatch = 256;
 
 }  // namespace
 
-UdpSender::UdpSender(net::io_context& io, udp::socket& main, std::size_t max_in_flight, IoThreads* threads, std::size_t lane)
+UdpSender::UdpSender(net::io_context& io, udp::socket& main, std::size_t max_in_flight, IoThreads* threads,
+                     std::size_t lane)
     : socket_(io), max_in_flight_(max_in_flight), threads_(threads), lane_(lane) {
   const int fd = ::dup(main.native_handle());
   if (fd < 0) throw std::runtime_error(std::string("cannot duplicate the UDP socket: ") + std::strerror(errno));
@@ -43,7 +44,8 @@ UdpSender::UdpSender(net::io_context& io, udp::socket& main, std::size_t max_in_
   }
 }
 
-bool UdpSender::send(const std::shared_ptr<UdpRegistration>& to, std::string_view head, std::string_view body, bool stamped) {
+bool UdpSender::send(const std::shared_ptr<UdpRegistration>& to, std::string_view head, std::string_view body,
+                     bool stamped) {
   std::lock_guard lock(m_);
   if (closed_ || !to->endpoint) return false;
   if (to->in_flight + wire::fragment_count(head.size() + body.size()) > max_in_flight_) return false;

@@ -22,7 +22,7 @@ namespace gmr::server {
 // Where one session's UDP frames go, once registered.
 struct UdpRegistration {
   std::optional<udp::endpoint> endpoint;
-  std::size_t lane = 0;               // the sender (I/O thread) its frames leave from
+  std::size_t lane = 0;  // the sender (I/O thread) its frames leave from
   // Guarded by that sender's lock:
   std::size_t in_flight = 0;          // datagrams batched, not yet handed to the kernel
   std::uint32_t next_message_id = 0;  // fragments of one message share an id
@@ -63,7 +63,7 @@ class UdpSender {
   struct Batched {
     std::size_t offset = 0;  // into Batch::bytes
     std::size_t bytes = 0;
-    std::size_t count = 0;   // datagrams
+    std::size_t count = 0;  // datagrams
     udp::endpoint to;
     std::shared_ptr<UdpRegistration> registration;
     // On a frame's first entry: where in the batch its write stamp's 8

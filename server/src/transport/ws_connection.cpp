@@ -18,7 +18,6 @@ constexpr std::size_t kKeptReadBuffer = 256 * 1024;
 
 }  // namespace
 
-
 WsConnection::WsConnection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
                            BufferBudget* budget)
     : QueuedOutbox(id, limits, budget), ws_(std::move(socket)), watchdog_(io) {
@@ -52,9 +51,10 @@ void WsConnection::start(http::request<http::string_body> upgrade, Format format
   tune_socket(beast::get_lowest_layer(ws_).socket(), limits_, id_);
   beast::get_lowest_layer(ws_).expires_never();  // the watchdog keeps time
   websocket::stream_base::timeout timeouts{};
-  timeouts.handshake_timeout = limits_.handshake_timeout.count() > 0
-                                   ? std::chrono::duration_cast<std::chrono::steady_clock::duration>(limits_.handshake_timeout)
-                                   : std::chrono::steady_clock::duration(std::chrono::seconds(5));
+  timeouts.handshake_timeout =
+      limits_.handshake_timeout.count() > 0
+          ? std::chrono::duration_cast<std::chrono::steady_clock::duration>(limits_.handshake_timeout)
+          : std::chrono::steady_clock::duration(std::chrono::seconds(5));
   timeouts.idle_timeout = websocket::stream_base::none();
   timeouts.keep_alive_pings = false;
   ws_.set_option(timeouts);
@@ -90,9 +90,8 @@ void WsConnection::read() {
     return;
   }
   reading_ = true;
-  ws_.async_read(in_, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
-    self->on_read(ec, n);
-  });
+  ws_.async_read(
+      in_, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) { self->on_read(ec, n); });
 }
 
 void WsConnection::on_read(const boost::system::error_code& ec, std::size_t bytes) {

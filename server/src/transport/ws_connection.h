@@ -89,7 +89,7 @@ class WsConnection final : public QueuedOutbox, public std::enable_shared_from_t
   std::shared_ptr<Connection::Handler> handler_;
   std::function<void(std::uint64_t)> on_closed_;
   beast::flat_buffer in_;
-  std::string out_;  // the message being written
+  std::string out_;             // the message being written
   std::uint32_t next_key_ = 0;  // frames are written key by key from here (round robin)
   net::steady_timer watchdog_;
 };

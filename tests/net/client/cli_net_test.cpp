@@ -49,9 +49,10 @@ TEST(CliNet, QueryPrintsExactlyWhatPositionsPrints) {
   TestServer s;
   const std::string port = " --port " + std::to_string(s.port());
   const std::string file = cmu_file().string();
-  for (const std::string opts : {"", " --roots LeftHand", " --roots Hips,LeftForeArm --relative-to Head",
-                                 " --strip-dummies --relative-to LeftFoot",
-                                 " --conventions unreal --metres-per-unit 0.0254", " --relative-to Head --conventions unity"}) {
+  for (const std::string opts :
+       {"", " --roots LeftHand", " --roots Hips,LeftForeArm --relative-to Head",
+        " --strip-dummies --relative-to LeftFoot", " --conventions unreal --metres-per-unit 0.0254",
+        " --relative-to Head --conventions unity"}) {
     SCOPED_TRACE(opts);
     const CommandRun q = gmr("query cmu/02_01 --frames 10:60" + opts + port);
     const CommandRun p = gmr("positions '" + file + "' --frames 10:60" + opts);

@@ -190,7 +190,8 @@ TEST(EventLoop, ManyClientsShareTwoThreads) {
                               })
                   .ok());
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (!closed_inside && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  while (!closed_inside && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   EXPECT_TRUE(closed_inside);
   clients.clear();  // closes every client, then the loop can go
   loop.reset();
@@ -218,13 +219,15 @@ TEST(EventLoop, RunsOnTheCallersIoContext) {
     client::SubscribeOptions so;
     so.end_frame = 10;
     so.speed = 4;
-    ASSERT_TRUE((*c)->subscribe(v->id, so, [&](const client::ReceivedFrame&) { ++frames; },
-                                [&](const client::SubscriptionEnd&) { ++ended; })
+    ASSERT_TRUE((*c)->subscribe(
+                        v->id, so, [&](const client::ReceivedFrame&) { ++frames; },
+                        [&](const client::SubscriptionEnd&) { ++ended; })
                     .ok());
     clients.push_back(std::move(c).value());
   }
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-  while (ended < 20 && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  while (ended < 20 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   EXPECT_EQ(ended.load(), 20);
   EXPECT_EQ(frames.load(), 200);
   clients.clear();

@@ -124,9 +124,9 @@ TEST(LoadTool, MeasuresAWindowWritesJsonMergesAndPlots) {
   std::filesystem::create_directories(dir);
   const auto json = dir / "run.json", png = dir / "run.png", merged = dir / "merged.json";
   // No --motion: the first in the server's list.
-  const ToolRun r = run("--port " + std::to_string(server.port()) + " --clients 20 --rate 50 --seconds 1 --warmup 0.3 " +
-                    "--udp --server-pid " + std::to_string(::getpid()) + " --json " + json.string() + " --plot " +
-                    png.string());
+  const ToolRun r =
+      run("--port " + std::to_string(server.port()) + " --clients 20 --rate 50 --seconds 1 --warmup 0.3 " +
+          "--udp --server-pid " + std::to_string(::getpid()) + " --json " + json.string() + " --plot " + png.string());
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("p99.9"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("histogram"), std::string::npos) << r.out;
@@ -186,9 +186,8 @@ TEST(LoadTool, MeasuresAWindowWritesJsonMergesAndPlots) {
             std::string::npos)
       << too_many.out;
   EXPECT_NE(too_many.out.find("--merge"), std::string::npos) << too_many.out;
-  const ToolRun fits = run_shell("ulimit -S -n 100 && ulimit -H -n 500 && " + std::string(GMR_LOAD_PATH) +
-                                 " --port " + std::to_string(server.port()) +
-                                 " --clients 200 --rate 20 --seconds 0.5 --warmup 0.2");
+  const ToolRun fits = run_shell("ulimit -S -n 100 && ulimit -H -n 500 && " + std::string(GMR_LOAD_PATH) + " --port " +
+                                 std::to_string(server.port()) + " --clients 200 --rate 20 --seconds 0.5 --warmup 0.2");
   EXPECT_EQ(fits.status, 0) << fits.out;
   EXPECT_NE(fits.out.find("200 clients"), std::string::npos) << fits.out;
   // A server that never answers: each client waits --timeout-ms, then says so.

@@ -271,7 +271,8 @@ TEST(Http, TooManyOpenConnectionsAreToldSo) {
     idle.back().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
   }
   // The third is answered 503 at once; the first two still work afterwards.
-  for (int i = 0; i < 50 && get(port, "/healthz").status != 503u; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  for (int i = 0; i < 50 && get(port, "/healthz").status != 503u; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(get(port, "/healthz").status, 503u);
   idle.clear();
   bool served = false;
@@ -485,11 +486,20 @@ TEST(WebSocket, TheFastFrameJsonIsProtobufsMappingOfEveryField) {
       continue;
     }
     switch (field->cpp_type()) {
-      case FieldDescriptor::CPPTYPE_UINT32: r->SetUInt32(f, field, 4000000000u + static_cast<unsigned>(i)); break;
-      case FieldDescriptor::CPPTYPE_UINT64: r->SetUInt64(f, field, std::numeric_limits<std::uint64_t>::max() - static_cast<unsigned>(i)); break;
-      case FieldDescriptor::CPPTYPE_INT64: r->SetInt64(f, field, std::numeric_limits<std::int64_t>::min() + i); break;
-      case FieldDescriptor::CPPTYPE_DOUBLE: r->SetDouble(f, field, -1234.5678e-9); break;
-      default: ADD_FAILURE() << "a Frame field of a type frame_to_json does not write";
+      case FieldDescriptor::CPPTYPE_UINT32:
+        r->SetUInt32(f, field, 4000000000u + static_cast<unsigned>(i));
+        break;
+      case FieldDescriptor::CPPTYPE_UINT64:
+        r->SetUInt64(f, field, std::numeric_limits<std::uint64_t>::max() - static_cast<unsigned>(i));
+        break;
+      case FieldDescriptor::CPPTYPE_INT64:
+        r->SetInt64(f, field, std::numeric_limits<std::int64_t>::min() + i);
+        break;
+      case FieldDescriptor::CPPTYPE_DOUBLE:
+        r->SetDouble(f, field, -1234.5678e-9);
+        break;
+      default:
+        ADD_FAILURE() << "a Frame field of a type frame_to_json does not write";
     }
   }
   const std::string json = server::frame_to_json(m);

@@ -682,18 +682,17 @@ std::string nats_server_binary() {
   return {};
 }
 
-#define GMR_REQUIRE_NATS(binary)                                                                              \
-  const std::string binary = nats_server_binary();                                                            \
-  if (binary.empty()) {                                                                                       \
-    const char* ci = std::getenv("CI");                                                                       \
+#define GMR_REQUIRE_NATS(binary)                                                                                \
+  const std::string binary = nats_server_binary();                                                              \
+  if (binary.empty()) {                                                                                         \
+    const char* ci = std::getenv("CI");                                                                         \
     if (ci != nullptr && std::string(ci) == "true") FAIL() << "nats-server is not installed (install-deps.sh)"; \
-    GTEST_SKIP() << "nats-server is not installed: scripts/install-deps.sh installs it";                      \
+    GTEST_SKIP() << "nats-server is not installed: scripts/install-deps.sh installs it";                        \
   }
 
 std::unique_ptr<Child> start_nats(const std::string& binary, std::uint16_t port, const TempDir& dir) {
-  auto nats = std::make_unique<Child>(
-      std::vector<std::string>{binary, "-a", "127.0.0.1", "-p", std::to_string(port)},
-      dir.path / ("nats-" + std::to_string(port) + ".log"));
+  auto nats = std::make_unique<Child>(std::vector<std::string>{binary, "-a", "127.0.0.1", "-p", std::to_string(port)},
+                                      dir.path / ("nats-" + std::to_string(port) + ".log"));
   for (int i = 0; i < 500 && !accepts(port); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_TRUE(accepts(port)) << nats->output();
   return nats;
@@ -732,7 +731,8 @@ TEST(LiveReplicas, ASourcePublishedOnOneReplicaStreamsFromAnotherAndEndsWhenItsR
     std::ofstream auth(dir.path / "auth.txt");
     auth << "publish " << kPublishToken << "\ncontrol " << kControlToken << "\n";
   }
-  std::filesystem::permissions(dir.path / "auth.txt", std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+  std::filesystem::permissions(dir.path / "auth.txt",
+                               std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
   Child a({GMR_SERVER_PATH, "--port", "0", "--port-file", (dir.path / "port_a").string(), "--http-port", "-1",
            "--auth-file", (dir.path / "auth.txt").string(), "--nats", url, "--log-level", "info"},
           dir.path / "replica_a.log");

@@ -81,7 +81,10 @@ TEST(BadInput, TruncatedMessageIsClosedByTheIdleTimeout) {
   cfg.idle_timeout = std::chrono::milliseconds(200);
   TestServer s(cfg);
   RawConnection c(s.port());
-  c.send_bytes(std::string("\x00\x00\x00\x20" "abc", 7));  // 32 announced, 3 sent, then silence
+  c.send_bytes(
+      std::string("\x00\x00\x00\x20"
+                  "abc",
+                  7));  // 32 announced, 3 sent, then silence
   EXPECT_TRUE(c.wait_closed(std::chrono::seconds(10)));
   expect_server_alive(s);
 }
@@ -95,7 +98,10 @@ TEST(BadInput, TruncatedMessageLogNamesTheBytesReceived) {
   {
     TestServer s;
     RawConnection c(s.port());
-    c.send_bytes(std::string("\x00\x00\x00\x20" "abc", 7));  // 32 announced, 3 sent, then the end
+    c.send_bytes(
+        std::string("\x00\x00\x00\x20"
+                    "abc",
+                    7));  // 32 announced, 3 sent, then the end
     c.shutdown_send();
     EXPECT_TRUE(c.wait_closed());
     expect_server_alive(s);
@@ -331,7 +337,9 @@ struct UdpSocket {
     ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
   }
   ~UdpSocket() { ::close(fd); }
-  void send(const std::string& d) { ::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&server), sizeof server); }
+  void send(const std::string& d) {
+    ::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&server), sizeof server);
+  }
   // Every datagram that arrives within `window`.
   std::vector<std::string> receive_for(std::chrono::milliseconds window) {
     std::vector<std::string> got;
@@ -361,9 +369,9 @@ TEST(BadInput, UdpDatagramsWithWrongTokensAreIgnored) {
   UdpSocket u(s.server.udp_port());
   std::string v1(16, '\0');  // a version 1 registration (8-byte token)
   std::memcpy(v1.data(), "GMRU\x01\x01\0\0", 8);
-  for (const std::string& d : {wire::make_register_datagram(off_by_one_bit), wire::make_register_datagram({}),
-                               std::string("garbage"), wire::make_register_datagram(token).substr(0, 12), v1,
-                               wire::make_confirm_datagram(token, {})}) {
+  for (const std::string& d :
+       {wire::make_register_datagram(off_by_one_bit), wire::make_register_datagram({}), std::string("garbage"),
+        wire::make_register_datagram(token).substr(0, 12), v1, wire::make_confirm_datagram(token, {})}) {
     u.send(d);
   }
   // Nothing comes back to any of them: not even a challenge.
@@ -417,7 +425,9 @@ TEST(BadInput, AForgedRegistrationGetsOneSmallChallengeAndNoFrames) {
   o.udp = true;
   o.loop = true;
   o.rate_hz = 500;
-  ASSERT_TRUE(c->subscribe(v->id, o, [&](const client::ReceivedFrame&) { ++frames; }, nullptr).ok());
+  ASSERT_TRUE(c->subscribe(
+                   v->id, o, [&](const client::ReceivedFrame&) { ++frames; }, nullptr)
+                  .ok());
 
   UdpSocket victim(s.server.udp_port());
   const std::string forged = wire::make_register_datagram(token_of(*c));  // the worst case: the token leaked

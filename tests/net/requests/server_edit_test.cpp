@@ -136,7 +136,8 @@ TEST(ViewEdits, ALongEditRunsOffTheIoThreadAndTheConnectionsNextRequestsWaitInOr
 
   // While the edit runs, the other client is answered and gets frames.
   std::size_t answered_during_edit = 0;
-  while (!editor.readable(std::chrono::milliseconds(1)) && std::chrono::steady_clock::now() - sent < std::chrono::seconds(60)) {
+  while (!editor.readable(std::chrono::milliseconds(1)) &&
+         std::chrono::steady_clock::now() - sent < std::chrono::seconds(60)) {
     auto motions = other->list_motions();
     ASSERT_TRUE(motions.ok()) << motions.error().to_string();
     ++answered_during_edit;
@@ -144,10 +145,11 @@ TEST(ViewEdits, ALongEditRunsOffTheIoThreadAndTheConnectionsNextRequestsWaitInOr
   const std::uint64_t frames_during_edit = frames.load() - frames_before;
   const std::optional<pb::ServerMessage> first = editor.reply(std::chrono::seconds(60));
   ASSERT_TRUE(first.has_value()) << "no answer to the edit";
-  std::printf("the edit of %zu values took %.0f ms; meanwhile the other client had %zu requests answered and %llu "
-              "frames\n",
-              m.values.size(), std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - sent).count(),
-              answered_during_edit, static_cast<unsigned long long>(frames_during_edit));
+  std::printf(
+      "the edit of %zu values took %.0f ms; meanwhile the other client had %zu requests answered and %llu "
+      "frames\n",
+      m.values.size(), std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - sent).count(),
+      answered_during_edit, static_cast<unsigned long long>(frames_during_edit));
   // Computed on the I/O thread, the edit lets through at most the one request
   // that came before it (measured: 1); off it, hundreds (measured: 310).
   EXPECT_GE(answered_during_edit, 10u) << "the edit held the I/O thread";

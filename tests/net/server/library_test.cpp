@@ -41,7 +41,8 @@ TEST(Library, LoadsTheSharedDataAndReportsRejectedFiles) {
                                  [&](const auto& r) { return r.path.filename() == file; });
     return it == lib->rejected.end() ? std::string() : it->reason;
   };
-  for (const char* f : {"TRUNC_02_01_in_hierarchy.bvh", "TRUNC_02_01_mid_frame.bvh", "TRUNC_02_01_no_motion_lines.bvh"}) {
+  for (const char* f :
+       {"TRUNC_02_01_in_hierarchy.bvh", "TRUNC_02_01_mid_frame.bvh", "TRUNC_02_01_no_motion_lines.bvh"}) {
     const std::string why = rejected(f);
     EXPECT_FALSE(why.empty()) << f << " was not rejected";
     EXPECT_NE(why.find(f), std::string::npos) << why;
@@ -66,7 +67,9 @@ TEST(Library, AmcFrameRateComesFromTheOptions) {
     ASSERT_TRUE(lib.ok()) << lib.error().to_string();
     ASSERT_EQ(lib->entries.size(), 2u);
     for (const auto& e : lib->entries) {
-      const double want = e.name == "02_01" ? 0.0083333 : fps == 0.0 ? 1.0 / 120.0 : 1.0 / 30.0;  // the BVH says .0083333
+      const double want = e.name == "02_01" ? 0.0083333
+                          : fps == 0.0      ? 1.0 / 120.0
+                                            : 1.0 / 30.0;  // the BVH says .0083333
       EXPECT_NEAR(e.motion->frame_time, want, 1e-15) << e.name << " at " << fps;
     }
   }
@@ -81,7 +84,8 @@ TEST(Library, NamesFilesAsFoundAndPicksEachAmcsSkeleton) {
   fs::create_directories(d.path / "walks");
   fs::create_symlink(data_file("bvh/cmu/02_01.bvh"), d.path / "walks" / "cmu_walk.bvh");
   fs::create_directories(d.path / "acclaim");
-  for (const char* f : {"asfamc/07/07-walk.asf", "asfamc/07/07_05-walk.amc", "asfamc/09/09-run.asf", "asfamc/09/09_06-run.amc"}) {
+  for (const char* f :
+       {"asfamc/07/07-walk.asf", "asfamc/07/07_05-walk.amc", "asfamc/09/09-run.asf", "asfamc/09/09_06-run.amc"}) {
     fs::create_symlink(data_file(f), d.path / "acclaim" / fs::path(f).filename());
   }
   auto lib = server::load_library(d.path, 2);
@@ -162,10 +166,10 @@ TEST(Library, AMotionAboveTheLimitsIsRejectedAtLoadWithItsFigures) {
   const auto walk = server::builtin_library().front().motion;
   auto refused = server::check_motion_limits(*walk, tight);
   ASSERT_FALSE(refused.ok());
-  EXPECT_EQ(refused.error().message,
-            "too large to serve: " + std::to_string(walk->frame_count) + " frames x " + std::to_string(walk->stride()) +
-                " channels take " + std::to_string(walk->values.size() * 8) +
-                " bytes, above the server's limit of 1000 (--max-motion-bytes)");
+  EXPECT_EQ(refused.error().message, "too large to serve: " + std::to_string(walk->frame_count) + " frames x " +
+                                         std::to_string(walk->stride()) + " channels take " +
+                                         std::to_string(walk->values.size() * 8) +
+                                         " bytes, above the server's limit of 1000 (--max-motion-bytes)");
 
   // Limits raised by the operator.
   server::MotionLimits raised;

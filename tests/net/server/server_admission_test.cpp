@@ -175,9 +175,10 @@ TEST(Admission, SubscriptionsPastTheSendBudgetAreRefused) {
 TEST(Admission, AnAutoBudgetIsMeasuredAtStart) {
   auto c = server::calibrate_send_budget(480, 2000, 3);
   ASSERT_TRUE(c.ok()) << c.error().to_string();
-  std::printf("this machine: %.0f ns per 480-byte loopback TCP send on the slowest of %zu CPUs (%.0f on the fastest) "
-              "-> a budget of %.0f frames/s (%.2f s)\n",
-              c->ns_per_send, c->cpus, c->fastest_ns_per_send, c->budget, c->seconds);
+  std::printf(
+      "this machine: %.0f ns per 480-byte loopback TCP send on the slowest of %zu CPUs (%.0f on the fastest) "
+      "-> a budget of %.0f frames/s (%.2f s)\n",
+      c->ns_per_send, c->cpus, c->fastest_ns_per_send, c->budget, c->seconds);
   EXPECT_GT(c->fastest_ns_per_send, 0.0);
   EXPECT_GE(c->ns_per_send, c->fastest_ns_per_send);
   EXPECT_GE(c->cpus, 1u);

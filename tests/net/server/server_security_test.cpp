@@ -166,8 +166,7 @@ TEST(Auth, UnknownTokensAndMissingOnesAreRefusedAtHello) {
     auto c = client::Client::connect(o);
     ASSERT_FALSE(c.ok());
     EXPECT_NE(c.error().message.find("UNAUTHENTICATED"), std::string::npos) << c.error().message;
-    EXPECT_NE(c.error().message.find(token.empty() ? "needs a token" : "does not know this token"),
-              std::string::npos)
+    EXPECT_NE(c.error().message.find(token.empty() ? "needs a token" : "does not know this token"), std::string::npos)
         << c.error().message;
   }
   // The raw protocol: the refusal, then the server closes the connection.

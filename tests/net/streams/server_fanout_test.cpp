@@ -28,10 +28,10 @@ struct Seen {
   std::mutex mutex;
   std::uint64_t frames = 0;
   std::uint64_t first_sequence = 0, last_sequence = 0;
-  std::int64_t offset = 0;        // frame_index - sequence, modulo the frame count
-  std::uint64_t bad_sequence = 0; // not after the previous one, or a frame index that disagrees with it
+  std::int64_t offset = 0;         // frame_index - sequence, modulo the frame count
+  std::uint64_t bad_sequence = 0;  // not after the previous one, or a frame index that disagrees with it
   std::uint64_t bad_positions = 0;
-  double worst = 0;               // largest position error
+  double worst = 0;  // largest position error
   bool udp_mismatch = false;
   std::string first_problem;
 };
@@ -116,7 +116,8 @@ TEST(ServerFanout, ThousandSubscribersAcrossThreadsGetExactPositionsAndSequences
       };
       if (f.udp != udp) s->udp_mismatch = true;
       const auto index = static_cast<std::int64_t>(f.frame_index);
-      const std::int64_t offset = ((index - static_cast<std::int64_t>(f.sequence)) % frame_count + frame_count) % frame_count;
+      const std::int64_t offset =
+          ((index - static_cast<std::int64_t>(f.sequence)) % frame_count + frame_count) % frame_count;
       if (s->frames == 0) {
         s->first_sequence = f.sequence;
         s->offset = offset;
@@ -188,8 +189,7 @@ TEST(ServerFanout, ThousandSubscribersAcrossThreadsGetExactPositionsAndSequences
   EXPECT_GE(udp_frames * 10, udp_subscribers * kFrames * (kSlowBuild ? 5 : 9));
   std::fprintf(stderr, "fan-out test: %zu subscribers, %zu frames checked (%llu over TCP, %llu over UDP of %llu due)\n",
                subscribers, checked, static_cast<unsigned long long>(tcp_frames),
-               static_cast<unsigned long long>(udp_frames),
-               static_cast<unsigned long long>(udp_subscribers * kFrames));
+               static_cast<unsigned long long>(udp_frames), static_cast<unsigned long long>(udp_subscribers * kFrames));
   EXPECT_GT(checked, 0u);
 }
 

@@ -28,7 +28,7 @@ using client::ViewState;
 // local server::View (the same ops on the same motion give the same motion).
 struct Case {
   std::string label;
-  bool shift = false;     // shift the root to the deepest joint
+  bool shift = false;      // shift the root to the deepest joint
   bool intrinsic = false;  // see from the head (or the deepest joint's parent)
 };
 
@@ -62,8 +62,10 @@ void apply(server::View& v, const Case& k, const Picks& p) {
 }
 
 const std::vector<Case>& cases() {
-  static const std::vector<Case> c = {
-      {"world", false, false}, {"intrinsic", false, true}, {"shifted_root", true, false}, {"shifted_and_intrinsic", true, true}};
+  static const std::vector<Case> c = {{"world", false, false},
+                                      {"intrinsic", false, true},
+                                      {"shifted_root", true, false},
+                                      {"shifted_and_intrinsic", true, true}};
   return c;
 }
 
@@ -230,8 +232,9 @@ TEST_P(FloatPath, Float32OrientationsMatchTheReference) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Motions, FloatPath, ::testing::Values("walk", "cmu/02_01"),
-                         [](const auto& p) { return p.param == "walk" ? std::string("DemoWalk") : std::string("Cmu02_01"); });
+INSTANTIATE_TEST_SUITE_P(Motions, FloatPath, ::testing::Values("walk", "cmu/02_01"), [](const auto& p) {
+  return p.param == "walk" ? std::string("DemoWalk") : std::string("Cmu02_01");
+});
 
 // The float form follows the motion: shared by the views of one library
 // motion, kept by a change of viewpoint, new after an edit; a form that

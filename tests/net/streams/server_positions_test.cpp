@@ -51,9 +51,13 @@ std::vector<Case> cases() {
       {"world", [](Client& c, std::uint32_t v, const Picks&) { return c.set_coordinates(v, ""); },
        [](const Picks&) { return ViewSpec{}; }},
       {"shift_root_to_leaf", [](Client& c, std::uint32_t v, const Picks& p) { return c.shift_root(v, p.leaf); },
-       [](const Picks& p) { return ViewSpec{{p.leaf}, false, ""}; }},
+       [](const Picks& p) {
+         return ViewSpec{{p.leaf}, false, ""};
+       }},
       {"split", [](Client& c, std::uint32_t v, const Picks& p) { return c.split(v, p.mid); },
-       [](const Picks& p) { return ViewSpec{{p.root, p.mid}, false, ""}; }},
+       [](const Picks& p) {
+         return ViewSpec{{p.root, p.mid}, false, ""};
+       }},
       {"split_then_join",
        [](Client& c, std::uint32_t v, const Picks& p) -> Result<ViewState> {
          auto s = c.split(v, p.mid);
@@ -61,19 +65,30 @@ std::vector<Case> cases() {
          return c.join(v, p.mid);
        },
        [](const Picks&) { return ViewSpec{}; }},
-      {"set_roots", [](Client& c, std::uint32_t v, const Picks& p) { return c.set_roots(v, {p.leaf, p.mid}); },
-       [](const Picks& p) { return ViewSpec{{p.leaf, p.mid}, false, ""}; }},
+      {"set_roots",
+       [](Client& c, std::uint32_t v, const Picks& p) {
+         return c.set_roots(v, {p.leaf, p.mid});
+       },
+       [](const Picks& p) {
+         return ViewSpec{{p.leaf, p.mid}, false, ""};
+       }},
       {"strip_dummies", [](Client& c, std::uint32_t v, const Picks&) { return c.strip_dummies(v); },
-       [](const Picks&) { return ViewSpec{{}, true, ""}; }},
+       [](const Picks&) {
+         return ViewSpec{{}, true, ""};
+       }},
       {"intrinsic", [](Client& c, std::uint32_t v, const Picks& p) { return c.set_coordinates(v, p.viewer); },
-       [](const Picks& p) { return ViewSpec{{}, false, p.viewer}; }},
+       [](const Picks& p) {
+         return ViewSpec{{}, false, p.viewer};
+       }},
       {"shifted_and_intrinsic",
        [](Client& c, std::uint32_t v, const Picks& p) -> Result<ViewState> {
          auto s = c.shift_root(v, p.leaf);
          if (!s.ok()) return s;
          return c.set_coordinates(v, p.viewer);
        },
-       [](const Picks& p) { return ViewSpec{{p.leaf}, false, p.viewer}; }},
+       [](const Picks& p) {
+         return ViewSpec{{p.leaf}, false, p.viewer};
+       }},
   };
 }
 
@@ -202,8 +217,7 @@ TEST_P(ServerPositions, UdpStreamEqualsGmrPositionsWithFragmentedFrames) {
       EXPECT_EQ(f.orientations.size(), applied->skeleton.size());
       const auto got = reorder(applied->skeleton, all, f.positions, ref);
       const std::span<const Eigen::Vector3d> want(ref.positions.data() + f.frame_index * n, n);
-      EXPECT_POSITIONS_NEAR(ref.skeleton, got, std::vector<Eigen::Vector3d>(want.begin(), want.end()),
-                            1e-9 * ref.size);
+      EXPECT_POSITIONS_NEAR(ref.skeleton, got, std::vector<Eigen::Vector3d>(want.begin(), want.end()), 1e-9 * ref.size);
     }
   }
   const auto counters = client_->counters();
@@ -233,8 +247,9 @@ TEST_P(ServerPositions, Float32StreamIsWithinFloatPrecision) {
   EXPECT_POSITIONS_NEAR(ref.skeleton, reorder(v->skeleton, all, got, ref), want, 1e-6 * ref.size);
 }
 
-INSTANTIATE_TEST_SUITE_P(Motions, ServerPositions, ::testing::Values("walk", "cmu/02_01"),
-                         [](const auto& p) { return p.param == "walk" ? std::string("DemoWalk") : std::string("Cmu02_01"); });
+INSTANTIATE_TEST_SUITE_P(Motions, ServerPositions, ::testing::Values("walk", "cmu/02_01"), [](const auto& p) {
+  return p.param == "walk" ? std::string("DemoWalk") : std::string("Cmu02_01");
+});
 
 TEST(ServerPositions, JointSubsetAndOrientationsMatchForwardKinematics) {
   TestServer server;

@@ -312,8 +312,9 @@ TEST(Streaming, ANeverReadingSubscriberCostsNothingOnceCongestedAfterItsBound) {
   };
   const std::uint64_t congested = encoded_while_stalled(std::chrono::milliseconds(50));
   const std::uint64_t unbounded = encoded_while_stalled(std::chrono::hours(1));
-  std::printf("frames encoded in 500 ms for a stalled 1 kHz subscriber: %llu (congested after 50 ms), %llu (after 1 h)\n",
-              static_cast<unsigned long long>(congested), static_cast<unsigned long long>(unbounded));
+  std::printf(
+      "frames encoded in 500 ms for a stalled 1 kHz subscriber: %llu (congested after 50 ms), %llu (after 1 h)\n",
+      static_cast<unsigned long long>(congested), static_cast<unsigned long long>(unbounded));
   EXPECT_GT(unbounded, 100u);
   EXPECT_LT(congested * 5, unbounded);
 }
@@ -386,7 +387,7 @@ TEST(Streaming, TicksALateServerSkipsAreGapsAndAreCounted) {
   cfg.port = 0;
   cfg.udp_port = 0;
   cfg.max_catch_up = std::chrono::milliseconds(0);  // skip as soon as a tick is a period late
-  cfg.send_budget = 15000;  // room for the 10 kHz stream, not for a second one
+  cfg.send_budget = 15000;                          // room for the 10 kHz stream, not for a second one
   server::Server srv(cfg, test_library());
   srv.start();
   client::ClientOptions co;
@@ -559,8 +560,8 @@ TEST(Streaming, TheNewSkeletonComesBeforeItsFrames) {
       ASSERT_EQ(sizes_seen[i], joints) << "frame " << i;
     }
     EXPECT_GT(versions_seen.size(), change_at.back());
-    std::printf("%s: %zu frames, %llu of another skeleton version dropped\n", udp ? "udp" : "tcp",
-                versions_seen.size(), static_cast<unsigned long long>(c->counters().frames_other_skeleton));
+    std::printf("%s: %zu frames, %llu of another skeleton version dropped\n", udp ? "udp" : "tcp", versions_seen.size(),
+                static_cast<unsigned long long>(c->counters().frames_other_skeleton));
   }
 }
 
@@ -615,13 +616,15 @@ TEST(Streaming, ConventionsPerQueryAndPerSubscription) {
   ASSERT_TRUE(native.ok() && in_unreal.ok());
   ASSERT_EQ(native->positions.size(), in_unreal->positions.size());
   double size = 0;  // the skeleton's size: farthest joint from the root in frame 0
-  for (std::size_t j = 0; j < v->skeleton.size(); ++j) size = std::max(size, (native->positions[j] - native->positions[0]).norm());
+  for (std::size_t j = 0; j < v->skeleton.size(); ++j)
+    size = std::max(size, (native->positions[j] - native->positions[0]).norm());
   ASSERT_GT(size, 0.5);
   for (std::size_t i = 0; i < native->positions.size(); ++i) {
     const Eigen::Vector3d& p = native->positions[i];
     EXPECT_LE((in_unreal->positions[i] - Eigen::Vector3d(p.z(), -p.x(), p.y())).norm(), 1e-12 * size);
     const Eigen::Matrix3d w = native->orientations[i].toRotationMatrix();
-    EXPECT_LE((in_unreal->orientations[i].toRotationMatrix() - ub.b * w * ub.b.transpose()).cwiseAbs().maxCoeff(), 1e-12);
+    EXPECT_LE((in_unreal->orientations[i].toRotationMatrix() - ub.b * w * ub.b.transpose()).cwiseAbs().maxCoeff(),
+              1e-12);
   }
   // Streams, float32 and float64, against the query in the same conventions.
   Conventions blender;
@@ -816,8 +819,8 @@ TEST(Streaming, LocalTransformsAndRestPoseInTheSubscribersConventions) {
   client::SubscribeOptions looping = o64;
   looping.end_frame = 0;
   looping.loop = true;
-  auto live = c->subscribe(v->id, looping, [](const ReceivedFrame&) {}, {},
-                           [&](const client::SkeletonChange& ch) { changed.set(ch); });
+  auto live = c->subscribe(
+      v->id, looping, [](const ReceivedFrame&) {}, {}, [&](const client::SkeletonChange& ch) { changed.set(ch); });
   ASSERT_TRUE(live.ok());
   ASSERT_TRUE(c->shift_root(v->id, "head").ok());
   auto ch = changed.wait();
@@ -826,7 +829,8 @@ TEST(Streaming, LocalTransformsAndRestPoseInTheSubscribersConventions) {
   for (int j = 0; j < static_cast<int>(ch->skeleton.size()); ++j) {
     const Joint& joint = ch->skeleton.joint(j);
     if (joint.has_translation() || ch->skeleton.is_root(j)) continue;
-    EXPECT_LE((ch->rest.translations[static_cast<std::size_t>(j)] - bb.position(joint.offset)).norm(), 1e-12) << joint.name;
+    EXPECT_LE((ch->rest.translations[static_cast<std::size_t>(j)] - bb.position(joint.offset)).norm(), 1e-12)
+        << joint.name;
   }
   EXPECT_TRUE(c->unsubscribe(live->id).ok());
 }
@@ -885,10 +889,11 @@ TEST(Streaming, AStalledClientGetsNoFrameOlderThanItsBound) {
   ASSERT_TRUE(stats.ok());
   EXPECT_GT(counters.frames_stale, 0u) << "frames that waited in the kernel during the stall";
   EXPECT_GT(stats->frames_dropped, 0u) << "frames the server did not send";
-  std::printf("after a 5 s stall: %llu frames dropped by the client as stale, %llu dropped by the server, "
-              "%zu fresh frames, oldest %.1f ms\n",
-              static_cast<unsigned long long>(counters.frames_stale),
-              static_cast<unsigned long long>(stats->frames_dropped), frames.size(), oldest / 1e6);
+  std::printf(
+      "after a 5 s stall: %llu frames dropped by the client as stale, %llu dropped by the server, "
+      "%zu fresh frames, oldest %.1f ms\n",
+      static_cast<unsigned long long>(counters.frames_stale), static_cast<unsigned long long>(stats->frames_dropped),
+      frames.size(), oldest / 1e6);
   EXPECT_TRUE(c->unsubscribe(sub->id).ok());
 }
 

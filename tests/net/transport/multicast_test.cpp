@@ -35,9 +35,10 @@ void run_in_namespace(const std::string& test) {
     if (ci) FAIL() << why << ": CI must run the multicast test";
     GTEST_SKIP() << why;
   }
-  const std::string cmd = "unshare -n sh -c 'ip link set lo up && ip route add 224.0.0.0/4 dev lo && "
-                          "GMR_IN_NETNS=1 exec /proc/" +
-                          std::to_string(::getpid()) + "/exe --gtest_filter=" + test + "' 2>&1";
+  const std::string cmd =
+      "unshare -n sh -c 'ip link set lo up && ip route add 224.0.0.0/4 dev lo && "
+      "GMR_IN_NETNS=1 exec /proc/" +
+      std::to_string(::getpid()) + "/exe --gtest_filter=" + test + "' 2>&1";
   FILE* p = ::popen(cmd.c_str(), "r");
   ASSERT_NE(p, nullptr);
   std::string out;

@@ -124,12 +124,12 @@ TEST(Memory, ClientsThatNeverReadStayWithinTheBudgetAndAGoodClientKeepsItsRate) 
   Latch<client::SubscriptionEnd> ended;
   const auto start = std::chrono::steady_clock::now();
   ASSERT_TRUE(c->subscribe(
-                    v->id, o,
-                    [&](const client::ReceivedFrame& f) {
-                      std::lock_guard lock(mu);
-                      seq.push_back(f.sequence);
-                    },
-                    [&](const client::SubscriptionEnd& e) { ended.set(e); })
+                   v->id, o,
+                   [&](const client::ReceivedFrame& f) {
+                     std::lock_guard lock(mu);
+                     seq.push_back(f.sequence);
+                   },
+                   [&](const client::SubscriptionEnd& e) { ended.set(e); })
                   .ok());
   std::uint64_t peak = resident_bytes();
   std::optional<client::SubscriptionEnd> end;
@@ -142,11 +142,12 @@ TEST(Memory, ClientsThatNeverReadStayWithinTheBudgetAndAGoodClientKeepsItsRate) 
   const auto st = s.server.stats();
   std::uint64_t slow_dropped = 0;
   for (const auto& ss : st.sessions) slow_dropped += ss.frames_dropped;
-  std::printf("RSS %.1f MB before, %.1f MB at the peak; views %.1f MB, buffers at most %.1f MB; "
-              "good client: %zu frames in %.2f s; slow clients: %llu frames dropped\n",
-              static_cast<double>(before) / 1e6, static_cast<double>(peak) / 1e6,
-              static_cast<double>(st.view_bytes) / 1e6, static_cast<double>(st.max_buffered_bytes) / 1e6, seq.size(),
-              seconds, static_cast<unsigned long long>(slow_dropped));
+  std::printf(
+      "RSS %.1f MB before, %.1f MB at the peak; views %.1f MB, buffers at most %.1f MB; "
+      "good client: %zu frames in %.2f s; slow clients: %llu frames dropped\n",
+      static_cast<double>(before) / 1e6, static_cast<double>(peak) / 1e6, static_cast<double>(st.view_bytes) / 1e6,
+      static_cast<double>(st.max_buffered_bytes) / 1e6, seq.size(), seconds,
+      static_cast<unsigned long long>(slow_dropped));
 
   // The good client: every frame in order, none dropped, at its rate.
   EXPECT_EQ(end->frames_dropped, 0u);
@@ -162,8 +163,8 @@ TEST(Memory, ClientsThatNeverReadStayWithinTheBudgetAndAGoodClientKeepsItsRate) 
   // Resident growth: views and buffers within their limits, plus per
   // subscription state (docs/protocol.md: at most 64 KB each). Sanitizers
   // add their own shadow memory and quarantine: checked in Release only.
-  const std::uint64_t budget = cfg.max_view_bytes + cfg.max_buffered_bytes +
-                               std::uint64_t{kClients} * kSubscriptions * 64 * 1024;
+  const std::uint64_t budget =
+      cfg.max_view_bytes + cfg.max_buffered_bytes + std::uint64_t{kClients} * kSubscriptions * 64 * 1024;
   if (!kSlowBuild) {
     EXPECT_LT(peak - before, budget) << "the server held more than its budget";
   }
@@ -197,12 +198,12 @@ TEST(Memory, AFloatStreamOfChannelLessFramesComputesOneFrame) {
   client::SubscribeOptions o;
   o.start_frame = static_cast<std::uint32_t>(m->frame_count - 3);
   ASSERT_TRUE(c->subscribe(
-                    v->id, o,
-                    [&](const client::ReceivedFrame& f) {
-                      std::lock_guard lock(mu);
-                      frames.push_back(f);
-                    },
-                    [&](const client::SubscriptionEnd& e) { ended.set(e); })
+                   v->id, o,
+                   [&](const client::ReceivedFrame& f) {
+                     std::lock_guard lock(mu);
+                     frames.push_back(f);
+                   },
+                   [&](const client::SubscriptionEnd& e) { ended.set(e); })
                   .ok());
   ASSERT_TRUE(ended.wait().has_value());
   ASSERT_EQ(frames.size(), 3u);

@@ -50,8 +50,8 @@ std::string random_bytes(std::size_t n, unsigned seed) {
 TEST(UdpFragments, TwoPiecesGiveTheDatagramsOfTheJoinedMessage) {
   using gmr::wire::kMaxFragmentPayload;
   std::size_t cases = 0;
-  for (std::size_t size : {std::size_t{0}, std::size_t{1}, kMaxFragmentPayload, kMaxFragmentPayload + 1,
-                           3 * kMaxFragmentPayload + 17}) {
+  for (std::size_t size :
+       {std::size_t{0}, std::size_t{1}, kMaxFragmentPayload, kMaxFragmentPayload + 1, 3 * kMaxFragmentPayload + 17}) {
     const std::string message = random_bytes(size, static_cast<unsigned>(size) + 7);
     std::string joined;
     gmr::wire::append_fragments(joined, 9, message);
@@ -74,8 +74,8 @@ TEST(UdpFragments, ReassembleExactlyInAnyOrderWithDuplicates) {
                            gmr::wire::kMaxFragmentPayload + 1, std::size_t{10000}}) {
     const std::string message = random_bytes(size, static_cast<unsigned>(size));
     auto datagrams = gmr::wire::fragment_message(42, message);
-    EXPECT_EQ(datagrams.size(), std::max<std::size_t>(1, (size + gmr::wire::kMaxFragmentPayload - 1) /
-                                                             gmr::wire::kMaxFragmentPayload));
+    EXPECT_EQ(datagrams.size(),
+              std::max<std::size_t>(1, (size + gmr::wire::kMaxFragmentPayload - 1) / gmr::wire::kMaxFragmentPayload));
     for (const auto& d : datagrams) EXPECT_LE(d.size(), gmr::wire::kMaxDatagramBytes);
     std::reverse(datagrams.begin(), datagrams.end());
     datagrams.push_back(datagrams.front());  // a duplicate after completion is ignored
@@ -114,7 +114,7 @@ TEST(UdpFragments, MalformedDatagramsAreCountedAndIgnored) {
   auto ds = gmr::wire::fragment_message(5, random_bytes(3000, 2));
   std::string truncated = ds[0].substr(0, ds[0].size() - 1);  // wrong payload size for its index
   std::string bad_count = ds[1];
-  bad_count[gmr::wire::kUdpHeaderBytes + 7] = 9;            // count that does not match the total
+  bad_count[gmr::wire::kUdpHeaderBytes + 7] = 9;  // count that does not match the total
   std::string bad_magic = ds[2];
   bad_magic[0] = 'X';
   EXPECT_FALSE(r.add(truncated));
@@ -226,7 +226,7 @@ TEST(FrameDecoding, RefusesCountsThatDoNotFormWholeValues) {
   auto r = gmr::wire::decode_frame(f);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().kind, gmr::ErrorKind::kInvalidData);
-  f.add_positions(1.0f), f.add_positions(1.0f);  // two whole positions
+  f.add_positions(1.0f), f.add_positions(1.0f);          // two whole positions
   for (int i = 0; i < 5; ++i) f.add_orientations(0.0f);  // neither 0 nor 8
   EXPECT_FALSE(gmr::wire::decode_frame(f).ok());
   for (int i = 0; i < 3; ++i) f.add_orientations(0.0f);

@@ -50,8 +50,8 @@ int main() {
       max_error = std::max(max_error, std::abs(reference[j][axis] - static_cast<double>(positions[j * 3 + axis])));
     }
     if (j < 3) {
-      std::printf("%s %.3f %.3f %.3f\n", demo.motion.skeleton.joint(static_cast<int>(j)).name.c_str(),
-                  positions[j * 3], positions[j * 3 + 1], positions[j * 3 + 2]);
+      std::printf("%s %.3f %.3f %.3f\n", demo.motion.skeleton.joint(static_cast<int>(j)).name.c_str(), positions[j * 3],
+                  positions[j * 3 + 1], positions[j * 3 + 2]);
     }
   }
   const double tolerance = 1e-4 * gmr::skeleton_size(demo.motion);

@@ -38,7 +38,8 @@ TEST(EveryCorpusPairMatchesItsGmrConversion, AcclaimToGmr) {
     EXPECT_DOUBLE_EQ(g->frame_time, 1.0 / 120.0);
     ASSERT_EQ(g->skeleton.size(), s->bones.size());
     EXPECT_EQ(g->skeleton.joint(0).name, "root");
-    for (std::size_t b = 1; b < s->bones.size(); ++b) EXPECT_EQ(g->skeleton.joint(static_cast<int>(b)).name, s->bones[b].name);
+    for (std::size_t b = 1; b < s->bones.size(); ++b)
+      EXPECT_EQ(g->skeleton.joint(static_cast<int>(b)).name, s->bones[b].name);
     const double size = skeleton_size(*g);
     EXPECT_GT(size, 10.0);  // CMU units: a person is ~30 units tall
     const auto a = acclaim_positions(*s, *m);
@@ -169,7 +170,8 @@ TEST(DecomposedAnglesAreContinuous, AcclaimToGmr) {
   for (std::size_t f = 1; f < g->frame_count; ++f) {
     const auto a = g->frame(f - 1);
     const auto b = g->frame(f);
-    for (std::size_t c = 0; c < a.size(); ++c) EXPECT_LT(std::abs(a[c] - b[c]), 90.0) << "frame " << f << " channel " << c;
+    for (std::size_t c = 0; c < a.size(); ++c)
+      EXPECT_LT(std::abs(a[c] - b[c]), 90.0) << "frame " << f << " channel " << c;
   }
 }
 
@@ -197,10 +199,16 @@ TEST(CorpusRoundTripThroughGmr, GmrToAcclaim) {
 }
 
 Motion two_joint_motion(Convention convention) {
-  Joint root{"Hips", kNoParent, kNoParent, Eigen::Vector3d(0, 1, 0),
+  Joint root{"Hips",
+             kNoParent,
+             kNoParent,
+             Eigen::Vector3d(0, 1, 0),
              {ChannelType::kXposition, ChannelType::kYposition, ChannelType::kZposition, ChannelType::kZrotation,
               ChannelType::kXrotation, ChannelType::kYrotation}};
-  Joint spine{"Spine", 0, kNoParent, Eigen::Vector3d(0, 2, 0),
+  Joint spine{"Spine",
+              0,
+              kNoParent,
+              Eigen::Vector3d(0, 2, 0),
               {ChannelType::kYposition, ChannelType::kXrotation, ChannelType::kZrotation}};
   Joint end{"Spine_End", 1, kNoParent, Eigen::Vector3d(0, 0, 0), {}};
   Motion m;
@@ -208,9 +216,9 @@ Motion two_joint_motion(Convention convention) {
   m.convention = convention;
   m.frame_time = 1.0 / 30.0;
   m.frame_count = 3;
-  m.values = {0, 1, 0, 10, 20, 30, 2.5, 5, 6,     //
-              1, 1, 1, -10, 0, 30, 3, 45, -45,    //
-              2, 0.5, 3, 170, -80, 95, 1.5, 0, 0};
+  m.values = {0, 1,   0, 10,  20,  30, 2.5, 5,  6,    //
+              1, 1,   1, -10, 0,   30, 3,   45, -45,  //
+              2, 0.5, 3, 170, -80, 95, 1.5, 0,  0};
   return m;
 }
 
@@ -298,7 +306,8 @@ TEST(EveryCorpusBvhExports, GmrToAcclaim) {
     for (std::size_t i = 0; i < bones.size(); ++i) {
       const int j = i == 0 ? sk.roots()[0] : sk.find(bones[i].name);
       ASSERT_GE(j, 0) << bones[i].name;
-      for (std::size_t f = 0; f < bvh->frame_count; ++f) reordered[f * sk.size() + static_cast<std::size_t>(j)] = b[f * sk.size() + i];
+      for (std::size_t f = 0; f < bvh->frame_count; ++f)
+        reordered[f * sk.size() + static_cast<std::size_t>(j)] = b[f * sk.size() + i];
     }
     EXPECT_POSITIONS_NEAR(sk, a, reordered, 1e-9 * skeleton_size(*bvh));
   }

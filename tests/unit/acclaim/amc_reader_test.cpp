@@ -12,7 +12,8 @@ namespace gmr::test {
 namespace {
 
 std::string replace_all(std::string s, const std::string& from, const std::string& to) {
-  for (std::size_t p = s.find(from); p != std::string::npos; p = s.find(from, p + to.size())) s.replace(p, from.size(), to);
+  for (std::size_t p = s.find(from); p != std::string::npos; p = s.find(from, p + to.size()))
+    s.replace(p, from.size(), to);
   return s;
 }
 
@@ -26,7 +27,7 @@ TEST(ReadsValuesInDofOrder, Amc) {
   const std::size_t stride = static_cast<std::size_t>(s.value_count());
   ASSERT_EQ(stride, 12u);
   const auto f1 = m.frame(1, stride);
-  EXPECT_EQ(f1[0], 1.5);                                                   // root TX
+  EXPECT_EQ(f1[0], 1.5);  // root TX
   EXPECT_EQ(f1[static_cast<std::size_t>(s.value_offset(s.find("knee")))], 80.0);
   EXPECT_EQ(f1[static_cast<std::size_t>(s.value_offset(s.find("back"))) + 1], 3.0);  // back rx
 }
@@ -86,15 +87,18 @@ TEST(BrokenInputGivesLineAndColumn, Amc) {
     std::string error;
   };
   const std::vector<Case> cases = {
-      {"too few values", "hip 5 -10 15", "hip 5 -10", "b.amc:5:10: expected 3 values for bone 'hip' (dof rx ry rz), found 2"},
+      {"too few values", "hip 5 -10 15", "hip 5 -10",
+       "b.amc:5:10: expected 3 values for bone 'hip' (dof rx ry rz), found 2"},
       {"too many values", "knee 40", "knee 40 41", "b.amc:6:9: expected 1 values for bone 'knee' (dof rx), found 2"},
       {"fused numbers", "hip 5 -10 15", "hip 5 0.0-7.5 15", "b.amc:5:7: expected a finite number, found '0.0-7.5'"},
       {"nan", "knee 40", "knee nan", "b.amc:6:6: expected a finite number, found 'nan'"},
       {"bone twice", "back 7 -3", "back 7 -3\nBack 1 2", "b.amc:8:1: bone 'Back' listed twice in frame 1"},
       {"data before frame", "1\nroot", "root", "b.amc:3:1: expected a frame number before bone data, found 'root'"},
       {"empty frame", "2\nroot 1.5", "2\n3\nroot 1.5", "b.amc:8:1: expected bone data after frame number 2"},
-      {"keyword in frames", "knee 80", ":DEGREES", "b.amc:11:1: expected a frame number or a bone name, found ':DEGREES'"},
-      {"no frames", kSmallAmc, ":DEGREES\n", "b.amc:1:1: expected at least one frame (a frame number, then bone lines)"},
+      {"keyword in frames", "knee 80", ":DEGREES",
+       "b.amc:11:1: expected a frame number or a bone name, found ':DEGREES'"},
+      {"no frames", kSmallAmc, ":DEGREES\n",
+       "b.amc:1:1: expected at least one frame (a frame number, then bone lines)"},
   };
   for (const auto& c : cases) {
     SCOPED_TRACE(c.what);
@@ -198,10 +202,18 @@ TEST(MutatedInputNeverCrashes, AsfAmc) {
     for (int e = 0; e < edits && !t.empty(); ++e) {
       const std::size_t at = rng() % t.size();
       switch (rng() % 4) {
-        case 0: t[at] = alphabet[rng() % alphabet.size()]; break;
-        case 1: t.erase(at, 1 + rng() % 8); break;
-        case 2: t.insert(at, 1, alphabet[rng() % alphabet.size()]); break;
-        default: t.insert(at, t.substr(rng() % t.size(), rng() % 40)); break;
+        case 0:
+          t[at] = alphabet[rng() % alphabet.size()];
+          break;
+        case 1:
+          t.erase(at, 1 + rng() % 8);
+          break;
+        case 2:
+          t.insert(at, 1, alphabet[rng() % alphabet.size()]);
+          break;
+        default:
+          t.insert(at, t.substr(rng() % t.size(), rng() % 40));
+          break;
       }
     }
     return t;

@@ -12,7 +12,8 @@ namespace gmr::test {
 namespace {
 
 std::string replace_all(std::string s, const std::string& from, const std::string& to) {
-  for (std::size_t p = s.find(from); p != std::string::npos; p = s.find(from, p + to.size())) s.replace(p, from.size(), to);
+  for (std::size_t p = s.find(from); p != std::string::npos; p = s.find(from, p + to.size()))
+    s.replace(p, from.size(), to);
   return s;
 }
 
@@ -23,7 +24,8 @@ std::vector<Eigen::Vector3d> small_positions(const std::string& asf, const std::
   return acclaim_positions(s, m);
 }
 
-void expect_same_positions(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b, double tol = 0) {
+void expect_same_positions(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
+                           double tol = 0) {
   ASSERT_EQ(a.size(), b.size());
   for (std::size_t i = 0; i < a.size(); ++i) EXPECT_LE((a[i] - b[i]).norm(), tol) << "position " << i;
 }
@@ -148,8 +150,10 @@ TEST(FieldOrderNotHardCoded, Asf) {
 // Pitfall 2: the axis order token is read, not assumed to be XYZ.
 TEST(AxisOrderIsRead, Asf) {
   // XYZ applies x first (C = Rz Ry Rx); ZYX applies z first (C = Rx Ry Rz).
-  const std::string xyz = replace_all(kSmallAsf, "axis 0 0 20 XYZ\n     dof rx ry rz", "axis 30 -40 20 XYZ\n     dof rx ry rz");
-  const std::string zyx = replace_all(kSmallAsf, "axis 0 0 20 XYZ\n     dof rx ry rz", "axis 30 -40 20 ZYX\n     dof rx ry rz");
+  const std::string xyz =
+      replace_all(kSmallAsf, "axis 0 0 20 XYZ\n     dof rx ry rz", "axis 30 -40 20 XYZ\n     dof rx ry rz");
+  const std::string zyx =
+      replace_all(kSmallAsf, "axis 0 0 20 XYZ\n     dof rx ry rz", "axis 30 -40 20 ZYX\n     dof rx ry rz");
   const AsfSkeleton a = must_parse_asf(xyz);
   const AsfSkeleton b = must_parse_asf(zyx);
   const AmcMotion m = must_parse_amc(kSmallAmc, a);
@@ -174,7 +178,8 @@ TEST(AxisOrderIsRead, Asf) {
 // Pitfall 2: CRLF, CR-only line ends and tabs.
 TEST(LineEndsAndTabs, Asf) {
   const auto ref = small_positions(kSmallAsf);
-  expect_same_positions(small_positions(replace_all(kSmallAsf, "\n", "\r\n"), replace_all(kSmallAmc, "\n", "\r\n")), ref);
+  expect_same_positions(small_positions(replace_all(kSmallAsf, "\n", "\r\n"), replace_all(kSmallAmc, "\n", "\r\n")),
+                        ref);
   expect_same_positions(small_positions(replace_all(kSmallAsf, "\n", "\r"), replace_all(kSmallAmc, "\n", "\r")), ref);
   expect_same_positions(small_positions(replace_all(kSmallAsf, " ", "\t"), replace_all(kSmallAmc, " ", "\t")), ref);
 }
@@ -224,7 +229,8 @@ TEST(UnitsLengthAndAngle, Asf) {
     for (int b = 0; b < static_cast<int>(deg.bones.size()); ++b) {
       const auto& bone = deg.bones[static_cast<std::size_t>(b)];
       for (std::size_t d = 0; d < bone.dofs.size(); ++d) {
-        const std::size_t k = f * static_cast<std::size_t>(deg.value_count()) + static_cast<std::size_t>(deg.value_offset(b)) + d;
+        const std::size_t k =
+            f * static_cast<std::size_t>(deg.value_count()) + static_cast<std::size_t>(deg.value_offset(b)) + d;
         if (bone.dofs[d] <= AcclaimDof::kRz) converted.values[k] *= M_PI / 180.0;
       }
     }
@@ -258,8 +264,9 @@ TEST(RootOrder, Asf) {
                                 Eigen::AngleAxisd(7 * M_PI / 180, Eigen::Vector3d::UnitZ()))
                                    .toRotationMatrix();
   const int b = s.find("back");
-  EXPECT_LE((p[static_cast<std::size_t>(b)] - (Eigen::Vector3d(1, 2, 3) + expect * back * Eigen::Vector3d(0, 2, 0))).norm(),
-            1e-12);
+  EXPECT_LE(
+      (p[static_cast<std::size_t>(b)] - (Eigen::Vector3d(1, 2, 3) + expect * back * Eigen::Vector3d(0, 2, 0))).norm(),
+      1e-12);
 }
 
 // Pitfall 6: dof subsets, translations and `l`; bones without dof are absent from the AMC.
@@ -309,7 +316,7 @@ struct BrokenAsf {
   const char* what;
   std::string from, to;  // edit applied to kSmallAsf
   int line, column;
-  const char* message;   // substring of the error message
+  const char* message;  // substring of the error message
 };
 
 TEST(BrokenInputGivesLineAndColumn, Asf) {
@@ -327,7 +334,8 @@ TEST(BrokenInputGivesLineAndColumn, Asf) {
       {"unknown child", "hip knee", "hip kneee", 44, 9, "unknown bone 'kneee'"},
       {"two parents", "hip knee", "hip knee\n    back knee", 45, 10, "already has a parent"},
       {"not connected", "hip knee\n", "", 24, 1, "'knee' is not connected"},
-      {"cycle", "root hip back\n    hip knee", "root back\n    hip knee\n    knee hip", 13, 1, "'hip' is not connected"},
+      {"cycle", "root hip back\n    hip knee", "root back\n    hip knee\n    knee hip", 13, 1,
+       "'hip' is not connected"},
       {"no name", "     name knee\n", "", 31, 3, "expected a 'name'"},
       {"no length", "     length 2\n", "", 39, 3, "expected a 'length'"},
       {"offset overflows", "direction 0 1 0\n     length 2", "direction 0 1e10 0\n     length 1e300", 37, 13,

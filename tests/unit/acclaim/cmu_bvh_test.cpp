@@ -57,18 +57,16 @@ const Take* load_take() {
 
 // Bone tip (ASF) -> BVH joint at the same place.
 const std::map<std::string, std::string> kLowerBody = {
-    {"root", "Hips"},
-    {"lhipjoint", "LeftUpLeg"},  {"lfemur", "LeftLeg"},   {"ltibia", "LeftFoot"},
-    {"lfoot", "LeftToeBase"},  {"ltoes", "LeftToeBase_End"},
-    {"rhipjoint", "RightUpLeg"}, {"rfemur", "RightLeg"}, {"rtibia", "RightFoot"},
-    {"rfoot", "RightToeBase"}, {"rtoes", "RightToeBase_End"},
-    {"lowerback", "Spine"},    {"upperback", "Spine1"},
+    {"root", "Hips"},         {"lhipjoint", "LeftUpLeg"},   {"lfemur", "LeftLeg"},         {"ltibia", "LeftFoot"},
+    {"lfoot", "LeftToeBase"}, {"ltoes", "LeftToeBase_End"}, {"rhipjoint", "RightUpLeg"},   {"rfemur", "RightLeg"},
+    {"rtibia", "RightFoot"},  {"rfoot", "RightToeBase"},    {"rtoes", "RightToeBase_End"}, {"lowerback", "Spine"},
+    {"upperback", "Spine1"},
 };
 
 // Upper body: same joints, but see ConstantUpperBodyDifference.
 const std::map<std::string, std::string> kUpperBody = {
-    {"lowerneck", "Neck1"}, {"upperneck", "Head"},      {"head", "Head_End"},
-    {"lclavicle", "LeftArm"}, {"lhumerus", "LeftForeArm"}, {"lradius", "LeftHand"},
+    {"lowerneck", "Neck1"},    {"upperneck", "Head"},        {"head", "Head_End"},
+    {"lclavicle", "LeftArm"},  {"lhumerus", "LeftForeArm"},  {"lradius", "LeftHand"},
     {"rclavicle", "RightArm"}, {"rhumerus", "RightForeArm"}, {"rradius", "RightHand"},
 };
 
@@ -89,7 +87,9 @@ TEST(LegsHipsAndLowerSpineMatchTheBvh, Cmu0101) {
     double worst = 0.0;
     std::size_t worst_frame = 0;
     for (std::size_t f = 0; f < t->checked; ++f) {
-      const double e = (t->acclaim[f * n + static_cast<std::size_t>(b)] - t->bvh_pos[(f + 1) * nb + static_cast<std::size_t>(j)]).norm();
+      const double e =
+          (t->acclaim[f * n + static_cast<std::size_t>(b)] - t->bvh_pos[(f + 1) * nb + static_cast<std::size_t>(j)])
+              .norm();
       if (e > worst) worst = e, worst_frame = f;
     }
     EXPECT_LE(worst, 1e-3) << bone << " vs " << joint << ", worst at AMC frame " << worst_frame;

@@ -118,11 +118,11 @@ TEST(WriteFileAtomic, TheNextWriteSweepsTemporariesOfDeadWriters) {
   };
   const std::string dead = std::to_string(dead_pid());
   const std::string alive = std::to_string(::getppid());
-  make(".out.gmr.tmp." + dead + ".0", true);      // a SIGKILLed writer of out.gmr: swept
-  make(".out.gmr.tmp." + dead + ".1", false);     // too recent (another machine's writer?): kept
-  make(".out.gmr.tmp." + alive + ".0", true);     // its writer is alive: kept
-  make(".other.gmr.tmp." + dead + ".0", true);    // another file's: kept until that file is written
-  make(".out.gmr.tmp." + dead + ".x", true);      // not our pattern: kept
+  make(".out.gmr.tmp." + dead + ".0", true);    // a SIGKILLed writer of out.gmr: swept
+  make(".out.gmr.tmp." + dead + ".1", false);   // too recent (another machine's writer?): kept
+  make(".out.gmr.tmp." + alive + ".0", true);   // its writer is alive: kept
+  make(".other.gmr.tmp." + dead + ".0", true);  // another file's: kept until that file is written
+  make(".out.gmr.tmp." + dead + ".x", true);    // not our pattern: kept
   ASSERT_EQ(d.entries(), 5u);
   ASSERT_TRUE(write_file_atomic(d.path / "out.gmr", "whole").ok());
   EXPECT_FALSE(fs::exists(d.path / (".out.gmr.tmp." + dead + ".0")));
@@ -142,7 +142,9 @@ TEST(WriteFileAtomic, ASignalDuringAWriteRemovesItsTemporary) {
     struct sigaction to_term {};
     to_term.sa_handler = [](int) { ::raise(SIGTERM); };
     ::sigaction(SIGXFSZ, &to_term, nullptr);
-    struct rlimit limit {64 * 1024, 64 * 1024};
+    struct rlimit limit {
+      64 * 1024, 64 * 1024
+    };
     ::setrlimit(RLIMIT_FSIZE, &limit);
     (void)write_file_atomic(d.path / "out.gmr", std::string(4 << 20, 'x'));
     ::_exit(0);  // not reached: SIGTERM ends it
@@ -161,7 +163,9 @@ TEST(WriteFileAtomic, PastTheFileSizeLimitIsAnErrorWithNothingLeft) {
   const pid_t child = ::fork();
   if (child == 0) {
     remove_temporaries_on_signals();
-    struct rlimit limit {64 * 1024, 64 * 1024};
+    struct rlimit limit {
+      64 * 1024, 64 * 1024
+    };
     ::setrlimit(RLIMIT_FSIZE, &limit);
     const Status s = write_file_atomic(d.path / "out.gmr", std::string(4 << 20, 'x'));
     ::_exit(!s.ok() && s.error().message.find("File too large") != std::string::npos ? 3 : 4);
@@ -174,10 +178,35 @@ TEST(WriteFileAtomic, PastTheFileSizeLimitIsAnErrorWithNothingLeft) {
 }
 
 TEST(FormatDouble, SameBytesAsToChars) {
-  std::vector<double> values = {0.0, -0.0, 1.0, -1.0, 10, 100, 1200000, 1e15, 999999999999999.0, 1e16, 0.001, 0.0001,
-                                0.000123, 1e-5, 1.5e-6, 1e-6, 0.1, 0.3, 0.30000000000000004, 123456.789, 1.0 / 3.0,
-                                2.5e-7, 12345678901234.5, 1234567890123.45, 0.5, 5e-324, 1.7976931348623157e308,
-                                std::numeric_limits<double>::infinity(), std::nan("")};
+  std::vector<double> values = {0.0,
+                                -0.0,
+                                1.0,
+                                -1.0,
+                                10,
+                                100,
+                                1200000,
+                                1e15,
+                                999999999999999.0,
+                                1e16,
+                                0.001,
+                                0.0001,
+                                0.000123,
+                                1e-5,
+                                1.5e-6,
+                                1e-6,
+                                0.1,
+                                0.3,
+                                0.30000000000000004,
+                                123456.789,
+                                1.0 / 3.0,
+                                2.5e-7,
+                                12345678901234.5,
+                                1234567890123.45,
+                                0.5,
+                                5e-324,
+                                1.7976931348623157e308,
+                                std::numeric_limits<double>::infinity(),
+                                std::nan("")};
   std::mt19937_64 rng(99);
   for (int i = 0; i < 200000; ++i) {
     // Short decimals of every length and scale, as motion files hold them.
@@ -190,7 +219,8 @@ TEST(FormatDouble, SameBytesAsToChars) {
     values.push_back(rng() % 2 ? v : -v);
     values.push_back(std::ldexp(static_cast<double>(rng() % (1ull << 53)), static_cast<int>(rng() % 120) - 80));
     char text[32];
-    std::snprintf(text, sizeof text, "%.*f", static_cast<int>(rng() % 9), std::ldexp(static_cast<double>(rng() % 100000), -10));
+    std::snprintf(text, sizeof text, "%.*f", static_cast<int>(rng() % 9),
+                  std::ldexp(static_cast<double>(rng() % 100000), -10));
     values.push_back(std::strtod(text, nullptr));
   }
   for (double v : values) ASSERT_EQ(format_double(v), to_chars_text(v)) << std::hexfloat << v;

@@ -19,7 +19,8 @@ TEST(ComposeRotation, ListedOrderIsIntrinsic) {
   // Zrotation Xrotation Yrotation is Rz * Rx * Ry.
   const ChannelType ch[] = {ChannelType::kZrotation, ChannelType::kXrotation, ChannelType::kYrotation};
   const double v[] = {30.0, -45.0, 60.0};
-  const Eigen::Matrix3d expected = axis_rotation(Axis::kZ, 30) * axis_rotation(Axis::kX, -45) * axis_rotation(Axis::kY, 60);
+  const Eigen::Matrix3d expected =
+      axis_rotation(Axis::kZ, 30) * axis_rotation(Axis::kX, -45) * axis_rotation(Axis::kY, 60);
   EXPECT_TRUE(compose_rotation(ch, v).isApprox(expected, 1e-15));
   // A point on x rotated 90 degrees about z goes to y.
   EXPECT_TRUE((axis_rotation(Axis::kZ, 90) * Eigen::Vector3d::UnitX()).isApprox(Eigen::Vector3d::UnitY(), 1e-15));

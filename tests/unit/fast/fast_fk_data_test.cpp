@@ -30,7 +30,8 @@ std::vector<Eigen::Vector3d> by_names(const Skeleton& gs, const std::vector<Eige
                                       const Skeleton& want_skeleton) {
   const std::size_t n = gs.size();
   std::vector<int> map(want_skeleton.size());
-  for (std::size_t j = 0; j < want_skeleton.size(); ++j) map[j] = gs.find(want_skeleton.joint(static_cast<int>(j)).name);
+  for (std::size_t j = 0; j < want_skeleton.size(); ++j)
+    map[j] = gs.find(want_skeleton.joint(static_cast<int>(j)).name);
   const std::size_t frames = n == 0 ? 0 : got.size() / n;
   std::vector<Eigen::Vector3d> out(frames * want_skeleton.size());
   for (std::size_t f = 0; f < frames; ++f) {
@@ -58,11 +59,14 @@ void expect_fast_matches(const Motion& m, const Skeleton& want_skeleton, const s
   for (bool with_orientations : {false, true}) {
     std::vector<Eigen::Vector3d> frames(m.frame_count * n);
     for (std::size_t f = 0; f < m.frame_count; ++f) {
-      const FkFrameJob job{.motion = &*cm, .frame = f, .out_positions = one,
+      const FkFrameJob job{.motion = &*cm,
+                           .frame = f,
+                           .out_positions = one,
                            .out_orientations = with_orientations ? std::span<float>(ori) : std::span<float>(),
                            .workspace = ws};
       ASSERT_TRUE(job.run());
-      for (std::size_t j = 0; j < n; ++j) frames[f * n + j] = Eigen::Vector3d(one[3 * j], one[3 * j + 1], one[3 * j + 2]);
+      for (std::size_t j = 0; j < n; ++j)
+        frames[f * n + j] = Eigen::Vector3d(one[3 * j], one[3 * j + 1], one[3 * j + 2]);
     }
     SCOPED_TRACE(with_orientations ? "FkFrameJob with orientations" : "FkFrameJob");
     EXPECT_POSITIONS_NEAR(want_skeleton, by_names(m.skeleton, frames, want_skeleton), want, tolerance);
@@ -157,8 +161,9 @@ TEST_F(FastEveryBvh, SingleFrameEqualsRangeOnCmu) {
     ASSERT_TRUE(cm.ok());
     const std::size_t n = cm->joint_count();
     std::vector<float> ws(fk_workspace_size(*cm)), range(cm->frame_count() * n * 3), one(n * 3);
-    ASSERT_TRUE((FkRangeJob{.motion = &*cm, .begin = 0, .end = cm->frame_count(), .out_positions = range,
-                            .workspace = ws}.run()));
+    ASSERT_TRUE(
+        (FkRangeJob{.motion = &*cm, .begin = 0, .end = cm->frame_count(), .out_positions = range, .workspace = ws}
+             .run()));
     const float tol = static_cast<float>(1e-5 * skeleton_size(*m));
     for (std::size_t f = 0; f < cm->frame_count(); ++f) {
       ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = one, .workspace = ws}.run()));

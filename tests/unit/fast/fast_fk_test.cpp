@@ -50,7 +50,8 @@ TEST(FastLaneTails, EveryRangeOfAShortMotion) {
   for (std::size_t b = 0; b <= m.frame_count; ++b) {
     for (std::size_t e = b; e <= m.frame_count; e += 3) {
       const auto got = fast_positions(*cm, b, e);
-      const std::vector<Eigen::Vector3d> want(all.begin() + static_cast<long>(b * n), all.begin() + static_cast<long>(e * n));
+      const std::vector<Eigen::Vector3d> want(all.begin() + static_cast<long>(b * n),
+                                              all.begin() + static_cast<long>(e * n));
       SCOPED_TRACE("range " + std::to_string(b) + ":" + std::to_string(e));
       EXPECT_POSITIONS_NEAR(m.skeleton, got, want, 1e-5 * skeleton_size(m));
       EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, b, e, Layout::kJointMajor), want, 1e-5 * skeleton_size(m));
@@ -66,8 +67,12 @@ TEST(FastSingleFrame, EqualsRange) {
     const std::size_t n = m.skeleton.size();
     std::vector<float> ws(fk_workspace_size(*cm));
     std::vector<float> range(m.frame_count * n * 3), range_ori(m.frame_count * n * 9);
-    FkRangeJob job{.motion = &*cm, .begin = 0, .end = m.frame_count, .out_positions = range,
-                   .out_orientations = range_ori, .workspace = ws};
+    FkRangeJob job{.motion = &*cm,
+                   .begin = 0,
+                   .end = m.frame_count,
+                   .out_positions = range,
+                   .out_orientations = range_ori,
+                   .workspace = ws};
     ASSERT_TRUE(job.run());
     std::vector<float> one(n * 3), one_ori(n * 9), scalar(n * 3);
     for (std::size_t f = 0; f < m.frame_count; ++f) {
@@ -122,14 +127,18 @@ void expect_frame_job_matches_reference(const Motion& m, const CompiledMotion& c
   for (std::size_t f = 0; f < m.frame_count; ++f) {
     compute_frame(m, f, p, w);
     for (bool with_ori : {false, true}) {
-      ASSERT_TRUE((FkFrameJob{.motion = &cm, .frame = f, .out_positions = pos,
+      ASSERT_TRUE((FkFrameJob{.motion = &cm,
+                              .frame = f,
+                              .out_positions = pos,
                               .out_orientations = with_ori ? std::span<float>(ori) : std::span<float>(),
-                              .workspace = ws}.run()));
+                              .workspace = ws}
+                       .run()));
       for (std::size_t j = 0; j < n; ++j) {
         for (int a = 0; a < 3; ++a) EXPECT_NEAR(pos[3 * j + static_cast<std::size_t>(a)], p[j][a], 1e-4) << j;
         if (!with_ori) continue;
         for (int r = 0; r < 3; ++r) {
-          for (int c = 0; c < 3; ++c) EXPECT_NEAR(ori[9 * j + static_cast<std::size_t>(3 * r + c)], w[j](r, c), 1e-5) << j;
+          for (int c = 0; c < 3; ++c)
+            EXPECT_NEAR(ori[9 * j + static_cast<std::size_t>(3 * r + c)], w[j](r, c), 1e-5) << j;
         }
       }
     }
@@ -142,7 +151,8 @@ TEST(FastSingleFrame, TwinsJointsWithoutRotationAndPositionChannels) {
   // in both conventions: FkFrameJob's per-motion program against compute_frame.
   using enum ChannelType;
   std::vector<Joint> joints;
-  joints.push_back(make_joint("root", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
+  joints.push_back(make_joint("root", kNoParent, {1, 2, 3},
+                              {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
   joints.push_back(make_joint("a", 0, {0, 5, 0}, {kZrotation, kXrotation, kYrotation}));
   joints.push_back(make_joint("b", 0, {3, 0, 1}, {kZrotation, kXrotation, kYrotation}));  // twin of a
   joints.push_back(make_joint("c", 2, {0, 0, 4}, {kXrotation}));
@@ -182,7 +192,7 @@ TEST(FastSingleFrame, RootsAndChainsWithoutRotationChannels) {
     m.convention = conv;
     auto cm = CompiledMotion::compile(m);
     ASSERT_TRUE(cm.ok()) << cm.error().to_string();
-    EXPECT_EQ(cm->slot_count(), 3u);              // y, a (= b), c
+    EXPECT_EQ(cm->slot_count(), 3u);             // y, a (= b), c
     EXPECT_EQ(frame_program(*cm).prologue, 1u);  // x runs before any step
     expect_frame_job_matches_reference(m, *cm);
   }
@@ -195,7 +205,8 @@ TEST(FastCompile, RotationsThatAreAlwaysWholeTurnsAreNotComputed) {
   // orientations are still those of the reference.
   using enum ChannelType;
   std::vector<Joint> joints;
-  joints.push_back(make_joint("root", kNoParent, {1, 2, 3}, {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
+  joints.push_back(make_joint("root", kNoParent, {1, 2, 3},
+                              {kXposition, kYposition, kZposition, kZrotation, kXrotation, kYrotation}));
   joints.push_back(make_joint("dummy", 0, {0, 5, 0}, {kZrotation, kXrotation, kYrotation}));
   joints.push_back(make_joint("b", 1, {3, 0, 1}, {kXrotation}));
   joints.push_back(make_joint("c", 2, {0, 0, 4}, {}));
@@ -203,7 +214,8 @@ TEST(FastCompile, RotationsThatAreAlwaysWholeTurnsAreNotComputed) {
   Motion m = motion_with_twins(std::move(joints), 11, 79, /*twin=*/1, /*of=*/1);
   const auto dummy = static_cast<std::size_t>(m.skeleton.channel_offset(1));
   for (std::size_t f = 0; f < m.frame_count; ++f) {
-    for (std::size_t i = 0; i < 3; ++i) m.values[f * m.stride() + dummy + i] = 360.0 * static_cast<double>((f + i) % 5) - 720.0;
+    for (std::size_t i = 0; i < 3; ++i)
+      m.values[f * m.stride() + dummy + i] = 360.0 * static_cast<double>((f + i) % 5) - 720.0;
   }
   for (Convention conv : {Convention::kPostRotation, Convention::kPreRotation}) {
     m.convention = conv;
@@ -278,8 +290,13 @@ TEST(FastOrientations, MatchReference) {
     const std::size_t n = m.skeleton.size();
     std::vector<float> ws(fk_workspace_size(*cm)), pos(m.frame_count * n * 3), ori(m.frame_count * n * 9);
     for (Layout layout : {Layout::kFrameMajor, Layout::kJointMajor}) {
-      FkRangeJob job{.motion = &*cm, .begin = 0, .end = m.frame_count, .layout = layout, .out_positions = pos,
-                     .out_orientations = ori, .workspace = ws};
+      FkRangeJob job{.motion = &*cm,
+                     .begin = 0,
+                     .end = m.frame_count,
+                     .layout = layout,
+                     .out_positions = pos,
+                     .out_orientations = ori,
+                     .workspace = ws};
       ASSERT_TRUE(job.run());
       std::vector<Eigen::Vector3d> p(n);
       std::vector<Eigen::Matrix3d> w(n);
@@ -289,7 +306,8 @@ TEST(FastOrientations, MatchReference) {
           for (int r = 0; r < 3; ++r) {
             for (int c = 0; c < 3; ++c) {
               const std::size_t e = static_cast<std::size_t>(3 * r + c);
-              const float got = layout == Layout::kFrameMajor ? ori[(f * n + j) * 9 + e] : ori[(j * 9 + e) * m.frame_count + f];
+              const float got =
+                  layout == Layout::kFrameMajor ? ori[(f * n + j) * 9 + e] : ori[(j * 9 + e) * m.frame_count + f];
               ASSERT_NEAR(got, w[j](r, c), 1e-5) << "frame " << f << " joint " << j;
             }
           }
@@ -307,8 +325,14 @@ TEST(FastJointMajor, MatchesFrameMajorWithStride) {
   const std::size_t b = 3, e = 40, stride = 50;
   std::vector<float> ws(fk_workspace_size(*cm)), fm((e - b) * n * 3), jm(stride * n * 3, -7.0f);
   ASSERT_TRUE((FkRangeJob{.motion = &*cm, .begin = b, .end = e, .out_positions = fm, .workspace = ws}.run()));
-  ASSERT_TRUE((FkRangeJob{.motion = &*cm, .begin = b, .end = e, .layout = Layout::kJointMajor,
-                          .joint_major_stride = stride, .out_positions = jm, .workspace = ws}.run()));
+  ASSERT_TRUE((FkRangeJob{.motion = &*cm,
+                          .begin = b,
+                          .end = e,
+                          .layout = Layout::kJointMajor,
+                          .joint_major_stride = stride,
+                          .out_positions = jm,
+                          .workspace = ws}
+                   .run()));
   for (std::size_t f = 0; f < e - b; ++f) {
     for (std::size_t k = 0; k < n * 3; ++k) ASSERT_EQ(fm[f * n * 3 + k], jm[k * stride + f]);
   }
@@ -340,8 +364,8 @@ TEST(FastJobValidity, RangeJob) {
   ASSERT_TRUE(cm.ok());
   const std::size_t n = m.skeleton.size();
   std::vector<float> ws(fk_workspace_size(*cm)), pos(20 * n * 3), ori(20 * n * 9);
-  const FkRangeJob valid{.motion = &*cm, .begin = 0, .end = 20, .out_positions = pos, .out_orientations = ori,
-                         .workspace = ws};
+  const FkRangeJob valid{
+      .motion = &*cm, .begin = 0, .end = 20, .out_positions = pos, .out_orientations = ori, .workspace = ws};
   EXPECT_TRUE(valid.validate()) << valid.check().error().to_string();
   FkRangeJob job = valid;
   job.motion = nullptr;
@@ -430,7 +454,8 @@ TEST(FastAllRoots, StoredPositionsAreTheOutput) {
   const std::size_t joints = m.skeleton.size();
   for (std::size_t i = 0; i < ref.size(); ++i) {
     const float* frame = cm->stored_positions(i / joints);
-    for (int a = 0; a < 3; ++a) EXPECT_EQ(frame[(i % joints) * 3 + static_cast<std::size_t>(a)], static_cast<float>(ref[i][a]));
+    for (int a = 0; a < 3; ++a)
+      EXPECT_EQ(frame[(i % joints) * 3 + static_cast<std::size_t>(a)], static_cast<float>(ref[i][a]));
   }
   EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 0, m.frame_count), ref, 1e-6 * skeleton_size(m));
   EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 5, 17, Layout::kJointMajor),
@@ -491,15 +516,18 @@ TEST(FastDispatch, EveryCompiledTargetMatchesReference) {
       auto cm = CompiledMotion::compile(m);
       ASSERT_TRUE(cm.ok());
       EXPECT_POSITIONS_NEAR(m.skeleton, fast_positions(*cm, 1, m.frame_count),
-                            std::vector<Eigen::Vector3d>(compute_positions(m, 1, m.frame_count)), 1e-5 * skeleton_size(m));
+                            std::vector<Eigen::Vector3d>(compute_positions(m, 1, m.frame_count)),
+                            1e-5 * skeleton_size(m));
       // The one-frame kernel too (the scalar target falls back to the scalar chain).
       const std::size_t n = m.skeleton.size();
       std::vector<float> ws(fk_workspace_size(*cm)), one(n * 3), ori(n * 9);
       std::vector<Eigen::Vector3d> got(m.frame_count * n);
       for (std::size_t f = 0; f < m.frame_count; ++f) {
-        ASSERT_TRUE((FkFrameJob{.motion = &*cm, .frame = f, .out_positions = one, .out_orientations = ori,
-                                .workspace = ws}.run()));
-        for (std::size_t j = 0; j < n; ++j) got[f * n + j] = Eigen::Vector3d(one[3 * j], one[3 * j + 1], one[3 * j + 2]);
+        ASSERT_TRUE(
+            (FkFrameJob{.motion = &*cm, .frame = f, .out_positions = one, .out_orientations = ori, .workspace = ws}
+                 .run()));
+        for (std::size_t j = 0; j < n; ++j)
+          got[f * n + j] = Eigen::Vector3d(one[3 * j], one[3 * j + 1], one[3 * j + 2]);
       }
       EXPECT_POSITIONS_NEAR(m.skeleton, got, compute_positions(m), 1e-5 * skeleton_size(m));
     }

@@ -187,7 +187,8 @@ TEST(GmrbCorrupt, SkeletonAndValuesAreChecked) {
   expect_error(patched(good, count_at, std::uint8_t{9}), "at most 6");
   expect_error(patched(good, count_at + 1, std::uint8_t{6}), "unknown channel code");
   const std::size_t data_at = good.size() - m.values.size() * 8;
-  expect_error(patched(good, data_at + 8 * 3, std::numeric_limits<double>::quiet_NaN()), "value 3 of frame 0 is not finite");
+  expect_error(patched(good, data_at + 8 * 3, std::numeric_limits<double>::quiet_NaN()),
+               "value 3 of frame 0 is not finite");
 }
 
 TEST(GmrbCorrupt, NonFiniteValuesAreFoundInAnyBlockAndExtremeFiniteValuesPass) {
@@ -211,8 +212,8 @@ TEST(GmrbCorrupt, NonFiniteValuesAreFoundInAnyBlockAndExtremeFiniteValuesPass) {
     for (const double bad : {std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
                              std::numeric_limits<double>::quiet_NaN()}) {
       SCOPED_TRACE(i);
-      const std::string want = "value " + std::to_string(i % m.stride()) + " of frame " + std::to_string(i / m.stride()) +
-                               " is not finite";
+      const std::string want =
+          "value " + std::to_string(i % m.stride()) + " of frame " + std::to_string(i / m.stride()) + " is not finite";
       expect_error(patched(good, data_at + 8 * i, bad), want);
     }
   }

@@ -91,8 +91,7 @@ TEST(BvhStructure, SimpleFile) {
 TEST(BvhPitfall1Whitespace, TabsCrOnlyCrlfMixed) {
   const Motion ref = parse_ok(kSimple);
   const std::string variants[] = {
-      replace_all(std::string(kSimple), "\n", "\r\n"),
-      replace_all(std::string(kSimple), "\n", "\r"),
+      replace_all(std::string(kSimple), "\n", "\r\n"), replace_all(std::string(kSimple), "\n", "\r"),
       replace_all(replace_all(std::string(kSimple), " ", "\t \t"), "Frame Time:", "Frame Time:\t"),
       // 02_01.bvh style: CRLF in the hierarchy, LF in MOTION.
       replace_all(std::string(kSimple.substr(0, kSimple.find("MOTION"))), "\n", "\r\n") +
@@ -157,8 +156,9 @@ TEST(BvhPitfall1Numbers, EveryDecimalReadsAsFromCharsReadsIt) {
   }
   numbers.insert(numbers.end(), {"9007199254740993", "9007199254740992.5", "0.1", "123456789012345678901", "-0",
                                  "1.7976931348623157e308", "4.9e-324", "0.000000000000000000000001", "5."});
-  std::string text = "HIERARCHY\nROOT A\n{\nOFFSET 0 0 0\nCHANNELS 1 Xposition\n}\nMOTION\nFrames: " +
-                     std::to_string(numbers.size()) + "\nFrame Time: 1\n";
+  std::string text =
+      "HIERARCHY\nROOT A\n{\nOFFSET 0 0 0\nCHANNELS 1 Xposition\n}\nMOTION\nFrames: " + std::to_string(numbers.size()) +
+      "\nFrame Time: 1\n";
   for (const std::string& n : numbers) text += n + "\n";
   const Motion m = parse_ok(text);
   ASSERT_EQ(m.values.size(), numbers.size());
@@ -289,9 +289,11 @@ TEST(BvhPitfall4EndSite, EndWithoutSite) {
 // 5. 3- and 6-channel joints mixed, channels in any order, count must match.
 TEST(BvhPitfall5Channels, AnyOrderPositionsAfterRotations) {
   // pybvh_rotation_first_root: the root lists rotations before positions.
-  std::string text = replace_all(std::string(kSimple), "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
-                                 "CHANNELS 6 Zrotation Xrotation Yrotation Xposition Yposition Zposition");
-  text = replace_all(text, "CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 6 Yrotation Xposition Zrotation Yposition Xrotation Zposition");
+  std::string text =
+      replace_all(std::string(kSimple), "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+                  "CHANNELS 6 Zrotation Xrotation Yrotation Xposition Yposition Zposition");
+  text = replace_all(text, "CHANNELS 3 Zrotation Xrotation Yrotation",
+                     "CHANNELS 6 Yrotation Xposition Zrotation Yposition Xrotation Zposition");
   text = replace_all(text, "1 2 3 10 20 30 40 50 60", "10 20 30 1 2 3 40 7 50 8 60 9");
   text = replace_all(text, "4 5 6 -10 -20 -30 -40 -50 -60", "0 0 0 0 0 0 0 0 0 0 0 0");
   const Motion m = parse_ok(text);
@@ -442,8 +444,7 @@ TEST(BvhPitfall8Frames, FramesHeaderSpellings) {
   }
   EXPECT_THAT(parse_error(replace_all(std::string(kSimple), "Frames: 2", "Frames: two")).message,
               HasSubstr("frame count"));
-  EXPECT_THAT(parse_error(replace_all(std::string(kSimple), "Frames: 2", "Fames: 2")).message,
-              HasSubstr("'Frames:'"));
+  EXPECT_THAT(parse_error(replace_all(std::string(kSimple), "Frames: 2", "Fames: 2")).message, HasSubstr("'Frames:'"));
 }
 
 // 9. Frame Time 0 or missing: a warning, never a division by zero.
@@ -467,8 +468,9 @@ TEST(BvhPitfall9FrameTime, MissingWarns) {
 }
 
 TEST(BvhPitfall9FrameTime, GluedFullPrecisionAndNegative) {
-  EXPECT_EQ(parse_ok(replace_all(std::string(kSimple), "Frame Time: 0.0083333", "Frame Time:0.0417083750417")).frame_time,
-            0.0417083750417);
+  EXPECT_EQ(
+      parse_ok(replace_all(std::string(kSimple), "Frame Time: 0.0083333", "Frame Time:0.0417083750417")).frame_time,
+      0.0417083750417);
   EXPECT_THAT(parse_error(replace_all(std::string(kSimple), "Frame Time: 0.0083333", "Frame Time: -1")).message,
               HasSubstr("negative"));
   EXPECT_THAT(parse_error(replace_all(std::string(kSimple), "Frame Time: 0.0083333", "Frame Time: fast")).message,
@@ -507,7 +509,8 @@ TEST(BvhPitfall13PositionChannels, ReplaceTheOffset) {
 
 // 14. One or two rotation channels: the missing axes are 0.
 TEST(BvhPitfall14FewRotationChannels, MissingAxesAreZero) {
-  std::string text = replace_all(std::string(kSimple), "CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 2 Yrotation Xrotation");
+  std::string text =
+      replace_all(std::string(kSimple), "CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 2 Yrotation Xrotation");
   text = replace_all(text, "1 2 3 10 20 30 40 50 60", "0 0 0 0 0 0 90 45");
   text = replace_all(text, "4 5 6 -10 -20 -30 -40 -50 -60", "0 0 0 0 0 0 0 0");
   const Motion m = parse_ok(text);
@@ -749,7 +752,7 @@ TEST(BvhRealFiles, EveryBvhLoadsAndRoundTripsExactly) {
 TEST(BvhRealFiles, KnownShapes) {
   GMR_REQUIRE_DATA();
   const Motion cmu = read_bvh(test::data_file("bvh/cmu/02_01.bvh")).value();  // mixed CRLF / LF
-  EXPECT_EQ(cmu.skeleton.size(), 38u);  // 31 joints + 7 End Sites
+  EXPECT_EQ(cmu.skeleton.size(), 38u);                                        // 31 joints + 7 End Sites
   EXPECT_EQ(cmu.stride(), 96u);
   EXPECT_EQ(cmu.frame_count, 344u);
   EXPECT_EQ(cmu.frame_time, 0.0083333);

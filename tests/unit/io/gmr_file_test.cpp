@@ -99,8 +99,8 @@ TEST(GmrFormat, ReadsTheDocumentedExample) {
   compute_frame(m, 0, p);
   EXPECT_TRUE(p[1].isApprox(Eigen::Vector3d(-10, 90, 0), 1e-12));
   // LeftLeg's 30 degrees about X move LeftLeg (pre-rotation), not only its children.
-  const Eigen::Vector3d knee = Eigen::Vector3d(0, 90, 0) + Eigen::Vector3d(2, -1, 0) +
-                               axis_rotation(Axis::kX, 30) * Eigen::Vector3d(0, -9, 0);
+  const Eigen::Vector3d knee =
+      Eigen::Vector3d(0, 90, 0) + Eigen::Vector3d(2, -1, 0) + axis_rotation(Axis::kX, 30) * Eigen::Vector3d(0, -9, 0);
   EXPECT_TRUE(p[3].isApprox(knee, 1e-12));
   // Neck is a root: world = [R | t], t its position channels.
   EXPECT_TRUE(p[4].isApprox(Eigen::Vector3d(0, 0, 0), 1e-12));
@@ -195,8 +195,9 @@ TEST(GmrFormat, SoftLinkErrors) {
               HasSubstr("itself"));
   EXPECT_THAT(parse_error(replace(std::string(kExample), "\t\tCHANNELS 0\n", "\t\tSOFTLINK Hips\n")).message,
               HasSubstr("ROOT only"));
-  EXPECT_THAT(parse_error(replace(std::string(kExample), "\tSOFTLINK Spine\n", "\tSOFTLINK Spine\n\tSOFTLINK Hips\n")).message,
-              HasSubstr("second SOFTLINK"));
+  EXPECT_THAT(
+      parse_error(replace(std::string(kExample), "\tSOFTLINK Spine\n", "\tSOFTLINK Spine\n\tSOFTLINK Hips\n")).message,
+      HasSubstr("second SOFTLINK"));
 }
 
 TEST(GmrFormat, BvhOnlySyntaxIsRejected) {

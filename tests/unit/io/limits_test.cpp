@@ -32,8 +32,9 @@ TEST(FrameLimits, TheRule) {
 
 // One joint without channels: a 76-byte BVH whose only content is its frame count.
 std::string channel_less(std::string_view magic, std::string_view frames) {
-  return std::string(magic) + "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 0\n}\nMOTION\nFrames: " +
-         std::string(frames) + "\nFrame Time: 0.01\n";
+  return std::string(magic) +
+         "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n CHANNELS 0\n}\nMOTION\nFrames: " + std::string(frames) +
+         "\nFrame Time: 0.01\n";
 }
 
 TEST(FrameLimits, TextFramesWithoutChannelsAreCapped) {

@@ -92,9 +92,11 @@ TEST(DeclaredUnit, AsfLengthIsInchesOverLength) {
   EXPECT_EQ(declared_metres_per_unit(d.path / "a.bvh"), 0.0);
   ASSERT_TRUE(write_file_atomic(d.path / "t.amc", ":FULLY-SPECIFIED\n").ok());
   EXPECT_EQ(declared_metres_per_unit(d.path / "t.amc"), 0.0) << "no .asf beside it";
-  ASSERT_TRUE(write_file_atomic(d.path / "t.asf", ":version 1.10\n:name t\n:units\n  mass 1.0\n  length 0.5\n  angle deg\n"
-                                                  ":root\n  order TX TY TZ RX RY RZ\n  axis XYZ\n  position 0 0 0\n"
-                                                  "  orientation 0 0 0\n:bonedata\n:hierarchy\n  begin\n  end\n").ok());
+  ASSERT_TRUE(write_file_atomic(d.path / "t.asf",
+                                ":version 1.10\n:name t\n:units\n  mass 1.0\n  length 0.5\n  angle deg\n"
+                                ":root\n  order TX TY TZ RX RY RZ\n  axis XYZ\n  position 0 0 0\n"
+                                "  orientation 0 0 0\n:bonedata\n:hierarchy\n  begin\n  end\n")
+                  .ok());
   EXPECT_DOUBLE_EQ(declared_metres_per_unit(d.path / "t.amc"), 0.0254 / 0.5);
   if (!test::have_data() && !test::in_ci()) return;
   EXPECT_DOUBLE_EQ(declared_metres_per_unit(test::data_file("asfamc/07/07_05-walk.amc")), 0.0254 / 0.45);

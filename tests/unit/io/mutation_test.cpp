@@ -74,18 +74,26 @@ TEST(ReaderMutation, TruncatedAtEveryByte) {
 
 TEST(ReaderMutation, CorruptedBytesAndSpans) {
   GMR_REQUIRE_DATA();
-  static constexpr char kBytes[] = {'{', '}', '-', '.', 'e', 'E', '+', '\0', '\r', '\n', ' ', '\t', '9', 'J', ':',
-                                    '\x7f', '\xff', 'n', 'i'};
+  static constexpr char kBytes[] = {'{', '}',  '-', '.', 'e', 'E',    '+',    '\0', '\r', '\n',
+                                    ' ', '\t', '9', 'J', ':', '\x7f', '\xff', 'n',  'i'};
   std::mt19937 rng(20120224);
   for (const Case& c : corpus()) {
     for (int i = 0; i < (test::kSlowBuild ? 400 : 1500); ++i) {
       std::string t = c.text;
       const std::size_t at = rng() % t.size();
       switch (i % 4) {
-        case 0: t[at] = kBytes[rng() % sizeof kBytes]; break;                         // replace a byte
-        case 1: t.erase(at, 1 + rng() % 40); break;                                   // delete a span
-        case 2: t.insert(at, t.substr(rng() % t.size(), 1 + rng() % 60)); break;      // duplicate a span
-        case 3: t.insert(at, 1, kBytes[rng() % sizeof kBytes]); break;                // insert a byte
+        case 0:
+          t[at] = kBytes[rng() % sizeof kBytes];
+          break;  // replace a byte
+        case 1:
+          t.erase(at, 1 + rng() % 40);
+          break;  // delete a span
+        case 2:
+          t.insert(at, t.substr(rng() % t.size(), 1 + rng() % 60));
+          break;  // duplicate a span
+        case 3:
+          t.insert(at, 1, kBytes[rng() % sizeof kBytes]);
+          break;  // insert a byte
       }
       check_one(c.parse, t, c.name + " mutation " + std::to_string(i));
       if (HasFatalFailure()) return;

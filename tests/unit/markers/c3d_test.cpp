@@ -127,7 +127,8 @@ TEST(RealFiles, Cmu0201WaistMatchesBvhRoot) {
     const int m = find(c3d, std::string("TakeoMonday:") + n);
     ASSERT_GE(m, 0) << n;
     mean += Eigen::Vector3d(c3d.positions[c3d.index(0, m, 0)], c3d.positions[c3d.index(0, m, 1)],
-                            c3d.positions[c3d.index(0, m, 2)]) / 4.0;
+                            c3d.positions[c3d.index(0, m, 2)]) /
+            4.0;
   }
   // BVH (x, y, z) = C3D (y, z, x) x 0.45 / 25.4 (mm to CMU units of 25.4/0.45 mm).
   const double s = 0.45 / 25.4;
@@ -252,7 +253,10 @@ struct C3dBuilder {
           }
         }
         const std::int16_t word = invalid ? -1 : static_cast<std::int16_t>(0x0300 | 2);  // cameras 0x03, residual 2
-        if (floats) f32(at + 12, word); else u16(at + 6, static_cast<std::uint16_t>(word));
+        if (floats)
+          f32(at + 12, word);
+        else
+          u16(at + 6, static_cast<std::uint16_t>(word));
       }
     }
     return bytes;
@@ -286,7 +290,7 @@ TEST(ProcessorTypes, IntelMipsDecIntegerAndFloat) {
     expect_small_file(a.build(-0.5f), 0.5);  // float storage; |scale| scales residuals
     C3dBuilder b;
     b.proc = p;
-    expect_small_file(b.build(0.5f), 0.5);   // int16 storage x 0.5
+    expect_small_file(b.build(0.5f), 0.5);  // int16 storage x 0.5
   }
 }
 
@@ -353,7 +357,8 @@ TEST(Malformed, SmallC3dErrorsAreLocated) {
   s = good;
   s[16] = 2;
   EXPECT_NE(error_of(s).find("at byte 16: data section (block 2) starts before the end of the parameter section"),
-            std::string::npos) << error_of(s);
+            std::string::npos)
+      << error_of(s);
 }
 
 }  // namespace

@@ -160,7 +160,8 @@ std::vector<Vector3d> joint_track(const Motion& m, const std::string& name) {
   const int j = m.skeleton.find(name);
   std::vector<Vector3d> out;
   const auto all = compute_positions(m);
-  for (std::size_t f = 0; f < m.frame_count; ++f) out.push_back(all[f * m.skeleton.size() + static_cast<std::size_t>(j)]);
+  for (std::size_t f = 0; f < m.frame_count; ++f)
+    out.push_back(all[f * m.skeleton.size() + static_cast<std::size_t>(j)]);
   return out;
 }
 
@@ -205,7 +206,8 @@ TEST(MarkerSolve, BallJointsAreFoundExactlyFromTheMotionAlone) {
   const auto carried = carried_marker_positions(r->motion, r->carried, 123);
   for (std::size_t i = 0; i < carried.size(); ++i) {
     const std::size_t m = static_cast<std::size_t>(r->carried[i].marker_index);
-    const Vector3d measured(s.markers.positions[s.markers.index(123, m)], s.markers.positions[s.markers.index(123, m, 1)],
+    const Vector3d measured(s.markers.positions[s.markers.index(123, m)],
+                            s.markers.positions[s.markers.index(123, m, 1)],
                             s.markers.positions[s.markers.index(123, m, 2)]);
     EXPECT_LT((carried[i] - measured).norm(), 1e-6) << r->carried[i].marker;
   }
@@ -344,14 +346,14 @@ struct BoneAngle {
   std::string bone;  // "lfemur": the bone from its parent joint to it
   double median_deg = 0;
   double p95_deg = 0;
-  double ours_mm = 0;       // the bone's length, median over frames
+  double ours_mm = 0;  // the bone's length, median over frames
   double reference_mm = 0;
 };
 
 struct TakeComparison {
-  int frame_offset = 0;      // reference frame = C3D frame + frame_offset (0-based)
-  double free_scale = 0;     // similarity fit's scale, mm per AMC unit
-  double declared_scale = 0; // mm per AMC unit from the ASF
+  int frame_offset = 0;       // reference frame = C3D frame + frame_offset (0-based)
+  double free_scale = 0;      // similarity fit's scale, mm per AMC unit
+  double declared_scale = 0;  // mm per AMC unit from the ASF
   Matrix3d rotation;
   Vector3d translation;
   std::vector<JointError> errors;
@@ -388,13 +390,14 @@ void fit_similarity(const std::vector<Vector3d>& a, const std::vector<Vector3d>&
   t = ca - s * r * cb;
 }
 
-const std::vector<std::string> kComparedJoints = {"lhipjoint", "rhipjoint", "lfemur",   "rfemur",   "ltibia",  "rtibia",
-                                                  "lclavicle", "rclavicle", "lhumerus", "rhumerus", "lradius", "rradius"};
+const std::vector<std::string> kComparedJoints = {"lhipjoint", "rhipjoint", "lfemur",    "rfemur",
+                                                  "ltibia",    "rtibia",    "lclavicle", "rclavicle",
+                                                  "lhumerus",  "rhumerus",  "lradius",   "rradius"};
 
 // The bones whose directions are compared: (bone, its parent joint), in
 // cmu41's names, which are the ASF's.
 const std::vector<std::pair<std::string, std::string>> kComparedBones = {
-    {"lfemur", "lhipjoint"},  {"rfemur", "rhipjoint"},  {"ltibia", "lfemur"},     {"rtibia", "rfemur"},
+    {"lfemur", "lhipjoint"},   {"rfemur", "rhipjoint"},   {"ltibia", "lfemur"},    {"rtibia", "rfemur"},
     {"lhumerus", "lclavicle"}, {"rhumerus", "rclavicle"}, {"lradius", "lhumerus"}, {"rradius", "rhumerus"}};
 
 // What a take is compared against: a motion of the same take, its unit, and
@@ -402,8 +405,8 @@ const std::vector<std::pair<std::string, std::string>> kComparedBones = {
 // the ASF bone of that name).
 struct Reference {
   std::string file;
-  std::string asf;           // with an AMC
-  double mm_per_unit = 0;    // 0: the unit the file declares
+  std::string asf;                           // with an AMC
+  double mm_per_unit = 0;                    // 0: the unit the file declares
   std::map<std::string, std::string> names;  // cmu41 joint -> reference joint; absent: the same name
   std::optional<int> frame_offset;           // known pairing; else the best of -4..4
   std::string name_of(const std::string& ours) const {
@@ -419,10 +422,10 @@ Reference cmu_bvh_reference(const std::string& file) {
   Reference r;
   r.file = file;
   r.mm_per_unit = 25.4 / 0.45;
-  r.names = {{"lhipjoint", "LeftUpLeg"},    {"rhipjoint", "RightUpLeg"},  {"lfemur", "LeftLeg"},
-             {"rfemur", "RightLeg"},        {"ltibia", "LeftFoot"},       {"rtibia", "RightFoot"},
-             {"lclavicle", "LeftArm"},      {"rclavicle", "RightArm"},    {"lhumerus", "LeftForeArm"},
-             {"rhumerus", "RightForeArm"},  {"lradius", "LeftHand"},      {"rradius", "RightHand"}};
+  r.names = {{"lhipjoint", "LeftUpLeg"},   {"rhipjoint", "RightUpLeg"}, {"lfemur", "LeftLeg"},
+             {"rfemur", "RightLeg"},       {"ltibia", "LeftFoot"},      {"rtibia", "RightFoot"},
+             {"lclavicle", "LeftArm"},     {"rclavicle", "RightArm"},   {"lhumerus", "LeftForeArm"},
+             {"rhumerus", "RightForeArm"}, {"lradius", "LeftHand"},     {"rradius", "RightHand"}};
   return r;
 }
 
@@ -505,20 +508,22 @@ TakeComparison compare_take(const std::string& c3d, const Reference& ref) {
       if (g < 0 || g >= static_cast<long>(reference->frame_count)) continue;
       const std::size_t gi = static_cast<std::size_t>(g);
       const Vector3d u = ours_p[f * on + static_cast<std::size_t>(o)] - ours_p[f * on + static_cast<std::size_t>(op)];
-      const Vector3d v = out.rotation * (ref_p[gi * rn + static_cast<std::size_t>(r)] - ref_p[gi * rn + static_cast<std::size_t>(rp)]);
+      const Vector3d v =
+          out.rotation * (ref_p[gi * rn + static_cast<std::size_t>(r)] - ref_p[gi * rn + static_cast<std::size_t>(rp)]);
       deg.push_back(std::atan2(u.cross(v).norm(), u.dot(v)) * 180 / M_PI);
       ours_mm.push_back(u.norm());
       ref_mm.push_back(out.declared_scale * v.norm());
     }
-    out.angles.push_back({bone, quantile(deg, 0.5), quantile(deg, 0.95), quantile(ours_mm, 0.5), quantile(ref_mm, 0.5)});
+    out.angles.push_back(
+        {bone, quantile(deg, 0.5), quantile(deg, 0.95), quantile(ours_mm, 0.5), quantile(ref_mm, 0.5)});
   }
   out.solved = std::move(*solved);
   return out;
 }
 
 void report(const std::string& take, const TakeComparison& c) {
-  std::printf("%s: reference frame = C3D frame %+d; scale %.3f mm per unit declared, %.3f fitted freely\n", take.c_str(),
-              c.frame_offset, c.declared_scale, c.free_scale);
+  std::printf("%s: reference frame = C3D frame %+d; scale %.3f mm per unit declared, %.3f fitted freely\n",
+              take.c_str(), c.frame_offset, c.declared_scale, c.free_scale);
   std::printf("  %-10s %9s %9s\n", "joint", "median", "p95");
   for (const JointError& e : c.errors) std::printf("  %-10s %7.1fmm %7.1fmm\n", e.joint.c_str(), e.median_mm, e.p95_mm);
   std::printf("  %-10s %9s %9s  (angle between the bone's directions) %9s %9s (length)\n", "bone", "median", "p95",
@@ -535,8 +540,8 @@ void report(const std::string& take, const TakeComparison& c) {
   }
   std::printf("  %-10s %10s %6s %9s %9s %9s\n", "joint", "functional", "det", "prior d", "fit rms", "bone rms");
   for (const JointFit& j : c.solved.joints) {
-    std::printf("  %-10s %10s %6d %7.1fmm %7.1fmm %7.1fmm\n", j.name.c_str(), j.functional ? "yes" : "no",
-                j.determined, j.prior_distance, j.fit_rms, j.bone_rms);
+    std::printf("  %-10s %10s %6d %7.1fmm %7.1fmm %7.1fmm\n", j.name.c_str(), j.functional ? "yes" : "no", j.determined,
+                j.prior_distance, j.fit_rms, j.bone_rms);
   }
 }
 
@@ -585,8 +590,9 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
   for (std::size_t f = 0; f < m.frame_count; ++f) {
     for (std::size_t j = 0; j < m.skeleton.size(); ++j) {
       const int k = moved->skeleton.find(m.skeleton.joint(static_cast<int>(j)).name);
-      worst = std::max(worst, (before[f * m.skeleton.size() + j] -
-                               after[f * moved->skeleton.size() + static_cast<std::size_t>(k)]).norm());
+      worst = std::max(
+          worst,
+          (before[f * m.skeleton.size() + j] - after[f * moved->skeleton.size() + static_cast<std::size_t>(k)]).norm());
     }
   }
   EXPECT_LT(worst, 1e-9 * skeleton_size(m));
@@ -621,15 +627,17 @@ TEST(MarkerSolveCmu, Take02_01MatchesSubject02sLimbsInItsBvh) {
   // The premise, on subject 01: the BVH conversion keeps the ASF's limbs.
   {
     Reference bvh = cmu_bvh_reference("bvh/cmu/01_01.bvh");
-    auto amc = load_motion(test::data_file("asfamc/01/01_01.amc"), LoadOptions{.asf = test::data_file("asfamc/01/01.asf")});
+    auto amc =
+        load_motion(test::data_file("asfamc/01/01_01.amc"), LoadOptions{.asf = test::data_file("asfamc/01/01.asf")});
     auto converted = load_motion(test::data_file(bvh.file));
     ASSERT_TRUE(amc.ok() && converted.ok());
     const auto pa = compute_positions(*amc);
     const auto pb = compute_positions(*converted);
     for (const auto& [bone, parent] : kComparedBones) {
       auto length = [&](const Motion& m, const std::vector<Vector3d>& p, const std::string& x, const std::string& y) {
-        return bvh.mm_per_unit * (p[static_cast<std::size_t>(m.skeleton.find(x))] -
-                                  p[static_cast<std::size_t>(m.skeleton.find(y))]).norm();
+        return bvh.mm_per_unit *
+               (p[static_cast<std::size_t>(m.skeleton.find(x))] - p[static_cast<std::size_t>(m.skeleton.find(y))])
+                   .norm();
       };
       EXPECT_NEAR(length(*amc, pa, bone, parent), length(*converted, pb, bvh.name_of(bone), bvh.name_of(parent)), 0.5)
           << bone;
@@ -639,7 +647,8 @@ TEST(MarkerSolveCmu, Take02_01MatchesSubject02sLimbsInItsBvh) {
   // C3D's frame i is the AMC's i + 1 (Take02_01MatchesItsAmcJointByJoint).
   Reference bvh = cmu_bvh_reference("bvh/cmu/02_01.bvh");
   {
-    auto amc = load_motion(test::data_file("asfamc/02/02_01.amc"), LoadOptions{.asf = test::data_file("asfamc/02/12.asf")});
+    auto amc =
+        load_motion(test::data_file("asfamc/02/02_01.amc"), LoadOptions{.asf = test::data_file("asfamc/02/12.asf")});
     auto converted = load_motion(test::data_file(bvh.file));
     ASSERT_TRUE(amc.ok() && converted.ok());
     ASSERT_EQ(converted->frame_count, amc->frame_count + 1);

@@ -70,8 +70,8 @@ TEST(MarkerMutation, TruncatedAtManyPoints) {
 
 TEST(MarkerMutation, CorruptedBytesAndSpans) {
   GMR_REQUIRE_DATA();
-  static constexpr char kBytes[] = {'\t', ',', ' ', '\r', '\n', '-', '.', 'e', 'N', 'a', '9', '\0', '\x7f', '\xff',
-                                    '\x80', '\x01', '\x50', '\x54', '\x55', '\x56'};
+  static constexpr char kBytes[] = {'\t', ',',  ' ',    '\r',   '\n',   '-',    '.',    'e',    'N',    'a',
+                                    '9',  '\0', '\x7f', '\xff', '\x80', '\x01', '\x50', '\x54', '\x55', '\x56'};
   std::mt19937 rng(20261122);
   for (const Case& c : corpus()) {
     for (int i = 0; i < (test::kSlowBuild ? 600 : 3000); ++i) {
@@ -80,10 +80,18 @@ TEST(MarkerMutation, CorruptedBytesAndSpans) {
       const std::size_t range = c.binary && i % 3 != 0 ? std::min<std::size_t>(t.size(), 2048) : t.size();
       const std::size_t at = rng() % range;
       switch (i % 4) {
-        case 0: t[at] = kBytes[rng() % sizeof kBytes]; break;
-        case 1: t[at] = static_cast<char>(rng()); break;
-        case 2: t.erase(at, 1 + rng() % 40); break;
-        case 3: t.insert(at, t.substr(rng() % t.size(), 1 + rng() % 60)); break;
+        case 0:
+          t[at] = kBytes[rng() % sizeof kBytes];
+          break;
+        case 1:
+          t[at] = static_cast<char>(rng());
+          break;
+        case 2:
+          t.erase(at, 1 + rng() % 40);
+          break;
+        case 3:
+          t.insert(at, t.substr(rng() % t.size(), 1 + rng() % 60));
+          break;
       }
       check_one(c.parse, c.binary, t, c.name + " mutation " + std::to_string(i));
       if (HasFatalFailure()) return;

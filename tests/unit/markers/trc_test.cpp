@@ -180,17 +180,25 @@ TEST(SmallTrc, ErrorsHaveLineAndColumn) {
     auto r = parse_trc(text, "t.trc");
     return r.ok() ? std::string("ok") : r.error().to_string();
   };
-  const std::string head = "PathFileType\t4\n" "DataRate\tNumFrames\n" "10\t1\n" "Frame#\tTime\tA\t\t\n" "\t\tX1\tY1\tZ1\n";
+  const std::string head =
+      "PathFileType\t4\n"
+      "DataRate\tNumFrames\n"
+      "10\t1\n"
+      "Frame#\tTime\tA\t\t\n"
+      "\t\tX1\tY1\tZ1\n";
   EXPECT_EQ(error_of(head + "1\t0\t1\t2\t3\n"), "ok");
-  EXPECT_EQ(error_of(head + "1\t0\t1\tx2\t3\n"), "t.trc:6:7: expected a number, NaN or an empty cell for A, found 'x2'");
-  EXPECT_EQ(error_of(head + "1\t0\t1\tinf\t3\n"), "t.trc:6:7: expected a number, NaN or an empty cell for A, found 'inf'");
+  EXPECT_EQ(error_of(head + "1\t0\t1\tx2\t3\n"),
+            "t.trc:6:7: expected a number, NaN or an empty cell for A, found 'x2'");
+  EXPECT_EQ(error_of(head + "1\t0\t1\tinf\t3\n"),
+            "t.trc:6:7: expected a number, NaN or an empty cell for A, found 'inf'");
   EXPECT_EQ(error_of(head + "1\t0\t1\t2\t3\t4\n"),
             "t.trc:6:11: row has 6 values, expected 5 (Frame#, Time and 3 per marker for 1 markers)");
   EXPECT_EQ(error_of(head + "1\t0\t1\t2\n"), "t.trc:6:8: row ends after 4 of 5 values (Frame#, Time and 3 per marker)");
   EXPECT_EQ(error_of(head + "a\t0\t1\t2\t3\n"), "t.trc:6:1: expected a frame number, found 'a'");
   EXPECT_EQ(error_of(""), "t.trc:1:1: empty file: expected a TRC header (PathFileType ...)");
   EXPECT_EQ(error_of("hello\n"), "t.trc:1:1: expected 'PathFileType' at the start of a TRC file");
-  EXPECT_EQ(error_of("PathFileType\t4\nDataRate\n"), "t.trc:3:1: expected the header values line, found the end of the file");
+  EXPECT_EQ(error_of("PathFileType\t4\nDataRate\n"),
+            "t.trc:3:1: expected the header values line, found the end of the file");
   EXPECT_EQ(error_of("PathFileType\t4\nDataRate\nfast\nFrame#\tTime\n"),
             "t.trc:3:1: DataRate must be a number >= 0, found 'fast'");
   EXPECT_EQ(error_of("PathFileType\t4\nDataRate\n1\nFrame\tTime\n"),

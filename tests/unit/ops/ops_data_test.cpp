@@ -262,7 +262,8 @@ TEST(StripDummiesOnCmuFiles, RemovesOnlyZeroLengthJoints) {
       ASSERT_TRUE(stripped.ok()) << stripped.error().to_string();
       const Motion& t = *stripped;
       ASSERT_EQ(t.skeleton.size(), s.skeleton.size()) << roots;
-      for (const Joint& j : s.skeleton.joints()) EXPECT_GE(t.skeleton.find(j.name), 0) << j.name << " rooted at " << roots;
+      for (const Joint& j : s.skeleton.joints())
+        EXPECT_GE(t.skeleton.find(j.name), 0) << j.name << " rooted at " << roots;
       const auto there = positions_by_name(t, s.skeleton);
       EXPECT_LE(test::compare_positions(p, there, s.skeleton.size()).max_error, 1e-9 * l.size) << roots;
     }
@@ -363,7 +364,8 @@ TEST(EngineLocalsOnCorpus, ComposeToEveryPositionOfReRootedViews) {
       for (std::size_t f = 0; f < m->frame_count; ++f) {
         view_frame(*m, viewer, f, pos, rot, basis);
         engine_locals(m->skeleton, sources, pos, rot, all, q, t);
-        worst = std::max(worst, test::compare_positions(test::compose_locals(m->skeleton, q, t), pos, all.size()).max_error);
+        worst = std::max(worst,
+                         test::compare_positions(test::compose_locals(m->skeleton, q, t), pos, all.size()).max_error);
       }
       EXPECT_LE(worst, 1e-9 * l.size * basis.scale);
       ++views;

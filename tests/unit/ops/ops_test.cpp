@@ -65,7 +65,8 @@ TEST(ShiftRoot, StaticOffsetsStayStatic) {
       // A non-root has translation channels only if a joint of the path had them.
       if (joint.has_translation()) {
         bool source = before.has_translation();
-        for (const Joint& other : m.skeleton.joints()) source = source || (other.parent != kNoParent && other.has_translation());
+        for (const Joint& other : m.skeleton.joints())
+          source = source || (other.parent != kNoParent && other.has_translation());
         EXPECT_TRUE(source) << joint.name;
       }
     }
@@ -371,9 +372,9 @@ Motion with_dummy() {
   m.skeleton = Skeleton::create(j).value();
   m.convention = Convention::kPostRotation;
   m.frame_count = 3;
-  m.values = {1, 2, 3, 10, 20, 30, 5, 6, 7, 40, 50, 60,    //
-              0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,          //
-              -1, 2, 9, 15, 25, 35, -5, 16, 17, 4, 5, 70};
+  m.values = {1,  2, 3, 10, 20, 30, 5,  6,  7,  40, 50, 60,  //
+              0,  0, 0, 0,  0,  0,  0,  0,  0,  0,  0,  0,   //
+              -1, 2, 9, 15, 25, 35, -5, 16, 17, 4,  5,  70};
   return m;
 }
 

@@ -16,10 +16,10 @@ namespace gmr::test {
 
 struct RandomMotionOptions {
   int joints = 12;
-  int roots = 1;                  // trees in the forest
+  int roots = 1;  // trees in the forest
   std::size_t frames = 5;
   Convention convention = Convention::kPostRotation;
-  double zero_offset_chance = 0.2;     // zero-length bones (dummies)
+  double zero_offset_chance = 0.2;        // zero-length bones (dummies)
   double position_channel_chance = 0.15;  // position channels on non-roots
 };
 
@@ -64,7 +64,9 @@ inline Motion random_motion(std::uint32_t seed, const RandomMotionOptions& o = {
       const Joint& joint = m.skeleton.joint(j);
       auto v = m.frame(f).subspan(static_cast<std::size_t>(m.skeleton.channel_offset(j)), joint.channels.size());
       for (std::size_t i = 0; i < joint.channels.size(); ++i) {
-        v[i] = is_rotation(joint.channels[i]) ? angle(rng) : joint.offset[static_cast<int>(axis_of(joint.channels[i]))] + 0.1 * u(rng);
+        v[i] = is_rotation(joint.channels[i])
+                   ? angle(rng)
+                   : joint.offset[static_cast<int>(axis_of(joint.channels[i]))] + 0.1 * u(rng);
       }
     }
   }
@@ -107,16 +109,16 @@ inline ::testing::AssertionResult same_local_data(const Motion& a, const Motion&
     if (jb < 0) return ::testing::AssertionFailure() << "joint " << x.name << " missing";
     const Joint& y = b.skeleton.joint(jb);
     if (name_of(a.skeleton, x.parent) != name_of(b.skeleton, y.parent))
-      return ::testing::AssertionFailure() << x.name << ": parent " << name_of(a.skeleton, x.parent) << " vs "
-                                           << name_of(b.skeleton, y.parent);
+      return ::testing::AssertionFailure()
+             << x.name << ": parent " << name_of(a.skeleton, x.parent) << " vs " << name_of(b.skeleton, y.parent);
     if (name_of(a.skeleton, x.soft_parent) != name_of(b.skeleton, y.soft_parent))
       return ::testing::AssertionFailure() << x.name << ": soft link differs";
     for (std::size_t f = 0; f < a.frame_count; ++f) {
       const double dr = (a.local_rotation(f, ja) - b.local_rotation(f, jb)).cwiseAbs().maxCoeff();
       const double dt = (a.local_offset(f, ja) - b.local_offset(f, jb)).norm();
       if (dr > rot_tol || dt > off_tol)
-        return ::testing::AssertionFailure() << x.name << " frame " << f << ": rotation differs by " << dr
-                                             << ", offset by " << dt;
+        return ::testing::AssertionFailure()
+               << x.name << " frame " << f << ": rotation differs by " << dr << ", offset by " << dt;
     }
   }
   return ::testing::AssertionSuccess();

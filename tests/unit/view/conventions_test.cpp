@@ -81,8 +81,8 @@ TEST(Conventions, RoundTrip) {
   const Eigen::Matrix3d w = (Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()) *
                              Eigen::AngleAxisd(-1.1, Eigen::Vector3d::UnitX()))
                                 .toRotationMatrix();
-  for (ConventionPreset pr : {ConventionPreset::kUnreal, ConventionPreset::kUnity, ConventionPreset::kBlender,
-                              ConventionPreset::kGodot}) {
+  for (ConventionPreset pr :
+       {ConventionPreset::kUnreal, ConventionPreset::kUnity, ConventionPreset::kBlender, ConventionPreset::kGodot}) {
     const OutputBasis b = basis(pr, 0.0254);
     EXPECT_TRUE((b.b.transpose() * b.position(p) / b.scale).isApprox(p, 1e-15)) << preset_name(pr);
     EXPECT_TRUE((b.b.transpose() * b.orientation(w) * b.b).isApprox(w, 1e-15)) << preset_name(pr);

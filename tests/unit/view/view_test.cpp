@@ -28,7 +28,8 @@ TEST(View, DefaultIsTheSourceInWorldCoordinates) {
   const auto expected = compute_positions(src);
   EXPECT_POSITIONS_NEAR(src.skeleton, p, expected, 1e-12 * skeleton_size(src));
   const Skeleton names = view_names(v);
-  for (std::size_t j = 0; j < names.size(); ++j) EXPECT_EQ(names.joint(static_cast<int>(j)).name, src.skeleton.joint(static_cast<int>(j)).name);
+  for (std::size_t j = 0; j < names.size(); ++j)
+    EXPECT_EQ(names.joint(static_cast<int>(j)).name, src.skeleton.joint(static_cast<int>(j)).name);
 }
 
 TEST(View, RootsAndStripKeepRowsInSourceOrder) {

@@ -61,9 +61,9 @@ struct ClientOptions {
   std::string host = "127.0.0.1";
   std::uint16_t port = 7400;
   std::string client_name = "gmr-client";
-  std::chrono::milliseconds timeout{5000};  // connect, and each request's reply
+  std::chrono::milliseconds timeout{5000};      // connect, and each request's reply
   std::uint32_t max_message_bytes = 16u << 20;  // largest reply accepted
-  int receive_buffer = 0;                   // SO_RCVBUF (0: system default)
+  int receive_buffer = 0;                       // SO_RCVBUF (0: system default)
   // Requests written to the socket but not yet taken by the kernel: a request
   // that would take them past this many bytes fails at once ("write queue
   // full", ErrorKind::kResourceExhausted) instead of queueing without bound
@@ -96,7 +96,7 @@ struct ServerHello {
   std::uint32_t protocol_version = 0;
   std::string server_name;
   std::array<std::uint8_t, 16> udp_token{};  // for UDP registration (register_udp does it)
-  std::uint16_t udp_port = 0;                 // 0: no UDP
+  std::uint16_t udp_port = 0;                // 0: no UDP
   std::uint32_t max_message_bytes = 0;
   std::uint32_t heartbeat_interval_ms = 0;
   std::uint32_t idle_timeout_ms = 0;
@@ -114,7 +114,7 @@ struct MotionInfo {
   std::uint32_t joint_count = 0;
   std::uint64_t frame_count = 0;
   double frame_time = 0.0;
-  std::string source;  // the file it came from, or "builtin"
+  std::string source;            // the file it came from, or "builtin"
   double metres_per_unit = 0.0;  // the motion's unit in metres; 0: unknown
 };
 
@@ -135,9 +135,9 @@ struct ViewState {
 struct QueryResult {
   std::uint32_t skeleton_version = 0;
   std::uint32_t begin = 0, end = 0;
-  std::vector<int> joints;                     // indices, in the order of the values
-  std::vector<Eigen::Vector3d> positions;      // frame-major, joints.size() per frame
-  std::vector<Eigen::Quaterniond> orientations;  // when asked
+  std::vector<int> joints;                          // indices, in the order of the values
+  std::vector<Eigen::Vector3d> positions;           // frame-major, joints.size() per frame
+  std::vector<Eigen::Quaterniond> orientations;     // when asked
   std::vector<Eigen::Quaterniond> local_rotations;  // when asked: relative to the parent's frame
   std::vector<Eigen::Vector3d> local_translations;
 };
@@ -151,17 +151,17 @@ struct QueryOptions {
 
 struct SubscribeOptions {
   std::uint32_t start_frame = 0;
-  std::uint32_t end_frame = 0;   // exclusive; 0: the motion's end
+  std::uint32_t end_frame = 0;  // exclusive; 0: the motion's end
   bool loop = false;
   double speed = 1.0;
-  double rate_hz = 0.0;          // 0: the motion's own rate times speed
+  double rate_hz = 0.0;  // 0: the motion's own rate times speed
   bool skip_repeats = false;
   bool orientations = false;
   bool local_transforms = false;    // each joint's rotation and translation relative to its parent (engine bones)
   std::vector<std::string> joints;  // empty: every joint
   bool udp = false;
   bool float64 = false;
-  bool shared = false;           // join a running stream with the same content and schedule
+  bool shared = false;  // join a running stream with the same content and schedule
   // Frames from the server's multicast group (a shared stream sent once to
   // every subscriber on the network; the server must have --multicast-group).
   // The client joins the group on the interface it reaches the server by.
@@ -172,7 +172,7 @@ struct SubscribeOptions {
   // stall, the kernel's buffers still hold them); both are counted. Zero: no
   // bound. docs/protocol.md, "Staleness".
   std::chrono::milliseconds max_staleness{100};
-  Conventions conventions;       // an engine's axes and unit (gmr/view/conventions.h); default: the motion's own
+  Conventions conventions;  // an engine's axes and unit (gmr/view/conventions.h); default: the motion's own
 };
 
 // A frame as it arrived: ids, frame index and motion time, sequence,
@@ -191,9 +191,9 @@ struct SubscriptionInfo {
   double rate_hz = 0.0;
   std::uint64_t stream_id = 0;
   bool joined_running = false;
-  Skeleton skeleton;        // the view's, as the frames' values follow it
-  RestPose rest;            // in the subscription's conventions
-  std::string relative_to;  // empty: world coordinates
+  Skeleton skeleton;            // the view's, as the frames' values follow it
+  RestPose rest;                // in the subscription's conventions
+  std::string relative_to;      // empty: world coordinates
   std::string multicast_group;  // multicast subscriptions: "group:port" the frames come from
 };
 
@@ -222,17 +222,17 @@ struct ServerCounters {
   std::uint64_t frames_skipped_total = 0;  // all streams
   std::uint64_t queued_bytes = 0;
   std::uint64_t max_queued_bytes = 0;
-  double committed_frames_per_second = 0;  // all subscriptions' rates together
-  double send_budget = 0;                  // what the server admits (0: no limit)
-  std::uint64_t subscriptions_refused = 0; // for the send budget
-  std::uint32_t live_sources = 0;          // being published now
-  std::uint64_t live_frames_received = 0;  // published frames the server accepted
-  std::uint64_t live_frames_refused = 0;   // and refused
-  std::uint64_t multicast_frames_sent = 0; // to the multicast group, once each
-  std::uint64_t frames_sent_total = 0;     // all connections, open and closed (one request's snapshot)
-  std::uint64_t frames_dropped_total = 0;  // all connections, open and closed
-  std::uint32_t io_threads = 0;            // the server's I/O threads (0: a server that does not say)
-  std::uint32_t io_thread = 0;             // this connection's (0: the control loop)
+  double committed_frames_per_second = 0;   // all subscriptions' rates together
+  double send_budget = 0;                   // what the server admits (0: no limit)
+  std::uint64_t subscriptions_refused = 0;  // for the send budget
+  std::uint32_t live_sources = 0;           // being published now
+  std::uint64_t live_frames_received = 0;   // published frames the server accepted
+  std::uint64_t live_frames_refused = 0;    // and refused
+  std::uint64_t multicast_frames_sent = 0;  // to the multicast group, once each
+  std::uint64_t frames_sent_total = 0;      // all connections, open and closed (one request's snapshot)
+  std::uint64_t frames_dropped_total = 0;   // all connections, open and closed
+  std::uint32_t io_threads = 0;             // the server's I/O threads (0: a server that does not say)
+  std::uint32_t io_thread = 0;              // this connection's (0: the control loop)
 };
 
 // A live source this client publishes (docs/protocol.md, "Live sources").
@@ -244,9 +244,9 @@ struct PublishOptions {
 };
 
 struct Publication {
-  std::uint32_t id = 0;    // for publish_frame and unpublish
+  std::uint32_t id = 0;  // for publish_frame and unpublish
   std::string motion;
-  std::string recording;   // with PublishOptions::record: the file the server will write
+  std::string recording;  // with PublishOptions::record: the file the server will write
 };
 
 using FrameCallback = std::function<void(const ReceivedFrame&)>;
@@ -272,8 +272,8 @@ struct ClientCounters {
   std::uint64_t frames_udp = 0;
   std::uint64_t udp_incomplete_dropped = 0;  // messages with a lost fragment
   std::uint64_t udp_malformed = 0;
-  std::uint64_t frames_malformed = 0;        // frames whose values did not decode (dropped)
-  std::uint64_t frames_stale = 0;            // frames that arrived older than their max_staleness (dropped)
+  std::uint64_t frames_malformed = 0;  // frames whose values did not decode (dropped)
+  std::uint64_t frames_stale = 0;      // frames that arrived older than their max_staleness (dropped)
   // Frames of another skeleton version than the subscription's latest
   // (Subscribed, then each SkeletonChange): dropped, so a FrameCallback
   // only gets frames whose values follow the skeleton it was last given.

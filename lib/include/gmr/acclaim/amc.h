@@ -15,8 +15,8 @@
 namespace gmr {
 
 struct AmcMotion {
-  bool fully_specified = false;   // `:FULLY-SPECIFIED` was present
-  bool degrees = true;            // value unit: :DEGREES / :RADIANS, else the ASF's unit
+  bool fully_specified = false;          // `:FULLY-SPECIFIED` was present
+  bool degrees = true;                   // value unit: :DEGREES / :RADIANS, else the ASF's unit
   std::vector<long long> frame_numbers;  // as written (need not start at 1 or be gapless)
   std::size_t frame_count = 0;
   // Frame-major, skeleton.value_count() per frame, each bone's values at

@@ -24,29 +24,29 @@ std::string_view acclaim_dof_name(AcclaimDof dof);
 
 struct AsfUnits {
   double mass = 1.0;
-  double length = 1.0;    // recorded, not applied (see the top of this file)
-  bool degrees = true;    // `angle deg` (true) or `angle rad`
+  double length = 1.0;  // recorded, not applied (see the top of this file)
+  bool degrees = true;  // `angle deg` (true) or `angle rad`
 };
 
 struct AsfLimit {
-  double min = 0.0;       // may be -inf
-  double max = 0.0;       // may be +inf
+  double min = 0.0;  // may be -inf
+  double max = 0.0;  // may be +inf
 };
 
 // A bone. bones[0] of an AsfSkeleton is always the root: name "root",
 // parent -1, dofs = its `order`, axis = its `orientation`, axis_order = its
 // `axis`, position = its `position`, direction 0 and length 0.
 struct AsfBone {
-  int id = 0;                                     // `id` from the file (0 for the root)
-  std::string name;                               // as written; matched case-insensitively
-  int parent = -1;                                // index into AsfSkeleton::bones; -1 for the root
+  int id = 0;                                           // `id` from the file (0 for the root)
+  std::string name;                                     // as written; matched case-insensitively
+  int parent = -1;                                      // index into AsfSkeleton::bones; -1 for the root
   Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // global, rest pose
   double length = 0.0;
-  Eigen::Vector3d axis = Eigen::Vector3d::Zero(); // x, y, z angles in the ASF's angle unit
+  Eigen::Vector3d axis = Eigen::Vector3d::Zero();                // x, y, z angles in the ASF's angle unit
   std::array<Axis, 3> axis_order{Axis::kX, Axis::kY, Axis::kZ};  // order the axis angles apply in
-  std::vector<AcclaimDof> dofs;                   // AMC value order
-  std::vector<AsfLimit> limits;                   // as read; empty, or one per dof
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // root only
+  std::vector<AcclaimDof> dofs;                                  // AMC value order
+  std::vector<AsfLimit> limits;                                  // as read; empty, or one per dof
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();            // root only
 };
 
 struct AsfSkeleton {

@@ -35,8 +35,7 @@
 namespace gmr {
 
 // Local rotation L_b = C_b M_b C_b^-1 of bone b for one frame's AMC values.
-Eigen::Matrix3d acclaim_local_rotation(const AsfSkeleton& skeleton, const AmcMotion& motion, std::size_t frame,
-                                       int b);
+Eigen::Matrix3d acclaim_local_rotation(const AsfSkeleton& skeleton, const AmcMotion& motion, std::size_t frame, int b);
 
 // Forward kinematics of the Acclaim model (double): for every bone, the
 // position of its tip (the root: its position) and, if out_orientations is not

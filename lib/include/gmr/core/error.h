@@ -29,7 +29,7 @@ enum class ErrorKind : std::uint8_t {
 // One problem found in a file, a request or a call. line and column are
 // 1-based; 0 means "not known / not applicable".
 struct Error {
-  std::string file;     // path or a label such as "<memory>"; may be empty
+  std::string file;  // path or a label such as "<memory>"; may be empty
   int line = 0;
   int column = 0;
   std::string message;  // what was expected / what is wrong, one line
@@ -46,21 +46,33 @@ using Warnings = std::vector<Error>;
 template <class T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : v_(std::move(value)) {}          // NOLINT(google-explicit-constructor)
-  Result(Error error) : v_(std::move(error)) {}      // NOLINT(google-explicit-constructor)
+  Result(T value) : v_(std::move(value)) {}      // NOLINT(google-explicit-constructor)
+  Result(Error error) : v_(std::move(error)) {}  // NOLINT(google-explicit-constructor)
 
   bool ok() const { return v_.index() == 0; }
   explicit operator bool() const { return ok(); }
 
-  T& value() & { assert(ok()); return std::get<0>(v_); }
-  const T& value() const& { assert(ok()); return std::get<0>(v_); }
-  T&& value() && { assert(ok()); return std::get<0>(std::move(v_)); }
+  T& value() & {
+    assert(ok());
+    return std::get<0>(v_);
+  }
+  const T& value() const& {
+    assert(ok());
+    return std::get<0>(v_);
+  }
+  T&& value() && {
+    assert(ok());
+    return std::get<0>(std::move(v_));
+  }
   T* operator->() { return &value(); }
   const T* operator->() const { return &value(); }
   T& operator*() & { return value(); }
   const T& operator*() const& { return value(); }
 
-  const Error& error() const { assert(!ok()); return std::get<1>(v_); }
+  const Error& error() const {
+    assert(!ok());
+    return std::get<1>(v_);
+  }
 
  private:
   std::variant<T, Error> v_;
@@ -72,9 +84,7 @@ using Status = Result<Ok>;
 
 // Shorthands to build an Error with no location: of the given kind, or
 // kInvalidArgument.
-inline Error make_error(ErrorKind kind, std::string message) {
-  return Error{{}, 0, 0, std::move(message), kind};
-}
+inline Error make_error(ErrorKind kind, std::string message) { return Error{{}, 0, 0, std::move(message), kind}; }
 inline Error make_error(std::string message) { return make_error(ErrorKind::kInvalidArgument, std::move(message)); }
 
 }  // namespace gmr

@@ -50,7 +50,6 @@ Eigen::Matrix3d compose_rotation(std::span<const ChannelType> channels, std::spa
 // even at gimbal lock (the last angle is solved from the residual rotation).
 // `hint`, when given, picks among equivalent solutions the one closest to it
 // (angles may differ from the hint by multiples of 360 to stay continuous).
-Eigen::Vector3d decompose_euler(const Eigen::Matrix3d& R, const Axis order[3],
-                                const Eigen::Vector3d* hint = nullptr);
+Eigen::Vector3d decompose_euler(const Eigen::Matrix3d& R, const Axis order[3], const Eigen::Vector3d* hint = nullptr);
 
 }  // namespace gmr

@@ -28,7 +28,7 @@
 namespace gmr {
 
 struct NamedMotion {
-  std::string name;   // file-name friendly: "walk", "wave", ...
+  std::string name;  // file-name friendly: "walk", "wave", ...
   Motion motion;
 };
 

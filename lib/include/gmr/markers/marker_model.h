@@ -11,7 +11,8 @@
 //   part pelvis LFWT RFWT LBWT RBWT
 //   part lthigh lhipjoint LTHI LKNE
 //   joint root in pelvis at mean(LFWT, RFWT, LBWT, RBWT)
-//   joint lhipjoint parent root in pelvis centre lthigh prior local(mean(LFWT, RFWT), LFWT, mean(LBWT, RBWT), 0.72, 0.1, -0.87)
+//   joint lhipjoint parent root in pelvis centre lthigh prior local(mean(LFWT, RFWT), LFWT, mean(LBWT, RBWT), 0.72,
+//   0.1, -0.87)
 //
 // Parsing checks the model alone (names, references, order); which markers a
 // file has is checked when the model is applied (gmr/markers/marker_solve.h).
@@ -74,7 +75,7 @@ struct ModelJoint {
   // flexion of less than 90 degrees barely moves them along) take the
   // prior's coordinates.
   bool hinge = false;
-  PointExpr where;      // kAt: the position; kCentre: the prior
+  PointExpr where;  // kAt: the position; kCentre: the prior
   int line = 0;
 };
 

@@ -64,8 +64,8 @@ struct PartFit {
 
 struct JointFit {
   std::string name;
-  bool functional = false;  // found by a centre fit (else placed by its `at` expression)
-  int determined = 0;       // centre: directions (0..3) the take determined; the rest from the prior
+  bool functional = false;    // found by a centre fit (else placed by its `at` expression)
+  int determined = 0;         // centre: directions (0..3) the take determined; the rest from the prior
   double prior_distance = 0;  // centre: distance from the prior (file units)
   double fit_rms = 0;         // centre: RMS of the marker-distance residuals (file units)
   // RMS variation of the bone parent -> joint over the take (file units),
@@ -76,15 +76,15 @@ struct JointFit {
 
 // A marker carried by a joint of the motion: world = P_joint + W_joint * offset.
 struct CarriedMarker {
-  std::string marker;  // as named in the model
+  std::string marker;     // as named in the model
   int marker_index = -1;  // in the marker file
   int joint = -1;         // in the motion's skeleton
   Eigen::Vector3d offset = Eigen::Vector3d::Zero();
-  int part = -1;          // in the model
+  int part = -1;  // in the model
 };
 
 struct MarkerSolveResult {
-  Motion motion;  // pre-rotation
+  Motion motion;                 // pre-rotation
   std::vector<PartFit> parts;    // model order
   std::vector<JointFit> joints;  // model order
   std::vector<CarriedMarker> carried;

@@ -30,9 +30,9 @@ enum class Convention : std::uint8_t {
 struct Motion {
   Skeleton skeleton;
   Convention convention = Convention::kPreRotation;
-  double frame_time = 0.0;        // seconds per frame; 0 when unknown
+  double frame_time = 0.0;  // seconds per frame; 0 when unknown
   std::size_t frame_count = 0;
-  std::vector<double> values;     // frame-major: values[f * stride() + c]
+  std::vector<double> values;  // frame-major: values[f * stride() + c]
 
   std::size_t stride() const { return static_cast<std::size_t>(skeleton.channel_count()); }
   std::span<const double> frame(std::size_t f) const {

@@ -14,7 +14,7 @@ namespace gmr {
 
 // What a join found about the offset it recovered.
 struct JoinReport {
-  double offset_spread = 0.0;      // largest distance of a frame's recovered offset from their mean
+  double offset_spread = 0.0;         // largest distance of a frame's recovered offset from their mean
   bool translation_channels = false;  // true when the offset varied and became per-frame channels
 };
 // Demotes root `root` back under its soft-link parent P: per frame

@@ -24,11 +24,11 @@ namespace gmr {
 inline constexpr int kNoParent = -1;
 
 struct Joint {
-  std::string name;                       // unique in the skeleton, non-empty
-  int parent = kNoParent;                 // kNoParent for a root
-  int soft_parent = kNoParent;            // roots only: the parent a split removed
+  std::string name;                                  // unique in the skeleton, non-empty
+  int parent = kNoParent;                            // kNoParent for a root
+  int soft_parent = kNoParent;                       // roots only: the parent a split removed
   Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // static offset from the parent (roots: position)
-  std::vector<ChannelType> channels;      // listed order; rotations compose in this order
+  std::vector<ChannelType> channels;                 // listed order; rotations compose in this order
 
   bool has_rotation() const;
   bool has_translation() const;
@@ -74,8 +74,8 @@ class Skeleton {
   std::vector<Joint> joints_;
   std::vector<int> roots_;
   std::vector<int> channel_offsets_;
-  std::vector<int> depth_;  // per joint: edges up to its root
-  std::vector<int> root_;   // per joint: the root of its tree
+  std::vector<int> depth_;        // per joint: edges up to its root
+  std::vector<int> root_;         // per joint: the root of its tree
   std::vector<int> child_begin_;  // CSR: children of j are child_list_[child_begin_[j] .. child_begin_[j+1])
   std::vector<int> child_list_;
   int channel_count_ = 0;

@@ -13,8 +13,8 @@
 namespace gmr::server {
 
 struct LibraryEntry {
-  std::string name;                     // unique: path relative to the folder without extension, '/'-separated
-  std::string source;                   // the file it came from, relative to the library folder, or "builtin"
+  std::string name;                      // unique: path relative to the folder without extension, '/'-separated
+  std::string source;                    // the file it came from, relative to the library folder, or "builtin"
   std::shared_ptr<const Motion> motion;  // pre-rotation (GMR), validated
   double metres_per_unit = 0.0;          // the motion's unit in metres (conventions); 0: unknown
 };
@@ -35,8 +35,8 @@ struct LibraryLoad {
 // above either limit is rejected at load with the figures, so that no request
 // can later make the server compute or allocate on its behalf beyond them.
 struct MotionLimits {
-  std::uint64_t max_joint_frames = std::uint64_t{1} << 25;    // frames x joints (CMU: 31 joints x 1 M frames)
-  std::uint64_t max_value_bytes = std::uint64_t{512} << 20;   // frames x channels x 8
+  std::uint64_t max_joint_frames = std::uint64_t{1} << 25;   // frames x joints (CMU: 31 joints x 1 M frames)
+  std::uint64_t max_value_bytes = std::uint64_t{512} << 20;  // frames x channels x 8
 };
 // Ok, or an error with the figures and the limit passed.
 Status check_motion_limits(const Motion& m, const MotionLimits& limits);

@@ -28,35 +28,35 @@ namespace gmr::server {
 struct SessionStats {
   std::uint64_t id = 0;
   std::uint64_t frames_sent = 0;
-  std::uint64_t frames_dropped = 0;   // replaced by a newer frame before it was written, or UDP over its bound
-  std::uint64_t frames_skipped = 0;   // ticks the server skipped because it was late
-  std::uint64_t queued_bytes = 0;     // now: replies + frames waiting or being written
-  std::uint64_t max_queued_bytes = 0; // high-water mark
+  std::uint64_t frames_dropped = 0;    // replaced by a newer frame before it was written, or UDP over its bound
+  std::uint64_t frames_skipped = 0;    // ticks the server skipped because it was late
+  std::uint64_t queued_bytes = 0;      // now: replies + frames waiting or being written
+  std::uint64_t max_queued_bytes = 0;  // high-water mark
   bool udp_registered = false;
-  std::size_t io_thread = 0;          // the I/O thread its socket work runs on (0: the control loop)
+  std::size_t io_thread = 0;  // the I/O thread its socket work runs on (0: the control loop)
 };
 
 struct ServerStats {
   std::size_t connections = 0;
-  std::size_t io_threads = 0;         // threads the sockets' work runs on, the control loop included
+  std::size_t io_threads = 0;  // threads the sockets' work runs on, the control loop included
   std::size_t streams = 0;
-  std::uint64_t frames_computed = 0;  // forward-kinematics runs for streams
+  std::uint64_t frames_computed = 0;        // forward-kinematics runs for streams
   std::uint64_t frames_computed_float = 0;  // of those, by the float path (float32 streams)
   std::uint64_t fk_blocks_computed = 0;     // float path: blocks of 16 frames computed (FkBlocks)
   std::uint64_t fk_block_hits = 0;          // float path: frames read from a kept block
   std::size_t fk_block_bytes = 0;           // taken by the kept blocks
-  std::uint64_t frames_encoded = 0;   // shared encodings
-  std::uint64_t frames_skipped = 0;   // ticks skipped because the server was late, per subscriber
-  std::uint64_t udp_rejected = 0;     // datagrams that were not a valid registration or confirm
-  std::uint64_t udp_challenges = 0;   // challenges sent (one per valid registration datagram)
+  std::uint64_t frames_encoded = 0;         // shared encodings
+  std::uint64_t frames_skipped = 0;         // ticks skipped because the server was late, per subscriber
+  std::uint64_t udp_rejected = 0;           // datagrams that were not a valid registration or confirm
+  std::uint64_t udp_challenges = 0;         // challenges sent (one per valid registration datagram)
   std::uint64_t connections_refused = 0;
-  std::uint64_t hellos_refused = 0;   // unknown token, or none where one is needed
-  double committed_frames_per_second = 0;  // what all subscriptions ask for (against send_budget)
-  double send_budget = 0;                  // config.send_budget, or what --send-budget auto measured (0: none)
-  std::uint64_t subscriptions_refused = 0; // refused for the send budget
-  std::uint64_t buffered_bytes = 0;      // now: all connections' replies, frames, writes, request bodies
-  std::uint64_t max_buffered_bytes = 0;  // high-water mark of buffered_bytes
-  std::uint64_t view_bytes = 0;          // now: motion bytes views own (edited copies)
+  std::uint64_t hellos_refused = 0;         // unknown token, or none where one is needed
+  double committed_frames_per_second = 0;   // what all subscriptions ask for (against send_budget)
+  double send_budget = 0;                   // config.send_budget, or what --send-budget auto measured (0: none)
+  std::uint64_t subscriptions_refused = 0;  // refused for the send budget
+  std::uint64_t buffered_bytes = 0;         // now: all connections' replies, frames, writes, request bodies
+  std::uint64_t max_buffered_bytes = 0;     // high-water mark of buffered_bytes
+  std::uint64_t view_bytes = 0;             // now: motion bytes views own (edited copies)
   std::vector<SessionStats> sessions;
 };
 

@@ -154,8 +154,7 @@ class View {
   Result<int> joint_index(const std::string& name) const;
 
  private:
-  void replace(std::shared_ptr<const Motion> motion, int relative_to,
-               std::shared_ptr<const CompiledForm> compiled = {},
+  void replace(std::shared_ptr<const Motion> motion, int relative_to, std::shared_ptr<const CompiledForm> compiled = {},
                std::shared_ptr<const std::vector<LiveStep>> live_steps = {});
   // Runs and commits `edit`.
   Status apply(const Result<ViewEdit>& edit);

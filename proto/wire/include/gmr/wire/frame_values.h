@@ -18,8 +18,8 @@ struct FrameValues {
   std::uint64_t frame_index = 0;
   double motion_time = 0.0;
   std::uint64_t sequence = 0;
-  std::int64_t server_send_time_ns = 0;   // at encoding (system_clock ns)
-  std::int64_t server_write_time_ns = 0;  // when it was handed to the kernel (0: not stamped)
+  std::int64_t server_send_time_ns = 0;          // at encoding (system_clock ns)
+  std::int64_t server_write_time_ns = 0;         // when it was handed to the kernel (0: not stamped)
   bool float64 = false;                          // the precision it travelled in
   std::vector<Eigen::Vector3d> positions;        // one per joint sent
   std::vector<Eigen::Quaterniond> orientations;  // empty, or one per joint sent

@@ -83,7 +83,7 @@ struct DecodedBlock {
   std::uint32_t begin = 0, end = 0;
   std::vector<int> joints;
   std::vector<Eigen::Vector3d> positions;
-  std::vector<Eigen::Quaterniond> orientations;  // empty unless asked for
+  std::vector<Eigen::Quaterniond> orientations;     // empty unless asked for
   std::vector<Eigen::Quaterniond> local_rotations;  // empty unless asked for
   std::vector<Eigen::Vector3d> local_translations;
 };
