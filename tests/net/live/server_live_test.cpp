@@ -775,25 +775,32 @@ TEST(LiveReplicas, ASourcePublishedOnOneReplicaStreamsFromAnotherAndEndsWhenItsR
   watch(*sub, v2, so, w2);
   publish_frames(**pub, id, *source, 0, n, pace());
   for (Watch* w : {&w1, &w2}) {
-    // The last frame comes through NATS and replica B's fan-out: on a busy
-    // machine (a sanitizer build beside another test) that took over 5 s.
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (std::chrono::steady_clock::now() < deadline) {
+    // Until the last frame arrived, or none arrived for 3 s: the frames come
+    // through NATS and replica B's fan-out, which on a busy machine (a
+    // sanitizer build beside another test) took over 5 s.
+    std::size_t seen = 0;
+    auto quiet_since = std::chrono::steady_clock::now();
+    while (std::chrono::steady_clock::now() - quiet_since < std::chrono::seconds(3)) {
       {
         std::lock_guard lock(w->mutex);
         if (!w->indices.empty() && w->indices.back() == n - 1) break;
+        if (w->indices.size() != seen) {
+          seen = w->indices.size();
+          quiet_since = std::chrono::steady_clock::now();
+        }
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
     std::lock_guard lock(w->mutex);
     EXPECT_EQ(w->bad, 0u) << w->first_problem;
-    // A slow (sanitizer) build may drop frames for a subscriber it cannot
-    // keep up with; those are counted below, at the end.
+    ASSERT_FALSE(w->indices.empty());
+    // A slow (sanitizer) build may skip frames for a subscriber it cannot
+    // keep up with, the last one too (a live source has no later frame to
+    // replace it); those are counted below, at the end.
     if (!kSlowBuild) {
       EXPECT_GE(w->indices.size(), n * 9 / 10);
+      EXPECT_EQ(w->indices.back(), n - 1);
     }
-    ASSERT_FALSE(w->indices.empty());
-    EXPECT_EQ(w->indices.back(), n - 1);
     std::fprintf(stderr, "replica B: %zu of %zu frames, %zu positions compared, worst %.3g\n", w->indices.size(), n,
                  w->compared, w->worst);
   }
