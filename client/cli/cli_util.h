@@ -11,6 +11,7 @@
 
 #include "gmr/core/error.h"
 #include "gmr/core/file_util.h"
+#include "gmr/core/names.h"
 
 namespace gmr::cli {
 
@@ -52,6 +53,10 @@ using ::gmr::lower_extension;
 // Indentation of a joint at `depth` in a printed tree: two spaces a level up
 // to 32 levels, then "[depth N] " so a deep chain prints in linear size.
 std::string tree_indent(int depth);
+
+// Text from another program (a server's names and reasons, a beacon) as
+// printed: control, invisible and bidirectional characters escaped.
+inline std::string shown(std::string_view text) { return terminal_safe(text); }
 
 // Splits "A,B,C" into names (empty items are an error).
 std::vector<std::string> split_list(std::string_view text);

@@ -59,7 +59,7 @@ RowOrder row_order(const Skeleton& source, const Skeleton& view, const std::vect
     const auto it = std::find(joints.begin(), joints.end(), vj);
     if (vj < 0 || it == joints.end()) continue;
     Joint n;
-    n.name = j.name;
+    n.name = shown(j.name);  // printed: a server's names never reach the terminal raw
     js.push_back(std::move(n));
     o.from.push_back(static_cast<std::size_t>(it - joints.begin()));
   }
@@ -83,9 +83,9 @@ void run_ls(const ServerOptions& s) {
   std::printf("%-32s %7s %8s %8s %9s  %s\n", "motion", "joints", "frames", "fps", "seconds", "source");
   for (const auto& m : motions) {
     const double fps = m.frame_time > 0 ? 1.0 / m.frame_time : 0.0;
-    std::printf("%-32s %7u %8llu %8.2f %9.2f  %s\n", m.name.c_str(), m.joint_count,
+    std::printf("%-32s %7u %8llu %8.2f %9.2f  %s\n", shown(m.name).c_str(), m.joint_count,
                 static_cast<unsigned long long>(m.frame_count), fps, m.frame_time * static_cast<double>(m.frame_count),
-                m.source.c_str());
+                shown(m.source).c_str());
   }
 }
 
@@ -93,7 +93,7 @@ void run_ls(const ServerOptions& s) {
 void run_skeleton(const ServerOptions& s, const std::string& motion) {
   auto c = connect(s);
   const Skeleton sk = take(c->skeleton(motion));
-  std::printf("%s: %zu joints, %zu roots\n", motion.c_str(), sk.size(), sk.roots().size());
+  std::printf("%s: %zu joints, %zu roots\n", shown(motion).c_str(), sk.size(), sk.roots().size());
   for (int j = 0; j < static_cast<int>(sk.size()); ++j) {
     const Joint& jt = sk.joint(j);
     std::string channels;
@@ -101,7 +101,7 @@ void run_skeleton(const ServerOptions& s, const std::string& motion) {
       if (!channels.empty()) channels += ' ';
       channels += channel_name(ch);
     }
-    std::printf("%s%s  offset %s %s %s%s%s\n", tree_indent(sk.depth(j)).c_str(), jt.name.c_str(),
+    std::printf("%s%s  offset %s %s %s%s%s\n", tree_indent(sk.depth(j)).c_str(), shown(jt.name).c_str(),
                 format_double(jt.offset.x()).c_str(), format_double(jt.offset.y()).c_str(),
                 format_double(jt.offset.z()).c_str(), channels.empty() ? "" : "  channels ", channels.c_str());
   }
@@ -213,6 +213,7 @@ void run_stream(const StreamOptions& o) {
     std::string end_reason;
     std::uint64_t frames = 0, gaps = 0, last_sequence = 0, last_frame = 0;
     std::uint64_t dropped = 0, skipped = 0;  // from the end notice: the client was slow / the server was late
+    std::uint64_t unfit = 0;                 // frames whose values do not fit the view's joints (not printed)
     std::int64_t latency_sum_ns = 0, latency_max_ns = 0;
     std::uint64_t window_frames = 0;
     std::int64_t window_latency_sum = 0, window_latency_max = 0;
@@ -220,6 +221,7 @@ void run_stream(const StreamOptions& o) {
   auto st = std::make_shared<State>();
   RowOrder order;
   std::atomic<bool> have_order{false};
+  std::size_t values = 0;  // per frame: one per joint subscribed
   std::mutex out_mutex;
   if (!o.summary) write_positions_csv_header(std::cout);
   const auto started = std::chrono::steady_clock::now();
@@ -237,6 +239,13 @@ void run_stream(const StreamOptions& o) {
       ++st->window_frames;
       st->window_latency_sum += latency;
       st->window_latency_max = std::max(st->window_latency_max, latency);
+    }
+    if (f.positions.size() != values) {
+      // The client checks frames against the joints the server named; these
+      // are the joints this command asked for.
+      std::lock_guard lock(st->mutex);
+      ++st->unfit;
+      return;
     }
     if (!o.summary && have_order) {
       std::vector<Eigen::Vector3d> rows;
@@ -263,6 +272,7 @@ void run_stream(const StreamOptions& o) {
       for (const auto& n : so.joints) joints.push_back(v.skeleton.find(n));
     }
     order = row_order(source, v.skeleton, joints);
+    values = joints.size();
     have_order = true;
   }
   const auto sub = take(c->subscribe(v.id, so, on_frame, on_end));
@@ -292,6 +302,7 @@ void run_stream(const StreamOptions& o) {
   const auto gaps = st->gaps;
   const auto reason = st->end_reason;
   const auto dropped = st->dropped, skipped = st->skipped;
+  const auto unfit = st->unfit;
   const double avg = frames ? static_cast<double>(st->latency_sum_ns) / static_cast<double>(frames) / 1e6 : 0.0;
   const double max = static_cast<double>(st->latency_max_ns) / 1e6;
   lock.unlock();
@@ -304,11 +315,19 @@ void run_stream(const StreamOptions& o) {
     std::printf(
         "done: %llu frames (%s), %llu gaps: %llu dropped for a slow reader, %llu skipped by a late server, "
         "%llu lost in transit; latency avg %.3f ms, max %.3f ms\n",
-        static_cast<unsigned long long>(frames), reason.c_str(), static_cast<unsigned long long>(gaps),
+        static_cast<unsigned long long>(frames), shown(reason).c_str(), static_cast<unsigned long long>(gaps),
         static_cast<unsigned long long>(dropped), static_cast<unsigned long long>(skipped),
         static_cast<unsigned long long>(gaps > server_side ? gaps - server_side : 0), avg, max);
   }
   if (!std::cout) throw CommandError("cannot write to standard output");
+  // Frames the client found malformed (values that do not decode or do not
+  // fit the joints the server named) and frames that do not fit the joints
+  // asked for: the output lacks them, which is an error.
+  const std::uint64_t malformed = c->counters().frames_malformed + unfit;
+  if (malformed > 0) {
+    throw CommandError(std::to_string(malformed) + " frames from the server did not carry the " +
+                       std::to_string(values) + " joints subscribed: not printed");
+  }
 }
 
 // ---- gmr record
@@ -323,6 +342,8 @@ struct RecordOptions : PlayOptions {
 // orientation, soft-linked to its nearest recorded ancestor in the view
 // (motion_from_world_poses). A frame lost on the way (UDP) is filled with the
 // one before it, and counted.
+constexpr std::uint64_t kMaxFilledGap = 1 << 16;  // frames: 9 minutes at 120 Hz
+
 void run_record(const RecordOptions& o) {
   const std::string ext = lower_extension(o.out);
   if (ext != ".gmr" && ext != ".gmrb" && ext != ".bvh") {
@@ -342,13 +363,31 @@ void run_record(const RecordOptions& o) {
     std::vector<Eigen::Vector3d> positions;
     std::vector<Eigen::Quaterniond> orientations;
     std::uint64_t frames = 0, filled = 0, last_sequence = 0;
+    std::size_t values = 0;  // per frame, from the first frame
+    std::string problem;     // a frame that cannot be recorded ends the recording
   };
   auto st = std::make_shared<State>();
   auto on_frame = [st](const client::ReceivedFrame& f) {
     std::lock_guard lock(st->mutex);
     if (st->done) return;
     const std::size_t n = f.positions.size();
-    // A gap in the sequence: repeat the last frame so frame times stay even.
+    auto stop = [&](std::string why) {
+      st->problem = std::move(why);
+      st->done = true;
+      st->cv.notify_all();
+    };
+    if (st->frames == 0) st->values = n;
+    if (n == 0 || n != st->values || f.orientations.size() != n) {
+      return stop("frame " + std::to_string(f.frame_index) + " carries " + std::to_string(n) + " positions and " +
+                  std::to_string(f.orientations.size()) + " orientations (expected " + std::to_string(st->values) +
+                  " of each)");
+    }
+    // A gap in the sequence: repeat the last frame so frame times stay even;
+    // a jump no stream makes is the server's error, not a gap to fill.
+    if (st->frames > 0 && f.sequence > st->last_sequence && f.sequence - st->last_sequence > kMaxFilledGap) {
+      return stop("the sequence jumped from " + std::to_string(st->last_sequence) + " to " +
+                  std::to_string(f.sequence));
+    }
     for (std::uint64_t s = st->last_sequence + 1; st->frames > 0 && s < f.sequence; ++s) {
       st->positions.insert(st->positions.end(), st->positions.end() - static_cast<std::ptrdiff_t>(n),
                            st->positions.end());
@@ -386,6 +425,17 @@ void run_record(const RecordOptions& o) {
   }
   if (stopped_here) check(c->unsubscribe(sub.id));
   std::lock_guard lock(st->mutex);
+  if (!st->problem.empty()) throw CommandError("nothing recorded: " + st->problem);
+  for (const int j : sub.joints) {
+    if (j < 0 || static_cast<std::size_t>(j) >= sub.skeleton.size()) {
+      throw CommandError("nothing recorded: the server subscribed joint " + std::to_string(j) + " of a " +
+                         std::to_string(sub.skeleton.size()) + "-joint skeleton");
+    }
+  }
+  if (st->frames > 0 && st->values != sub.joints.size()) {
+    throw CommandError("nothing recorded: frames of " + std::to_string(st->values) + " joints for a subscription of " +
+                       std::to_string(sub.joints.size()));
+  }
   if (st->frames == 0)
     throw CommandError("nothing recorded: the subscription ended (" + st->end_reason + ") before a frame");
   // Names and soft links from the view: each recorded joint hangs from its
@@ -409,7 +459,7 @@ void run_record(const RecordOptions& o) {
   check(save_motion(m, o.out));
   std::fprintf(
       stderr, "recorded %llu frames of %s (%zu joints) to %s: %s%s\n", static_cast<unsigned long long>(m.frame_count),
-      o.motion.c_str(), names.size(), o.out.c_str(), st->end_reason.c_str(),
+      shown(o.motion).c_str(), names.size(), o.out.c_str(), shown(st->end_reason).c_str(),
       st->filled > 0 ? (", " + std::to_string(st->filled) + " lost frames filled with the one before").c_str() : "");
 }
 
@@ -467,14 +517,15 @@ void run_publish(const PublishCommand& o) {
       throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
     if (auto s = c->publish_frame(id, m.frame(sent % m.frame_count)); !s.ok()) {
       std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent),
-                   s.error().message.c_str());
+                   shown(s.error().message).c_str());
     }
     for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
   }
   check(c->unpublish(id));
   for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
-  std::fprintf(stderr, "published %llu frames of '%s'%s\n", static_cast<unsigned long long>(sent), po.name.c_str(),
-               publication.recording.empty() ? "" : ("; the server records them to " + publication.recording).c_str());
+  std::fprintf(
+      stderr, "published %llu frames of '%s'%s\n", static_cast<unsigned long long>(sent), po.name.c_str(),
+      publication.recording.empty() ? "" : ("; the server records them to " + shown(publication.recording)).c_str());
 }
 
 // ---- gmr discover
@@ -536,8 +587,9 @@ void run_discover(const DiscoverOptions& o) {
     seen[where] = true;
     std::string notes;
     if (b.tls()) notes += "tls ";
-    if (!b.multicast_group().empty()) notes += "multicast " + b.multicast_group();
-    std::printf("%-22s %-24s %5u %5u %5u %7u %4u  %s\n", where.c_str(), b.server_name().substr(0, 24).c_str(),
+    if (!b.multicast_group().empty()) notes += "multicast " + shown(b.multicast_group().substr(0, 64));
+    // A beacon is anyone's datagram: nothing in it reaches the terminal raw.
+    std::printf("%-22s %-24s %5u %5u %5u %7u %4u  %s\n", where.c_str(), shown(b.server_name().substr(0, 24)).c_str(),
                 b.udp_port(), b.http_port(), b.protocol_version(), b.motions(), b.live_sources(), notes.c_str());
     std::fflush(stdout);
   }

@@ -5,10 +5,29 @@
 #include <cstdio>
 #include <exception>
 #include <new>
+#include <string>
+#include <string_view>
 
 #include "cli_util.h"
 #include "gmr/core/file_util.h"
 #include "commands.h"
+
+namespace {
+
+// An error message's lines, each escaped (its line breaks are the message's own).
+std::string shown_lines(std::string_view text) {
+  std::string out;
+  for (std::size_t start = 0;;) {
+    const std::size_t end = text.find('\n', start);
+    out += gmr::cli::shown(text.substr(start, end == std::string_view::npos ? end : end - start));
+    if (end == std::string_view::npos) break;
+    out += '\n';
+    start = end + 1;
+  }
+  return out;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"gmr: General Motion Representation tools"};
@@ -27,7 +46,8 @@ int main(int argc, char** argv) {
     // Usage errors: CLI11 prints help or the problem; --help exits 0.
     return app.exit(e);
   } catch (const gmr::cli::CommandError& e) {
-    std::fprintf(stderr, "gmr: %s\n", e.what());
+    // An error may quote what a server or a file said: escaped, line by line.
+    std::fprintf(stderr, "gmr: %s\n", shown_lines(e.what()).c_str());
     return 1;
   } catch (const std::bad_alloc&) {
     // Readers bound what a file may declare (docs/gmr-format.md, "Limits"),
@@ -36,7 +56,7 @@ int main(int argc, char** argv) {
                  app.get_subcommands().empty() ? "gmr" : app.get_subcommands().front()->get_name().c_str());
     return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "gmr: %s\n", e.what());
+    std::fprintf(stderr, "gmr: %s\n", shown_lines(e.what()).c_str());
     return 1;
   }
   return 0;

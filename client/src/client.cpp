@@ -104,7 +104,12 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   });
   if (d.own_loop) {
     d.guard.emplace(d.io.get_executor());
-    d.thread = std::thread([impl = c->impl_] { impl->io.run(); });
+    std::promise<void> done;
+    d.thread_done = done.get_future();
+    d.thread = std::thread([impl = c->impl_, done = std::move(done)]() mutable {
+      impl->io.run();
+      done.set_value();
+    });
   }
   const std::string where = options.host + ":" + std::to_string(options.port);
   if (connected_future.wait_for(options.timeout) != std::future_status::ready) {
@@ -159,6 +164,9 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   // kernel caps it at net.core.rmem_max).
   if (!ec) d.udp_socket.set_option(net::socket_base::receive_buffer_size(4 << 20), ec);
   net::post(d.strand, [impl = c->impl_] {
+    // The server may have gone already (closed, reset, garbage right after
+    // its HelloReply): then the UDP socket opened above is closed here.
+    if (!impl->open) return impl->shut();
     if (impl->udp_socket.is_open()) impl->read_udp();
     impl->arm_heartbeat();
   });
@@ -180,6 +188,7 @@ void Client::close() {
     auto finished = done->get_future();
     net::post(impl_->strand, [impl = impl_, done] {
       impl->fail("closed by the client");
+      impl->shut();
       done->set_value();
     });
     if (!impl_->loop->runs_here()) finished.wait();
@@ -188,15 +197,19 @@ void Client::close() {
   if (!impl_->thread.joinable()) return;
   net::post(impl_->strand, [impl = impl_] {
     impl->fail("closed by the client");
+    impl->shut();
     impl->guard.reset();
   });
-  if (impl_->thread.joinable()) {
-    if (impl_->thread.get_id() == std::this_thread::get_id()) {
-      impl_->thread.detach();  // close() from a callback: the thread ends by itself
-    } else {
-      impl_->thread.join();
-    }
+  if (impl_->thread.get_id() == std::this_thread::get_id()) {
+    impl_->thread.detach();  // close() from a callback: the thread ends by itself
+    return;
   }
+  // Every socket is closed and every timer cancelled: the loop runs out of
+  // work at once. Should a handler still wait (a bug, or a callback that
+  // blocks), the loop is stopped after kCloseGrace rather than close()
+  // waiting for ever; what it left queued is then never run.
+  if (impl_->thread_done.wait_for(Impl::kCloseGrace) != std::future_status::ready) impl_->io.stop();
+  impl_->thread.join();
 }
 
 const ServerHello& Client::hello() const { return impl_->hello; }
@@ -319,6 +332,12 @@ Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::
   if (!r.ok()) return r.error();
   auto b = wire::decode_block(r->frames());
   if (!b.ok()) return make_error(ErrorKind::kInvalidData, "the server sent a bad frame block: " + b.error().message);
+  // The frames asked for (end 0: the one frame at begin), nothing else.
+  if (b->begin != begin || b->end != (end == 0 ? std::uint64_t{begin} + 1 : end)) {
+    return make_error(ErrorKind::kInvalidData, "the server answered frames [" + std::to_string(b->begin) + ", " +
+                                                   std::to_string(b->end) + ") to a query of [" +
+                                                   std::to_string(begin) + ", " + std::to_string(end) + ")");
+  }
   QueryResult out;
   out.skeleton_version = b->skeleton_version;
   out.begin = b->begin;

@@ -84,7 +84,9 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   udp::socket udp_socket{strand};
   udp::endpoint server_udp;
   net::steady_timer heartbeat{strand};
-  std::thread thread;  // own loop only
+  std::thread thread;             // own loop only
+  std::future<void> thread_done;  // ready when the own loop's thread left io.run()
+  static constexpr auto kCloseGrace = std::chrono::milliseconds(900);
   // Own loop: keeps run() going until close(); then the loop ends once every
   // handler has completed (never io.stop(): a handler left queued would keep
   // Impl alive).
@@ -117,6 +119,10 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     // is dropped and counted, so on_frame only sees frames of the skeleton
     // it knows. Under mutex.
     std::uint32_t skeleton_version = 0;
+    // The values each frame of that version carries (one per subscribed
+    // joint; 0: not stated, no check). A frame with another count is
+    // malformed: dropped and counted, never handed on. Under mutex.
+    std::size_t values = 0;
     // Frames that came for it, whatever became of them (under mutex), and
     // its end notice when that came before frames it counts (a UDP frame
     // can be overtaken by the TCP notice): held until they are all here or
@@ -181,7 +187,20 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   void on_answer(const pb::ServerMessage& m);
   void on_push(const pb::ServerMessage& m);
 
+  // Ends the connection once (the first reason is kept); pending requests
+  // get no reply.
   void fail(const std::string& reason);
+
+  // Why the joint indices a server gave for a subscription (Subscribed,
+  // SkeletonChanged) cannot be used with its skeleton of `skeleton_size`
+  // joints (0: none sent); empty when they can.
+  static std::string bad_joints(const google::protobuf::RepeatedField<std::uint32_t>& joints,
+                                std::size_t skeleton_size);
+  // Closes every socket and cancels every timer, whether or not fail() ran
+  // before (a socket opened after it, by connect() or a multicast join, is
+  // closed too): afterwards no handler of this client waits for anything. On
+  // the strand.
+  void shut();
 
   Result<pb::ServerMessage> call(pb::ClientMessage m, std::function<void(const pb::ServerMessage&)> on_reply = {});
 

@@ -19,6 +19,17 @@ SubscriptionEnd end_of(const pb::SubscriptionEnded& e) {
 
 }  // namespace
 
+std::string Client::Impl::bad_joints(const google::protobuf::RepeatedField<std::uint32_t>& joints,
+                                     std::size_t skeleton_size) {
+  if (skeleton_size == 0) return {};
+  for (const std::uint32_t j : joints) {
+    if (j >= skeleton_size) {
+      return "joint index " + std::to_string(j) + " of a skeleton of " + std::to_string(skeleton_size) + " joints";
+    }
+  }
+  return {};
+}
+
 void Client::Impl::on_message(const pb::ServerMessage& m, bool via_udp) {
   if (m.has_frame()) {
     if (auto sub = deliver_frame(m.frame(), via_udp)) finish_ending(m.frame().subscription_id(), sub, false);
@@ -62,7 +73,12 @@ std::shared_ptr<Client::Impl::Sub> Client::Impl::deliver_frame(const pb::Frame& 
     return sub;
   }
   auto decoded = wire::decode_frame(f);
-  if (!decoded.ok()) {
+  bool malformed = !decoded.ok();
+  if (!malformed) {
+    std::lock_guard lock(mutex);
+    malformed = sub->values != 0 && decoded->positions.size() != sub->values;
+  }
+  if (malformed) {
     std::lock_guard lock(mutex);
     ++counters.frames_malformed;
     return sub;
@@ -123,11 +139,18 @@ void Client::Impl::on_push(const pb::ServerMessage& m) {
       if (auto it = subs.find(c.subscription_id()); it != subs.end()) sub = it->second;
     }
     auto sk = wire::from_proto(c.skeleton());
-    if (sub && sk.ok()) {
+    // A change whose joints do not fit its skeleton is not taken: the frames
+    // of its version are then dropped as another skeleton's.
+    const bool usable = sk.ok() && bad_joints(c.joints(), sk->size()).empty();
+    if (sub && usable) {
       std::lock_guard lock(mutex);
       sub->skeleton_version = c.skeleton_version();
+      sub->values = c.joints_size() > 0 ? static_cast<std::size_t>(c.joints_size()) : sk->size();
+    } else if (sub) {
+      std::lock_guard lock(mutex);
+      ++counters.frames_malformed;
     }
-    if (sub && sub->on_skeleton && sk.ok()) {
+    if (sub && sub->on_skeleton && usable) {
       SkeletonChange change;
       change.subscription_id = c.subscription_id();
       change.view_id = c.view_id();

@@ -88,13 +88,25 @@ void Client::Impl::on_answer(const pb::ServerMessage& m) {
   p.promise.set_value(m);
 }
 
-void Client::Impl::fail(const std::string& reason) {
-  if (!open.exchange(false)) return;
+void Client::Impl::shut() {
   boost::system::error_code ec;
   socket.tcp().close(ec);
   udp_socket.close(ec);
   if (multicast_socket) multicast_socket->close(ec);
   heartbeat.cancel();
+  std::vector<std::shared_ptr<net::steady_timer>> timers;
+  {
+    std::lock_guard lock(mutex);
+    for (const auto& [id, sub] : subs) {
+      if (sub->ending_timer) timers.push_back(sub->ending_timer);
+    }
+  }
+  for (const auto& t : timers) t->cancel();
+}
+
+void Client::Impl::fail(const std::string& reason) {
+  if (!open.exchange(false)) return;
+  shut();
   std::map<std::uint64_t, Pending> orphans;
   {
     std::lock_guard lock(mutex);

@@ -64,23 +64,26 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
     ++impl_->subscribes_in_flight;
   }
   auto replied = std::make_shared<std::atomic<bool>>(false);
-  auto r = impl_->expect(m, pb::ServerMessage::kSubscribed,
-                         [impl = impl_.get(), sub, replied](const pb::ServerMessage& reply) {
-                           std::deque<std::pair<pb::ServerMessage, bool>> replay;
-                           {
-                             std::lock_guard lock(impl->mutex);
-                             *replied = true;
-                             --impl->subscribes_in_flight;
-                             if (reply.has_subscribed()) {
-                               sub->stream_id = reply.subscribed().stream_id();
-                               sub->skeleton_version = reply.subscribed().skeleton_version();
-                               sub->multicast = !reply.subscribed().multicast_group().empty();
-                               impl->subs[reply.subscribed().subscription_id()] = sub;
-                             }
-                             if (impl->subscribes_in_flight == 0) replay.swap(impl->early_frames);
-                           }
-                           for (auto& [frame, via_udp] : replay) impl->on_message(frame, via_udp);
-                         });
+  auto r = impl_->expect(
+      m, pb::ServerMessage::kSubscribed, [impl = impl_.get(), sub, replied](const pb::ServerMessage& reply) {
+        std::deque<std::pair<pb::ServerMessage, bool>> replay;
+        {
+          std::lock_guard lock(impl->mutex);
+          *replied = true;
+          --impl->subscribes_in_flight;
+          if (reply.has_subscribed()) {
+            const auto& sr = reply.subscribed();
+            sub->stream_id = sr.stream_id();
+            sub->skeleton_version = sr.skeleton_version();
+            sub->multicast = !sr.multicast_group().empty();
+            sub->values = sr.joints_size() > 0 ? static_cast<std::size_t>(sr.joints_size())
+                                               : static_cast<std::size_t>(sr.skeleton().joints_size());
+            impl->subs[sr.subscription_id()] = sub;
+          }
+          if (impl->subscribes_in_flight == 0) replay.swap(impl->early_frames);
+        }
+        for (auto& [frame, via_udp] : replay) impl->on_message(frame, via_udp);
+      });
   {
     std::lock_guard lock(impl_->mutex);
     if (!*replied) --impl_->subscribes_in_flight;  // timed out or lost: no reply will come
@@ -100,6 +103,10 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
     if (!sk.ok()) return make_error("the server sent an invalid skeleton: " + sk.error().message);
     info.skeleton = std::move(sk).value();
     info.rest = wire::rest_from_proto(sr.skeleton());
+    if (const std::string why = Impl::bad_joints(sr.joints(), info.skeleton.size()); !why.empty()) {
+      (void)unsubscribe(info.id);
+      return make_error(ErrorKind::kInvalidData, "the server's subscription names " + why);
+    }
   }
   info.relative_to = sr.relative_to();
   info.multicast_group = sr.multicast_group();

@@ -42,6 +42,7 @@ Status Client::Impl::join_multicast(const std::string& group) {
     return make_error("the server named a bad multicast group '" + group.substr(0, 64) + "'");
   }
   if (multicast_socket) return Ok{};  // one group per server
+  if (!open) return make_error("not connected: the connection closed before the multicast join");
   const auto local = socket.tcp().local_endpoint(ec).address();
   udp::socket s(strand);
   s.open(udp::v4(), ec);

@@ -427,6 +427,123 @@ class LiveSources(unittest.TestCase):
         self.assertEqual(e.exception.code, "BAD_REQUEST")
 
 
+class HostileServer(unittest.TestCase):
+    """A fake server that answers Hello, then misbehaves: whatever it sends,
+    the client raises GmrError (never ValueError, never unbounded memory)."""
+
+    def serve(self, after_hello):
+        """Starts a one-connection server on 127.0.0.1 that answers Hello and
+        then calls after_hello(sock, send, read); returns its port."""
+        import socket
+        import threading
+        pb = gmr_client.stream_pb2
+        wire = gmr_client._wire
+        listener = socket.socket()
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(1)
+        self.addCleanup(listener.close)
+
+        def read(sock):
+            head = sock.recv(4, socket.MSG_WAITALL)
+            (n,) = wire.LENGTH_PREFIX.unpack(head)
+            m = pb.ClientMessage()
+            m.ParseFromString(sock.recv(n, socket.MSG_WAITALL))
+            return m
+
+        def send(sock, m):
+            sock.sendall(wire.frame_message(m.SerializeToString()))
+
+        def run():
+            sock, _ = listener.accept()
+            with sock:
+                hello = read(sock)
+                r = pb.ServerMessage(request_id=hello.request_id)
+                r.hello.protocol_version = 1
+                r.hello.max_message_bytes = 0xFFFFFFFF  # says: send me anything; not a licence to buffer 4 GiB
+                r.hello.heartbeat_interval_ms = 60000
+                r.hello.idle_timeout_ms = 60000
+                send(sock, r)
+                try:
+                    after_hello(sock, lambda m: send(sock, m), lambda: read(sock))
+                    sock.recv(1)  # until the client goes
+                except OSError:
+                    pass
+
+        thread = threading.Thread(target=run, daemon=True)
+        thread.start()
+        self.addCleanup(thread.join, 5)
+        return listener.getsockname()[1]
+
+    def test_a_4_gib_message_is_refused_without_buffering_it(self):
+        def huge(sock, send, read):
+            read()  # list_motions
+            sock.sendall(b"\xff\xff\xff\xf0" + b"x" * 65536)
+
+        with gmr_client.Client(port=self.serve(huge), timeout=5) as c, self.assertRaises(gmr_client.GmrError) as e:
+            c.list_motions()
+        self.assertEqual(e.exception.code, "PROTOCOL")
+        self.assertIn("4294967280 bytes, above the limit of 16777216", str(e.exception))
+
+    def test_an_unknown_error_code_is_a_gmr_error(self):
+        def unknown(sock, send, read):
+            m = read()
+            r = gmr_client.stream_pb2.ServerMessage(request_id=m.request_id)
+            r.error.code = 999
+            r.error.message = "from the future"
+            send(r)
+
+        with gmr_client.Client(port=self.serve(unknown)) as c, self.assertRaises(gmr_client.GmrError) as e:
+            c.list_motions()
+        self.assertEqual(e.exception.code, "UNKNOWN_999")
+        self.assertIn("from the future", str(e.exception))
+
+    def test_a_subscription_naming_a_joint_past_its_skeleton_is_refused(self):
+        def bad_joints(sock, send, read):
+            m = read()
+            r = gmr_client.stream_pb2.ServerMessage(request_id=m.request_id)
+            r.subscribed.subscription_id = 7
+            r.subscribed.joints.extend([0, 1000000])
+            for k, name in enumerate(["a", "b"]):
+                j = r.subscribed.skeleton.joints.add()
+                j.name, j.parent = name, k - 1
+            send(r)
+
+        with gmr_client.Client(port=self.serve(bad_joints)) as c, self.assertRaises(gmr_client.GmrError) as e:
+            c.subscribe(1)
+        self.assertEqual(e.exception.code, "PROTOCOL")
+        self.assertIn("joint index 1000000 of a skeleton of 2 joints", str(e.exception))
+
+    def test_frames_whose_values_do_not_fit_are_dropped_and_counted(self):
+        def frames(sock, send, read):
+            m = read()
+            pb = gmr_client.stream_pb2
+            r = pb.ServerMessage(request_id=m.request_id)
+            r.subscribed.subscription_id = 7
+            r.subscribed.joints.extend([0, 1])
+            for k, name in enumerate(["a", "b"]):
+                j = r.subscribed.skeleton.joints.add()
+                j.name, j.parent = name, k - 1
+            send(r)
+            for index, joints in enumerate([0, 1, 2, 3, 2]):
+                f = pb.ServerMessage()
+                f.frame.subscription_id = 7
+                f.frame.frame_index = index
+                f.frame.sequence = index
+                f.frame.server_send_time_ns = time.time_ns()
+                f.frame.positions_f64.extend([float(v) for v in range(3 * joints)])
+                send(f)
+            end = pb.ServerMessage()
+            end.subscription_ended.subscription_id = 7
+            end.subscription_ended.frames_sent = 5
+            send(end)
+
+        with gmr_client.Client(port=self.serve(frames)) as c:
+            sub = c.subscribe(1, max_staleness_ms=0)
+            got = list(sub)
+        self.assertEqual([f.frame_index for f in got], [2, 4])
+        self.assertEqual(sub.frames_malformed, 3)
+
+
 class RealFiles(unittest.TestCase):
     """A CMU BVH and a CMU ASF/AMC take served from a folder: every frame of
     the query equals `gmr positions` with the same roots, viewpoint and

@@ -42,12 +42,23 @@ from .values import (ConventionsLike, GmrError, MotionInfo, Publication, QueryRe
 
 PROTOCOL_VERSION = 1
 DEFAULT_PORT = 7400
-_DEFAULT_MAX_MESSAGE_BYTES = 4 << 20
+# The largest message this client takes from a server, as the C++ client's
+# ClientOptions::max_message_bytes; a server's HelloReply never raises it.
+_DEFAULT_MAX_MESSAGE_BYTES = 16 << 20
+
+
+def _code_name(code: int) -> str:
+    """An error code's name without its prefix; one this client does not know
+    (a newer or a hostile server) as UNKNOWN_<number>, never a ValueError."""
+    try:
+        return pb.ErrorCode.Name(code).replace("ERROR_CODE_", "")
+    except ValueError:
+        return f"UNKNOWN_{code}"
 
 
 class Client:
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *, name: str = "gmr-python",
-                 token: str = "", timeout: float = 5.0):
+                 token: str = "", timeout: float = 5.0, max_message_bytes: int = _DEFAULT_MAX_MESSAGE_BYTES):
         self.timeout = timeout
         self._next_request = 1
         self._replies = {}
@@ -56,7 +67,7 @@ class Client:
         self._udp = None
         self._udp_registered = False
         self._reassembler = _wire.Reassembler()
-        self._max_message = _DEFAULT_MAX_MESSAGE_BYTES
+        self._max_message = max_message_bytes
         self.frames_malformed = 0
         self._awaiting = set()  # request ids a call waits for; other replies are errors to keep
         self._errors = collections.deque(maxlen=64)  # refusals of requests that get no reply
@@ -78,8 +89,6 @@ class Client:
         # The server's clock minus ours, from the round trip (0 if it does not
         # say): frames' ages are measured with it.
         self.clock_offset_ns = self.hello.server_time_ns - (sent + answered) // 2 if self.hello.server_time_ns else 0
-        if self.hello.max_message_bytes:
-            self._max_message = self.hello.max_message_bytes
 
     # ------------------------------------------------------------ lifetime
 
@@ -343,7 +352,7 @@ class Client:
         r = self._replies.pop(m.request_id)
         which = r.WhichOneof("body")
         if which == "error":
-            raise GmrError(pb.ErrorCode.Name(r.error.code).replace("ERROR_CODE_", ""), r.error.message)
+            raise GmrError(_code_name(r.error.code), r.error.message)
         if which != expect:
             raise GmrError("PROTOCOL", f"expected a '{expect}' reply, got '{which}'")
         return getattr(r, which)
@@ -472,8 +481,8 @@ class Client:
         elif msg.request_id in self._awaiting:
             self._replies[msg.request_id] = msg
         elif msg.request_id and which == "error":  # a request that gets no reply was refused
-            self._errors.append(f"{pb.ErrorCode.Name(msg.error.code).replace('ERROR_CODE_', '')}: {msg.error.message}")
+            self._errors.append(f"{_code_name(msg.error.code)}: {msg.error.message}")
         elif msg.request_id:
             pass  # a reply nobody waits for any more (its request timed out)
         elif which == "error":  # an error about no request: the server is closing the connection
-            raise GmrError(pb.ErrorCode.Name(msg.error.code).replace("ERROR_CODE_", ""), msg.error.message)
+            raise GmrError(_code_name(msg.error.code), msg.error.message)

@@ -10,7 +10,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from .values import Frame, Skeleton
+from .values import Frame, GmrError, Skeleton
 
 _MAX_QUEUED_FRAMES = 1024  # per subscription; older frames give way (counted)
 _END_GRACE_S = 0.1  # how long an end notice waits for the frames it counts (UDP)
@@ -20,6 +20,20 @@ def _frames_to_come(end: dict) -> int:
     """How many frames an ended subscription's client gets: those the server
     counted against it, less those it dropped or skipped."""
     return max(0, end["frames_sent"] - end["frames_dropped"] - end["frames_skipped"])
+
+
+def _check_joints(joints: np.ndarray, skeleton: Optional[Skeleton]) -> None:
+    """A server's joint indices must name joints of its skeleton."""
+    if skeleton is not None and len(joints) and (joints.min() < 0 or joints.max() >= len(skeleton.names)):
+        bad = int(joints.max() if joints.max() >= len(skeleton.names) else joints.min())
+        raise GmrError("PROTOCOL", f"joint index {bad} of a skeleton of {len(skeleton.names)} joints")
+
+
+def _values_per_frame(joints: np.ndarray, skeleton: Optional[Skeleton]) -> int:
+    """The positions each frame carries: one per subscribed joint (0: unknown)."""
+    if len(joints):
+        return len(joints)
+    return len(skeleton.names) if skeleton is not None else 0
 
 
 class Subscription:
@@ -37,11 +51,15 @@ class Subscription:
         self.id = reply.subscription_id
         self.view_id = reply.view_id
         self.skeleton_version = reply.skeleton_version
-        self.joints = np.array(reply.joints, dtype=np.int32)
+        skeleton = Skeleton.from_proto(reply.skeleton) if reply.HasField("skeleton") else None
+        joints = np.array(reply.joints, dtype=np.int64)
+        _check_joints(joints, skeleton)
+        self.joints = joints.astype(np.int32)
         self.rate_hz = reply.rate_hz
         self.stream_id = reply.stream_id
         self.joined_running = reply.joined_running
-        self.skeleton = Skeleton.from_proto(reply.skeleton) if reply.HasField("skeleton") else None
+        self.skeleton = skeleton
+        self._values = _values_per_frame(self.joints, self.skeleton)
         self.relative_to = reply.relative_to
         self.ended = None  # dict(reason, frames_sent, frames_dropped, frames_skipped) once ended
         self.skeleton_changes = 0
@@ -49,6 +67,7 @@ class Subscription:
         self.frames_stale = 0       # frames that arrived older than max_staleness (dropped)
         self.max_age_ns = 0         # 0: no staleness bound
         self.frames_other_skeleton = 0  # frames of another skeleton version than `skeleton_version` (dropped)
+        self.frames_malformed = 0  # frames whose values do not fit the subscribed joints (dropped)
         self.arrived = 0  # frames that came for it, whatever became of them
         # The end notice, held while frames it counts are still on their way
         # (a UDP frame can be overtaken by the TCP notice), until they come or
@@ -61,15 +80,22 @@ class Subscription:
         if frame.skeleton_version != self.skeleton_version:
             self.frames_other_skeleton += 1
             return
+        if self._values and len(frame.positions) != self._values:
+            self.frames_malformed += 1
+            return
         if len(self._frames) >= _MAX_QUEUED_FRAMES:
             self._frames.popleft()
             self.frames_overflowed += 1
         self._frames.append(frame)
 
     def _skeleton_changed(self, c) -> None:
+        skeleton = Skeleton.from_proto(c.skeleton)
+        joints = np.array(c.joints, dtype=np.int64)
+        _check_joints(joints, skeleton)
         self.skeleton_version = c.skeleton_version
-        self.skeleton = Skeleton.from_proto(c.skeleton)
-        self.joints = np.array(c.joints, dtype=np.int32)
+        self.skeleton = skeleton
+        self.joints = joints.astype(np.int32)
+        self._values = _values_per_frame(self.joints, self.skeleton)
         self.relative_to = c.relative_to
         self.skeleton_changes += 1
         kept = [f for f in self._frames if f.skeleton_version == self.skeleton_version]
@@ -172,7 +198,11 @@ class Subscriptions:
     def on_skeleton_changed(self, c) -> None:
         sub = self._subs.get(c.subscription_id)
         if sub is not None:
-            sub._skeleton_changed(c)
+            try:
+                sub._skeleton_changed(c)
+            except GmrError:
+                # Not taken: the frames of its version are dropped as another skeleton's.
+                sub.frames_malformed += 1
 
     def expire_endings(self) -> None:
         """Ends the subscriptions whose held end notice's grace is over."""

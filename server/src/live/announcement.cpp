@@ -7,6 +7,8 @@
 #include <string_view>
 
 #include "gmr/wire/convert.h"
+#include "gmr/core/names.h"
+#include "transport/net.h"
 #include "streams/stream.h"
 
 namespace gmr::server {
@@ -15,28 +17,27 @@ namespace {
 
 constexpr std::size_t kMaxLiveNameBytes = 200;
 
-// Why `name` cannot name a motion (empty: it can).
-std::string bad_name(std::string_view name) {
-  if (name.empty()) return "a live source needs a name";
-  if (name.size() > kMaxLiveNameBytes) {
-    return "a name of " + std::to_string(name.size()) + " bytes; at most " + std::to_string(kMaxLiveNameBytes);
-  }
-  for (const unsigned char c : name) {
-    if (c < 0x20 || c == 0x7f) return "the name has a control character";
-  }
-  return {};
-}
-
 }  // namespace
 
 std::variant<Skeleton, Refusal> check_announcement(const pb::Publish& r, const ServerConfig& cfg) {
-  if (const std::string why = bad_name(r.name()); !why.empty()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, why};
+  if (r.name().empty()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, "a live source needs a name"};
+  if (const std::string why = name_problem(r.name(), kMaxLiveNameBytes); !why.empty()) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "source name " + printable(r.name(), 64) + ": " + why};
+  }
   if (static_cast<std::size_t>(r.skeleton().joints_size()) > cfg.max_live_joints) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "a skeleton of " + std::to_string(r.skeleton().joints_size()) +
                                                           " joints; live sources have at most " +
                                                           std::to_string(cfg.max_live_joints)};
   }
   if (r.skeleton().joints_size() == 0) return Refusal{pb::ERROR_CODE_BAD_REQUEST, "the skeleton has no joints"};
+  // Joint names reach every subscriber's screen: the same rule as source names.
+  for (int j = 0; j < r.skeleton().joints_size(); ++j) {
+    const std::string& name = r.skeleton().joints(j).name();
+    if (const std::string why = name_problem(name, kMaxLiveNameBytes); !why.empty()) {
+      return Refusal{pb::ERROR_CODE_BAD_REQUEST,
+                     "joint " + std::to_string(j) + " name " + printable(name, 64) + ": " + why};
+    }
+  }
   auto skeleton = wire::from_proto(r.skeleton());
   if (!skeleton.ok()) {
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "the skeleton of '" + r.name() + "': " + skeleton.error().message};

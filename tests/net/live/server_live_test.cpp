@@ -548,6 +548,19 @@ TEST(LivePublish, BadSkeletonsAndFramesGetErrorsAndNeverReachSubscribers) {
     s2.mutable_joints(1)->set_parent(1000);
     bad.push_back({"parent out of range", "x", s2, 0.01, pb::ERROR_CODE_BAD_REQUEST, "parent"});
   }
+  {
+    // Joint names reach every subscriber's terminal: the source names' rule.
+    pb::Skeleton s2 = good;
+    s2.mutable_joints(2)->set_name("Spine\x1b[2J\x07");
+    bad.push_back({"a joint name with ESC", "x", s2, 0.01, pb::ERROR_CODE_BAD_REQUEST,
+                   "joint 2 name \"Spine\\x1b[2J\\x07\": the name has a control character (U+001B"});
+    s2.mutable_joints(2)->set_name("Spine\nframe,Head,0,0,0");
+    bad.push_back({"a joint name with a line break", "x", s2, 0.01, pb::ERROR_CODE_BAD_REQUEST, "(U+000A"});
+  }
+  bad.push_back({"a zero-width space in the source name", "walk\xE2\x80\x8B", good, 0.01, pb::ERROR_CODE_BAD_REQUEST,
+                 "invisible or look-alike character (U+200B"});
+  bad.push_back({"a right-to-left override in the source name", "\xE2\x80\xAEklaw", good, 0.01,
+                 pb::ERROR_CODE_BAD_REQUEST, "(U+202E"});
   bad.push_back({"no joints", "x", pb::Skeleton{}, 0.01, pb::ERROR_CODE_BAD_REQUEST, "no joints"});
   bad.push_back({"no name", "", good, 0.01, pb::ERROR_CODE_BAD_REQUEST, "name"});
   bad.push_back({"a library motion's name", "walk", good, 0.01, pb::ERROR_CODE_FAILED_PRECONDITION, "already served"});
