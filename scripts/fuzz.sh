@@ -19,7 +19,7 @@ cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_CO
 cmake --build "$BUILD" -j "$JOBS" --target gmr_fuzzers
 
 harnesses=("$@")
-[ ${#harnesses[@]} -eq 0 ] && harnesses=(bvh gmr gmrb asf amc c3d trc csv model wire requests)
+[ ${#harnesses[@]} -eq 0 ] && harnesses=(bvh gmr gmrb asf amc c3d trc csv model wire requests client)
 if [ ! -d "$DATA" ]; then
   if [ "${CI:-}" = true ]; then echo "fuzz: $DATA is missing (needed for the seed corpora in CI)" >&2; exit 1; fi
   echo "fuzz: $DATA not found: starting from empty corpora" >&2

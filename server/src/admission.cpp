@@ -13,7 +13,7 @@ Admission::Admission(const ServerConfig& cfg)
 
 std::string Admission::admit(const std::string& address) {
   if (cfg_.max_connections_per_address != 0) {
-    auto it = per_address_.find(address);
+    auto it = per_address_.find(address_group(address));
     if (it != per_address_.end() && it->second >= cfg_.max_connections_per_address) {
       return "the server's limit of " + std::to_string(cfg_.max_connections_per_address) +
              " connections from one address (--max-connections-per-address)";
@@ -45,7 +45,7 @@ Admission::Entry& Admission::add(const std::shared_ptr<Outbox>& connection, std:
   auto& entry = connections_[connection->id()];
   entry = Entry{connection, std::move(session), address};
   pending_hello_[connection->id()] = connection;
-  ++per_address_[address];
+  ++per_address_[address_group(address)];
   ++accepted_[connection->transport()];
   return entry;
 }
@@ -55,7 +55,9 @@ std::optional<Admission::Entry> Admission::remove(std::uint64_t id) {
   if (it == connections_.end()) return std::nullopt;
   Entry entry = std::move(it->second);
   if (auto c = entry.connection.lock()) closed_counters_[c->transport()].add_totals(c->counters());
-  if (auto n = per_address_.find(entry.address); n != per_address_.end() && --n->second == 0) per_address_.erase(n);
+  if (auto n = per_address_.find(address_group(entry.address)); n != per_address_.end() && --n->second == 0) {
+    per_address_.erase(n);
+  }
   connections_.erase(it);
   pending_hello_.erase(id);
   return entry;
@@ -120,6 +122,41 @@ bool Admission::hello_refused(std::uint64_t& suppressed) {
   ++hellos_refused_;
   return hello_log_.allow(suppressed);
 }
+
+std::optional<Clock::duration> Admission::auth_wait(const std::string& address) const {
+  auto it = auth_failures_.find(address_group(address));
+  if (it == auth_failures_.end()) return std::nullopt;
+  const auto now = Clock::now();
+  if (it->second.until <= now) return std::nullopt;
+  return it->second.until - now;
+}
+
+void Admission::auth_failed(const std::string& address) {
+  const auto now = Clock::now();
+  const std::string group = address_group(address);
+  if (auth_failures_.size() >= kMaxAuthAddresses && !auth_failures_.contains(group)) {
+    // Forget the addresses whose wait is over (a long quiet one starts
+    // afresh); should all still wait, the one waiting least.
+    std::erase_if(auth_failures_, [&](const auto& e) { return e.second.until + kAuthForgetAfter <= now; });
+    if (auth_failures_.size() >= kMaxAuthAddresses) {
+      auto least = std::min_element(auth_failures_.begin(), auth_failures_.end(),
+                                    [](const auto& a, const auto& b) { return a.second.until < b.second.until; });
+      auth_failures_.erase(least);
+    }
+  }
+  AuthFailures& f = auth_failures_[group];
+  if (f.until + kAuthForgetAfter <= now) f.failures = 0;  // quiet for long: a fresh start
+  ++f.failures;
+  if (f.failures > kFreeAuthFailures) {
+    const auto doublings = std::min<std::uint32_t>(f.failures - kFreeAuthFailures - 1, 10);
+    const auto wait = std::min<Clock::duration>(kFirstAuthWait * (1 << doublings), kLongestAuthWait);
+    f.until = now + wait;
+  } else {
+    f.until = now;
+  }
+}
+
+void Admission::auth_succeeded(const std::string& address) { auth_failures_.erase(address_group(address)); }
 
 std::optional<std::string> Admission::commit_rate(double rate_hz, std::uint64_t rate_mhz) {
   if (cfg_.send_budget > 0 && static_cast<double>(committed_mhz_ + rate_mhz) > cfg_.send_budget * 1000.0) {

@@ -86,6 +86,20 @@ class Admission {
   // `suppressed` says how many were not).
   bool hello_refused(std::uint64_t& suppressed);
   std::uint64_t hellos_refused() const { return hellos_refused_; }
+  // Refused Hellos by address (IPv6 by /64, address_group): the first
+  // kFreeAuthFailures cost nothing; after them each makes the address wait
+  // before its next Hello is checked at all, 250 ms doubling up to 30 s (a
+  // token guesser gets a few hundred tries an hour, not 9,000 a second). A
+  // Hello that passes clears the address; one quiet for a minute after its
+  // wait starts afresh. How long `address` must still wait (nullopt: none).
+  std::optional<Clock::duration> auth_wait(const std::string& address) const;
+  void auth_failed(const std::string& address);
+  void auth_succeeded(const std::string& address);
+  static constexpr std::uint32_t kFreeAuthFailures = 5;
+  static constexpr Clock::duration kFirstAuthWait = std::chrono::milliseconds(250);
+  static constexpr Clock::duration kLongestAuthWait = std::chrono::seconds(30);
+  static constexpr Clock::duration kAuthForgetAfter = std::chrono::seconds(60);
+  static constexpr std::size_t kMaxAuthAddresses = 4096;
 
   // --- The send budget (docs/protocol.md, "Admission") --------------------
   // Commits `rate_hz` (in millihertz, `rate_mhz`) of frames per second, or
@@ -117,6 +131,11 @@ class Admission {
   LogLimiter refusal_log_{5, std::chrono::seconds(10)};
   std::uint64_t hellos_refused_ = 0;
   LogLimiter hello_log_{5, std::chrono::seconds(10)};
+  struct AuthFailures {
+    std::uint32_t failures = 0;
+    Clock::time_point until{};  // no Hello is checked before
+  };
+  std::map<std::string, AuthFailures> auth_failures_;  // by address_group, at most kMaxAuthAddresses
   // Frames per second the subscriptions ask for, in millihertz (integers:
   // no drift however many come and go), against cfg.send_budget.
   std::uint64_t committed_mhz_ = 0;

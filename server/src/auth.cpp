@@ -4,13 +4,50 @@
 #include <openssl/evp.h>
 #include <sys/stat.h>
 
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+
 #include "gmr/core/file_util.h"
 
 namespace gmr::server {
 
 namespace {
 
-constexpr std::size_t kMinTokenLength = 16;
+constexpr double kMinTokenBits = 128;
+constexpr std::size_t kMinDistinct = 8;
+
+// Why `token` is too weak to guard a server (empty: it is not). Its
+// strength is estimated as a random string over the character classes it
+// uses (digits 10, lower case 26, upper case 26, other printable 33):
+// `openssl rand -hex 16` (32 characters of 36) has 165 bits, 16 characters
+// of lower case 75. A token of fewer than 8 distinct characters is refused
+// whatever its length (aaaa...).
+std::string weak_token(std::string_view token) {
+  bool digit = false, lower = false, upper = false, other = false;
+  std::array<bool, 256> seen{};
+  std::size_t distinct = 0;
+  for (const char ch : token) {
+    const auto c = static_cast<unsigned char>(ch);
+    digit |= c >= '0' && c <= '9';
+    lower |= c >= 'a' && c <= 'z';
+    upper |= c >= 'A' && c <= 'Z';
+    other |= !std::isalnum(c);
+    if (!seen[c]) ++distinct, seen[c] = true;
+  }
+  const double alphabet = (digit ? 10 : 0) + (lower ? 26 : 0) + (upper ? 26 : 0) + (other ? 33 : 0);
+  const double bits = static_cast<double>(token.size()) * std::log2(std::max(alphabet, 2.0));
+  if (bits < kMinTokenBits || distinct < kMinDistinct) {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "a weak token (%zu characters, %zu distinct, about %.0f bits; at least %.0f bits and %zu distinct: "
+                  "openssl rand -hex 16 makes one)",
+                  token.size(), distinct, bits, kMinTokenBits, kMinDistinct);
+    return text;
+  }
+  return {};
+}
 
 std::array<std::uint8_t, 32> sha256(std::string_view text) {
   std::array<std::uint8_t, 32> out{};
@@ -79,10 +116,11 @@ Result<Credentials> Credentials::parse(std::string_view text, const std::string&
     }
     const std::string_view token = next_word(line, pos);
     if (token.empty() || token.front() == '#') return fail("a '" + std::string(role_word) + "' line without its token");
-    if (token.size() < kMinTokenLength) {
-      return fail("a token of " + std::to_string(token.size()) + " characters; tokens have at least " +
-                  std::to_string(kMinTokenLength) + " (openssl rand -hex 16 makes one)");
+    if (token.size() > kMaxTokenBytes) {
+      return fail("a token of " + std::to_string(token.size()) + " characters; at most " +
+                  std::to_string(kMaxTokenBytes));
     }
+    if (const std::string why = weak_token(token); !why.empty()) return fail(why);
     const std::string_view rest = next_word(line, pos);
     if (!rest.empty() && rest.front() != '#') return fail("text after the token that is not a # comment");
     const auto digest = sha256(token);
@@ -110,6 +148,9 @@ Result<Credentials> Credentials::load(const std::string& path, std::string* warn
 }
 
 Role Credentials::role_of(std::string_view token) const {
+  // Longer than any token can be: refused before it is hashed (a 4 MiB
+  // "token" took 8 ms of SHA-256).
+  if (token.size() > kMaxTokenBytes) return Role::kNone;
   // Every entry is compared, whatever matched: the time taken is the same
   // for every token of a given file.
   const auto digest = sha256(token);

@@ -90,7 +90,16 @@ void RequestHandler::answer(std::uint64_t request_id, std::string_view kind, Clo
 
 Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point began) {
   using C = pb::ClientMessage;
-  if (req.body_case() == C::kHello) return hello(req.hello());
+  if (req.body_case() == C::kHello) {
+    // The role is settled once: a second Hello would re-evaluate it under
+    // what the first one opened (a publication, subscriptions).
+    if (handshaked_) {
+      return Refusal{pb::ERROR_CODE_BAD_REQUEST, "Hello was already said on this connection (as '" +
+                                                     std::string(role_name(role_)) +
+                                                     "'): connect again for another role"};
+    }
+    return hello(req.hello());
+  }
   if (req.body_case() == C::BODY_NOT_SET) {
     return Refusal{pb::ERROR_CODE_UNKNOWN_REQUEST, "unknown or empty request (this server speaks protocol version " +
                                                        std::to_string(wire::kProtocolVersion) + ")"};
@@ -188,6 +197,19 @@ Reply RequestHandler::hello(const pb::Hello& h) {
                        ", this server speaks version " + std::to_string(wire::kProtocolVersion)};
   }
   const ServerConfig& cfg = link_.services.cfg;
+  Admission& admission = link_.services.admission;
+  const auto* entry = admission.find(link_.connection_id);
+  const std::string address = entry != nullptr ? entry->address : std::string();
+  // An address that keeps offering tokens the server does not know waits
+  // before its next one is even looked at.
+  if (const auto wait = admission.auth_wait(address)) {
+    std::uint64_t suppressed = 0;
+    admission.hello_refused(suppressed);
+    if (auto c = link_.connection()) c->close_after_reply();
+    const auto ms = std::chrono::ceil<std::chrono::milliseconds>(*wait).count();
+    return Refusal{pb::ERROR_CODE_UNAUTHENTICATED,
+                   "too many refused Hellos from this address: try again in " + std::to_string(ms) + " ms"};
+  }
   // The role: the token's, or the anonymous one. A token the server does not
   // know is refused rather than taken as anonymous (a typo should show); a
   // server without tokens takes every client as anonymous.
@@ -195,7 +217,8 @@ Reply RequestHandler::hello(const pb::Hello& h) {
   if (cfg.credentials && !h.auth_token().empty()) role = cfg.credentials->role_of(h.auth_token());
   if (role == Role::kNone) {
     const bool had_token = !h.auth_token().empty();
-    if (std::uint64_t suppressed = 0; link_.services.admission.hello_refused(suppressed)) {
+    admission.auth_failed(address);
+    if (std::uint64_t suppressed = 0; admission.hello_refused(suppressed)) {
       spdlog::warn("conn {}: refused at Hello: {}{}", link_.connection_id,
                    had_token ? "unknown token" : "no token and anonymous clients may not connect",
                    suppressed ? " (" + std::to_string(suppressed) + " more such lines suppressed)" : std::string());
@@ -205,6 +228,7 @@ Reply RequestHandler::hello(const pb::Hello& h) {
                                                              : "this server needs a token (ClientOptions::auth_token, "
                                                                "gmr --token or GMR_TOKEN)"};
   }
+  admission.auth_succeeded(address);
   role_ = role;
   handshaked_ = true;
   if (auto c = link_.connection()) c->established();

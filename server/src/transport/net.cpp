@@ -37,6 +37,17 @@ std::string printable(std::string_view text, std::size_t max) {
   return out;
 }
 
+std::string address_group(const std::string& address) {
+  boost::system::error_code ec;
+  const auto a = net::ip::make_address(address, ec);
+  if (ec || a.is_v4()) return address;
+  auto v6 = a.to_v6();
+  if (v6.is_v4_mapped()) return net::ip::make_address_v4(net::ip::v4_mapped, v6).to_string();
+  auto bytes = v6.to_bytes();
+  std::fill(bytes.begin() + 8, bytes.end(), 0);
+  return net::ip::address_v6(bytes).to_string() + "/64";
+}
+
 bool LogLimiter::allow(std::uint64_t& suppressed) {
   const auto now = Clock::now();
   if (now - window_start_ >= period_) {

@@ -41,6 +41,12 @@ using Reply = std::variant<pb::ServerMessage, Refusal>;
 // terminal, nor flood the log.
 std::string printable(std::string_view text, std::size_t max = 64);
 
+// The host an address stands for in per-address limits: an IPv4 address
+// itself (an IPv4-mapped IPv6 one as IPv4), an IPv6 address's /64 (one host
+// is given 2^64 addresses; "2001:db8:1:2::/64"); text that is no address as
+// it is.
+std::string address_group(const std::string& address);
+
 // Rate limit for the log lines one client can cause: at most `burst` per
 // `period`; the others are counted, and the next line logged reports them.
 class LogLimiter {

@@ -22,7 +22,8 @@ namespace {
 // An Outbox that keeps what it is given.
 class RecordingOutbox final : public server::Outbox {
  public:
-  std::uint64_t id() const override { return 7; }
+  explicit RecordingOutbox(std::uint64_t id = 7) : id_(id) {}
+  std::uint64_t id() const override { return id_; }
   bool stopped() const override { return false; }
   bool closing() const override { return closing_; }
   void send(std::string framed) override { replies.push_back(unframe(framed)); }
@@ -55,8 +56,29 @@ class RecordingOutbox final : public server::Outbox {
     EXPECT_TRUE(m.ParseFromString(framed.substr(wire::kLengthPrefixBytes)));
     return m;
   }
+  std::uint64_t id_;
   bool closing_ = false;
 };
+
+// The per-address limit counts an IPv6 host's /64 as one address (before:
+// each of its 2^64 addresses had the limit to itself).
+TEST(AdmissionLimits, AnIpv6SlashSixtyFourIsOneAddress) {
+  server::ServerConfig cfg;
+  cfg.max_connections_per_address = 2;
+  server::Admission admission(cfg);
+  std::vector<std::shared_ptr<RecordingOutbox>> held;
+  for (const std::string host : {"2001:db8:1:2::1", "2001:db8:1:2:ffff::9"}) {
+    ASSERT_EQ(admission.admit(host), "") << host;
+    held.push_back(std::make_shared<RecordingOutbox>(admission.next_id()));
+    admission.add(held.back(), {}, host);
+  }
+  const std::string why = admission.admit("2001:db8:1:2:aaaa:bbbb:cccc:dddd");
+  EXPECT_NE(why.find("connections from one address"), std::string::npos) << why;
+  EXPECT_EQ(admission.admit("2001:db8:1:3::1"), "") << "another /64 is another host";
+  EXPECT_EQ(admission.admit("10.0.0.1"), "");
+  admission.remove(held.front()->id());
+  EXPECT_EQ(admission.admit("2001:db8:1:2::77"), "") << "a slot of the /64 came free";
+}
 
 class RequestHandlerTest : public ::testing::Test {
  protected:

@@ -18,6 +18,7 @@
 #include "gmr/wire/framing.h"
 
 #include "transport/calibrate.h"
+#include "transport/net.h"
 #include "net_test_util.h"
 
 namespace gmr::test {
@@ -125,6 +126,17 @@ TEST(Admission, OneAddressCannotTakeEverySlot) {
 // The send budget: subscriptions' rates add up across connections, shared
 // streams or not; the one that would pass the budget is refused with the
 // figures; what ends, is closed or disconnects gives its rate back.
+// One IPv6 host is given a /64: 2^64 addresses, which before each had their
+// own per-address limit.
+TEST(Admission, PerAddressLimitsCountAnIpv6HostByItsSlash64) {
+  EXPECT_EQ(server::address_group("127.0.0.1"), "127.0.0.1");
+  EXPECT_EQ(server::address_group("::ffff:10.1.2.3"), "10.1.2.3");
+  EXPECT_EQ(server::address_group("2001:db8:1:2:aaaa:bbbb:cccc:dddd"), "2001:db8:1:2::/64");
+  EXPECT_EQ(server::address_group("2001:db8:1:2::1"), server::address_group("2001:db8:1:2:ffff:ffff:ffff:ffff"));
+  EXPECT_NE(server::address_group("2001:db8:1:2::1"), server::address_group("2001:db8:1:3::1"));
+  EXPECT_EQ(server::address_group("?"), "?");
+}
+
 TEST(Admission, SubscriptionsPastTheSendBudgetAreRefused) {
   server::ServerConfig cfg;
   cfg.send_budget = 1000;

@@ -37,17 +37,18 @@ std::shared_ptr<const server::Credentials> credentials() {
 
 TEST(AuthFile, RolesCommentsAndBlankLines) {
   auto c = server::Credentials::parse(
-      "# gmr-server tokens\n\ncontrol 0123456789abcdef0123\r\n  read\tfedcba9876543210fedc # a viewer\nread "
-      "aaaaaaaaaaaaaaaa",
+      "# gmr-server tokens\n\ncontrol 0123456789abcdef0123456789abcdef\r\n  read\tfedcba9876543210fedcba9876543210 # a "
+      "viewer\nread Xq7-mP2z_vK9wR4t_bN6yH1s",
       "auth.txt");
   ASSERT_TRUE(c.ok()) << c.error().to_string();
   EXPECT_EQ(c->size(), 3u);
-  EXPECT_EQ(c->role_of("0123456789abcdef0123"), server::Role::kControl);
-  EXPECT_EQ(c->role_of("fedcba9876543210fedc"), server::Role::kRead);
-  EXPECT_EQ(c->role_of("aaaaaaaaaaaaaaaa"), server::Role::kRead);
-  EXPECT_EQ(c->role_of("0123456789abcdef012"), server::Role::kNone) << "a prefix is not the token";
-  EXPECT_EQ(c->role_of("0123456789abcdef01234"), server::Role::kNone) << "nor is a longer one";
+  EXPECT_EQ(c->role_of("0123456789abcdef0123456789abcdef"), server::Role::kControl);
+  EXPECT_EQ(c->role_of("fedcba9876543210fedcba9876543210"), server::Role::kRead);
+  EXPECT_EQ(c->role_of("Xq7-mP2z_vK9wR4t_bN6yH1s"), server::Role::kRead);
+  EXPECT_EQ(c->role_of("0123456789abcdef0123456789abcde"), server::Role::kNone) << "a prefix is not the token";
+  EXPECT_EQ(c->role_of("0123456789abcdef0123456789abcdef0"), server::Role::kNone) << "nor is a longer one";
   EXPECT_EQ(c->role_of(""), server::Role::kNone);
+  EXPECT_EQ(c->role_of(std::string(4 << 20, 'x')), server::Role::kNone) << "refused unhashed";
 }
 
 TEST(AuthFile, BadLinesSayWhereAndWhat) {
@@ -56,13 +57,19 @@ TEST(AuthFile, BadLinesSayWhereAndWhat) {
     int line;
     std::string says;
   };
+  const std::string good = "0123456789abcdef0123456789abcdef";
   const std::vector<Case> cases = {
-      {"read 0123456789abcdef\nadmin 0123456789abcdef0\n", 2, "unknown role 'admin'"},
+      {"read " + good + "\nadmin " + good + "0\n", 2, "unknown role 'admin'"},
       {"\n\ncontrol\n", 3, "without its token"},
-      {"read short\n", 1, "a token of 5 characters"},
-      {"read 0123456789abcdef\ncontrol 0123456789abcdef\n", 2, "a token listed twice"},
-      {"read 0123456789abcdef extra\n", 1, "not a # comment"},
-      {"none 0123456789abcdef\n", 1, "unknown role 'none'"},
+      {"read short\n", 1, "a weak token (5 characters, 5 distinct, about 24 bits; at least 128 bits"},
+      // Before: any 16 characters passed, these too.
+      {"read aaaaaaaaaaaaaaaa\n", 1, "a weak token (16 characters, 1 distinct, about 75 bits"},
+      {"read 0123456789abcdef\n", 1, "a weak token (16 characters, 16 distinct, about 83 bits"},
+      {"read " + std::string(64, 'a') + "\n", 1, "1 distinct"},
+      {"read " + std::string(300, 'x') + "\n", 1, "a token of 300 characters; at most 256"},
+      {"read " + good + "\ncontrol " + good + "\n", 2, "a token listed twice"},
+      {"read " + good + " extra\n", 1, "not a # comment"},
+      {"none " + good + "\n", 1, "unknown role 'none'"},
   };
   for (const auto& c : cases) {
     SCOPED_TRACE(c.text);
@@ -187,6 +194,50 @@ TEST(Auth, UnknownTokensAndMissingOnesAreRefusedAtHello) {
   EXPECT_EQ((*ok)->hello().role, client::Role::kRead);
 }
 
+// Before: 9,325 wrong tokens a second from one address, each checked. Now
+// the first five are free, and then each refusal makes the address wait,
+// 250 ms doubling, before its next Hello is looked at: the right token too.
+TEST(Auth, AnAddressThatKeepsGuessingWaitsLongerAndLongerBeforeItsNextTry) {
+  server::ServerConfig cfg;
+  cfg.credentials = credentials();
+  cfg.anonymous = server::Role::kNone;
+  TestServer s(cfg);
+  client::ClientOptions o;
+  o.host = "127.0.0.1";
+  o.port = s.port();
+  auto hello_with = [&](const std::string& token) {
+    o.auth_token = token;
+    auto c = client::Client::connect(o);
+    return c.ok() ? std::string("ok") : c.error().message;
+  };
+  for (int k = 0; k < 6; ++k) {
+    EXPECT_NE(hello_with("guess-" + std::to_string(k)).find("does not know this token"), std::string::npos) << k;
+  }
+  // The sixth refusal started a wait: the right token is not even checked.
+  const std::string waiting = hello_with(kReadToken);
+  const auto at = waiting.find("too many refused Hellos from this address: try again in ");
+  ASSERT_NE(at, std::string::npos) << waiting;
+  const int ms = std::atoi(waiting.c_str() + at + 56);
+  EXPECT_GT(ms, 0);
+  EXPECT_LE(ms, 250);
+  std::this_thread::sleep_for(std::chrono::milliseconds(ms + 20));
+  EXPECT_EQ(hello_with(kReadToken), "ok") << "once the wait is over the right token gets in";
+
+  // A guesser that keeps going for two seconds: a handful of its tokens are
+  // checked at all.
+  int checked = 0, turned_away = 0;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  for (int k = 0; std::chrono::steady_clock::now() < until; ++k) {
+    const std::string r = hello_with("guess-again-" + std::to_string(k));
+    if (r.find("does not know this token") != std::string::npos) ++checked;
+    if (r.find("too many refused Hellos") != std::string::npos) ++turned_away;
+  }
+  std::fprintf(stderr, "token guessing for 2 s: %d tokens checked, %d Hellos turned away unchecked\n", checked,
+               turned_away);
+  EXPECT_LE(checked, 5 + 4) << "5 free, then waits of 0.25 + 0.5 + 1 s fill the 2 s";
+  EXPECT_GT(turned_away, 0);
+}
+
 // Tokens rotate without a restart (gmr-server reads its auth file again on
 // SIGHUP): the next Hello is checked against the new ones, connections
 // already in keep the role they had.
@@ -202,13 +253,13 @@ TEST(Auth, NewCredentialsApplyToTheNextHello) {
   auto before = client::Client::connect(o);
   ASSERT_TRUE(before.ok()) << before.error().to_string();
 
-  auto rotated = server::Credentials::parse("read 0f1e2d3c4b5a69788796a5b4\n", "auth");
+  auto rotated = server::Credentials::parse("read 0f1e2d3c4b5a69788796a5b4c3d2e1f0\n", "auth");
   ASSERT_TRUE(rotated.ok());
   s.server.set_credentials(std::make_shared<const server::Credentials>(std::move(rotated).value()));
   auto old_token = client::Client::connect(o);
   ASSERT_FALSE(old_token.ok());
   EXPECT_NE(old_token.error().message.find("UNAUTHENTICATED"), std::string::npos) << old_token.error().message;
-  o.auth_token = "0f1e2d3c4b5a69788796a5b4";
+  o.auth_token = "0f1e2d3c4b5a69788796a5b4c3d2e1f0";
   auto new_token = client::Client::connect(o);
   ASSERT_TRUE(new_token.ok()) << new_token.error().to_string();
   EXPECT_EQ((*new_token)->hello().role, client::Role::kRead);
