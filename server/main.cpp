@@ -204,6 +204,12 @@ int main(int argc, char** argv) {
                  "HTTP connections open at once (WebSockets count "
                  "under --max-connections)")
       ->capture_default_str();
+  app.add_option("--max-http-sessions-per-address", cfg.max_http_sessions_per_address,
+                 "HTTP connections one address (IPv6: its /64) may hold")
+      ->capture_default_str();
+  app.add_option("--allow-host", cfg.http_allowed_hosts,
+                 "A host name (as browsers send it in Host, without the port) the WebSocket and /metrics answer "
+                 "to, besides IP addresses and localhost; repeatable (docs/security.md, DNS rebinding)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
   try {
     app.parse(argc, argv);

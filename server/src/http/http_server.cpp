@@ -3,6 +3,10 @@
 #include <spdlog/spdlog.h>
 
 #include <boost/beast/core.hpp>
+#include <unistd.h>
+
+#include <array>
+#include <cctype>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
 #include <filesystem>
@@ -56,6 +60,46 @@ std::optional<std::filesystem::path> safe_relative(std::string_view path) {
 // of this server (same host and port), or one the configuration allows.
 // Programs send no Origin. Without this check any web site open in a
 // browser on this host could drive a loopback server (docs/security.md).
+// Whether the request's Host names this server in a way no other web site
+// can: an IP address, localhost, or a name the configuration allows. A page
+// of evil.example whose name was made to resolve to this server (DNS
+// rebinding) sends Host: evil.example, and its requests pass every
+// same-origin check a browser makes; this is what refuses them. No Host at
+// all (HTTP/1.0, a program) is not a browser's request.
+std::optional<std::string> host_refused(const Request& req, const ServerConfig& cfg) {
+  const auto field = req[http::field::host];
+  std::string_view host(field.data(), field.size());
+  if (host.empty()) return std::nullopt;
+  // Without the port: [v6]:port, name:port, v4:port.
+  std::string_view name = host;
+  if (name.front() == '[') {
+    const auto close = name.find(']');
+    name = close == std::string_view::npos ? std::string_view() : name.substr(1, close - 1);
+  } else if (const auto colon = name.rfind(':'); colon != std::string_view::npos) {
+    name = name.substr(0, colon);
+  }
+  auto lower = [](std::string_view s) {
+    std::string out(s);
+    for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return out;
+  };
+  const std::string n = lower(name);
+  boost::system::error_code ec;
+  (void)net::ip::make_address(n, ec);
+  if (!n.empty() && (!ec || n == "localhost" || n.ends_with(".localhost"))) return std::nullopt;
+  for (const auto& allowed : cfg.http_allowed_hosts) {
+    if (lower(allowed) == n) return std::nullopt;
+  }
+  // This machine's own name (a browser on the LAN that asks for it by name).
+  static const std::string own = [&] {
+    std::array<char, 256> buf{};
+    return ::gethostname(buf.data(), buf.size() - 1) == 0 ? lower(buf.data()) : std::string();
+  }();
+  if (!own.empty() && (n == own || n == own + ".local")) return std::nullopt;
+  return "Host '" + lower(host.substr(0, 100)) +
+         "' is not an address or a name of this server (--allow-host; docs/security.md, DNS rebinding)";
+}
+
 bool origin_allowed(const Request& req, const ServerConfig& cfg) {
   const auto origin = req[http::field::origin];
   if (origin.empty()) return true;
@@ -73,18 +117,22 @@ bool origin_allowed(const Request& req, const ServerConfig& cfg) {
 
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
  public:
-  HttpSession(HttpListener& listener, tcp::socket socket, std::uint64_t id)
-      : listener_(listener), server_(listener.services_), stream_(std::move(socket)), id_(id) {
-    boost::system::error_code ec;
-    const auto ep = stream_.socket().remote_endpoint(ec);
-    address_ = ec ? std::string("?") : ep.address().to_string();
-  }
+  HttpSession(HttpListener& listener, tcp::socket socket, std::uint64_t id, std::string address)
+      : listener_(listener),
+        server_(listener.services_),
+        stream_(std::move(socket)),
+        id_(id),
+        address_(std::move(address)),
+        group_(address_group(address_)) {}
 
-  void start(bool refused) {
-    if (refused) {
-      // Over max_http_sessions: one answer, then the connection closes.
-      respond(text_response(http::status::service_unavailable, 11, false,
-                            "too many HTTP connections (--max-http-sessions); try again\n"));
+  const std::string& group() const { return group_; }
+  // Still waiting for a request head (not answering, not upgrading).
+  bool waiting() const { return waiting_; }
+
+  // `refusal`: why it is turned away (one answer, then the connection closes).
+  void start(const std::string& refusal) {
+    if (!refusal.empty()) {
+      respond(text_response(http::status::service_unavailable, 11, false, refusal + "; try again\n"));
       return;
     }
     read();
@@ -101,13 +149,17 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     parser_.emplace();
     parser_->header_limit(kHeaderLimit);
     parser_->body_limit(0);  // GET and HEAD only: no body
-    stream_.expires_after(server_.cfg.http_timeout);
+    // The whole request head within the head deadline, however slowly it
+    // trickles in (a byte at a time would otherwise hold the session).
+    stream_.expires_after(server_.cfg.http_head_timeout);
+    waiting_ = true;
     http::async_read(
         stream_, buffer_, *parser_,
         [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) { self->on_read(ec); });
   }
 
   void on_read(const boost::system::error_code& ec) {
+    waiting_ = false;
     if (ec) {
       if (ec == http::error::end_of_stream || ec == beast::error::timeout || ec == net::error::operation_aborted ||
           ec == net::error::connection_reset || listener_.closed_) {
@@ -170,6 +222,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return text_response(http::status::ok, v, keep, "ready: " + std::to_string(status.motions) + " motions\n");
     }
     if (target == "/metrics") {
+      if (auto why = host_refused(req, server_.cfg))
+        return text_response(http::status::forbidden, v, false, *why + "\n");
       return text_response(http::status::ok, v, keep, server_.metrics_text(),
                            "text/plain; version=0.0.4; charset=utf-8");
     }
@@ -264,6 +318,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (state == HttpServices::State::kLoading) {
       return refuse(http::status::service_unavailable, "the library is still loading; try again shortly (/readyz)");
     }
+    if (auto why = host_refused(req, server_.cfg)) return refuse(http::status::forbidden, *why);
     if (!origin_allowed(req, server_.cfg)) {
       return refuse(http::status::forbidden, "a page from another origin may not use this server (--allow-origin)");
     }
@@ -285,16 +340,30 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (ended_) return;
     ended_ = true;
     listener_.sessions_.erase(id_);
+    if (auto n = listener_.per_address_.find(group_); n != listener_.per_address_.end() && --n->second == 0) {
+      listener_.per_address_.erase(n);
+    }
   }
 
+ public:
+  // Closed to make room for a newer connection (it was waiting for a request).
+  void evict() {
+    waiting_ = false;
+    close();
+    end();
+  }
+
+ private:
   HttpListener& listener_;
   const HttpServices& server_;
   beast::tcp_stream stream_;
   std::uint64_t id_;
   std::string address_;
+  std::string group_;  // address_group(address_): what the per-address limit counts
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   bool request_is_head_ = false;
+  bool waiting_ = false;
   bool ended_ = false;
 };
 
@@ -325,14 +394,40 @@ void HttpListener::accept() {
       if (ec == net::error::operation_aborted || closed_) return;
       spdlog::warn("HTTP accept failed: {}", ec.message());
     } else if (!closed_) {
-      const bool refused = sessions_.size() >= services_.cfg.max_http_sessions;
+      boost::system::error_code peer_ec;
+      const auto peer = socket.remote_endpoint(peer_ec);
       const std::uint64_t id = next_session_++;
-      auto session = std::make_shared<HttpSession>(*this, std::move(socket), id);
+      auto session = std::make_shared<HttpSession>(*this, std::move(socket), id,
+                                                   peer_ec ? std::string("?") : peer.address().to_string());
+      const auto& cfg = services_.cfg;
+      std::string refusal;
+      if (cfg.max_http_sessions_per_address != 0 &&
+          per_address_[session->group()] >= cfg.max_http_sessions_per_address) {
+        refusal = "too many HTTP connections from one address (--max-http-sessions-per-address)";
+      } else if (sessions_.size() >= cfg.max_http_sessions && !make_room()) {
+        refusal = "too many HTTP connections (--max-http-sessions)";
+      }
       sessions_[id] = session;
-      session->start(refused);
+      ++per_address_[session->group()];
+      session->start(refusal);
     }
     if (!closed_) accept();
   });
+}
+
+bool HttpListener::make_room() {
+  // The oldest session still waiting for a request gives way: a client that
+  // sends its request at once (a health probe) always finds a place, however
+  // many sockets sit silent.
+  for (auto it = sessions_.begin(); it != sessions_.end(); ++it) {
+    auto s = it->second.lock();
+    if (s && s->waiting()) {
+      ++evicted_;
+      s->evict();  // erases it from sessions_
+      return true;
+    }
+  }
+  return false;
 }
 
 void HttpListener::close() {

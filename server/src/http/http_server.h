@@ -63,13 +63,19 @@ class HttpListener {
  private:
   friend class HttpSession;
   void accept();
+  // Closes the oldest session waiting for a request; false when none is.
+  bool make_room();
 
   HttpServices services_;
   tcp::acceptor acceptor_;
   std::uint16_t port_ = 0;
   bool closed_ = false;
   std::uint64_t next_session_ = 1;
+  // Open sessions by id (ids grow: the first is the oldest), and how many
+  // each address (address_group) holds.
   std::map<std::uint64_t, std::weak_ptr<HttpSession>> sessions_;
+  std::map<std::string, std::size_t> per_address_;
+  std::uint64_t evicted_ = 0;
 };
 
 }  // namespace gmr::server

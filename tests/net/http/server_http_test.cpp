@@ -48,9 +48,15 @@ struct HttpReply {
 };
 
 // One request on a fresh connection; `raw` is sent as it is when given.
-HttpReply http_request(std::uint16_t port, http::verb verb, const std::string& target, const std::string& raw = {}) {
+// `from`: the local address to connect from (127.0.0.x stand for hosts).
+HttpReply http_request(std::uint16_t port, http::verb verb, const std::string& target, const std::string& raw = {},
+                       const std::string& from = {}) {
   net::io_context io;
   tcp::socket s(io);
+  if (!from.empty()) {
+    s.open(tcp::v4());
+    s.bind(tcp::endpoint(net::ip::make_address(from), 0));
+  }
   s.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
   read_deadline(s, std::chrono::seconds(5));
   if (raw.empty()) {
@@ -76,8 +82,9 @@ HttpReply get(std::uint16_t port, const std::string& target) { return http_reque
 
 // The server's answer to a WebSocket upgrade of /ws that it refuses (a
 // status other than 101), with the subprotocol and Origin given.
-HttpReply refused_upgrade(std::uint16_t port, const std::string& protocol, const std::string& origin = {}) {
-  std::string raw = "GET /ws HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) +
+HttpReply refused_upgrade(std::uint16_t port, const std::string& protocol, const std::string& origin = {},
+                          const std::string& host = "127.0.0.1") {
+  std::string raw = "GET /ws HTTP/1.1\r\nHost: " + host + ":" + std::to_string(port) +
                     "\r\nConnection: Upgrade\r\nUpgrade: websocket\r\nSec-WebSocket-Version: 13\r\n"
                     "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
   if (!protocol.empty()) raw += "Sec-WebSocket-Protocol: " + protocol + "\r\n";
@@ -89,14 +96,17 @@ HttpReply refused_upgrade(std::uint16_t port, const std::string& protocol, const
 class WsClient {
  public:
   // `protocol` empty: none asked for. `origin` empty: none sent.
-  WsClient(std::uint16_t port, const std::string& protocol, const std::string& origin = {}) : ws_(io_) {
+  // `host`: the Host header (default 127.0.0.1:port).
+  WsClient(std::uint16_t port, const std::string& protocol, const std::string& origin = {}, std::string host = {})
+      : ws_(io_) {
+    if (host.empty()) host = "127.0.0.1:" + std::to_string(port);
     ws_.next_layer().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
     read_deadline(ws_.next_layer(), std::chrono::seconds(5));
     ws_.set_option(websocket::stream_base::decorator([protocol, origin](websocket::request_type& req) {
       if (!protocol.empty()) req.set(http::field::sec_websocket_protocol, protocol);
       if (!origin.empty()) req.set(http::field::origin, origin);
     }));
-    ws_.handshake(response_, "127.0.0.1:" + std::to_string(port), "/ws", error_);
+    ws_.handshake(response_, host, "/ws", error_);
   }
   bool open() const { return !error_; }
   std::string chosen_protocol() const { return std::string(response_[http::field::sec_websocket_protocol]); }
@@ -259,28 +269,98 @@ TEST(Http, ServesItsFilesAndSaysWhatIsWrongWithABadRequest) {
   EXPECT_NE(garbage.body.find("bad HTTP request"), std::string::npos);
 }
 
-TEST(Http, TooManyOpenConnectionsAreToldSo) {
+// Silent sockets that hold a session each (connected, never a byte).
+std::vector<tcp::socket> silent_sockets(net::io_context& io, std::uint16_t port, int n, const std::string& from) {
+  std::vector<tcp::socket> out;
+  for (int i = 0; i < n; ++i) {
+    out.emplace_back(io);
+    out.back().open(tcp::v4());
+    out.back().bind(tcp::endpoint(net::ip::make_address(from), 0));
+    out.back().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  }
+  return out;
+}
+
+// Before: 64 sockets from one address that sent nothing held every session,
+// and /healthz, /readyz and /metrics answered 503 for as long as they were
+// re-opened (the shipped Kubernetes probes then restarted the pod). Now one
+// address holds at most its share, and when the sessions are full the oldest
+// one still waiting for a request makes room: the probes always get in.
+TEST(Http, SilentSocketsCannotLockOutTheHealthProbes) {
   server::ServerConfig cfg = http_config();
-  cfg.max_http_sessions = 2;
+  cfg.max_http_sessions = 8;
+  cfg.max_http_sessions_per_address = 4;
   TestServer s(cfg);
   const std::uint16_t port = s.server.http_port();
   net::io_context io;
-  std::vector<tcp::socket> idle;
-  for (int i = 0; i < 2; ++i) {
-    idle.emplace_back(io);
-    idle.back().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  // One address: its fifth is refused, saying why; another address still gets in.
+  auto first = silent_sockets(io, port, 4, "127.0.0.2");
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // accepted
+  const auto refused = http_request(port, http::verb::get, "/healthz", {}, "127.0.0.2");
+  EXPECT_EQ(refused.status, 503u);
+  EXPECT_NE(refused.body.find("from one address"), std::string::npos) << refused.body;
+  EXPECT_EQ(http_request(port, http::verb::get, "/healthz", {}, "127.0.0.5").status, 200u);
+  // Two addresses fill every session; the probes still answer, each time.
+  auto second = silent_sockets(io, port, 4, "127.0.0.3");
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  for (const std::string target : {"/healthz", "/readyz", "/metrics", "/healthz"}) {
+    EXPECT_EQ(http_request(port, http::verb::get, target, {}, "127.0.0.4").status, 200u) << target;
+    // The attacker re-opens what was closed to make room.
+    auto more = silent_sockets(io, port, 1, "127.0.0.3");
+    for (auto& m : more) second.push_back(std::move(m));
   }
-  // The third is answered 503 at once; the first two still work afterwards.
-  for (int i = 0; i < 50 && get(port, "/healthz").status != 503u; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  EXPECT_EQ(get(port, "/healthz").status, 503u);
-  idle.clear();
-  bool served = false;
-  for (int i = 0; i < 100 && !served; ++i) {
-    served = get(port, "/healthz").status == 200u;
-    if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+}
+
+// A request head that trickles in is cut off at the head deadline.
+TEST(Http, ARequestHeadMustArriveWithinItsDeadline) {
+  server::ServerConfig cfg = http_config();
+  cfg.http_head_timeout = std::chrono::milliseconds(300);
+  TestServer s(cfg);
+  net::io_context io;
+  tcp::socket slow(io);
+  slow.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), s.server.http_port()));
+  const std::string head = "GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: ";
+  const auto start = std::chrono::steady_clock::now();
+  bool closed = false;
+  for (int i = 0; i < 100 && !closed; ++i) {  // a byte every 50 ms: 5 s if it were let through
+    boost::system::error_code ec;
+    net::write(slow, net::buffer(head.substr(0, std::min<std::size_t>(head.size(), static_cast<std::size_t>(i + 1)))),
+               ec);
+    closed = ec.failed();
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
-  EXPECT_TRUE(served);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_TRUE(closed) << "the trickle went on for " << seconds << " s";
+  std::fprintf(stderr, "a trickled request head was cut off after %.2f s (deadline 0.3 s)\n", seconds);
+}
+
+// DNS rebinding: a page of evil.example whose name now resolves to this
+// server sends Host: evil.example and Origin: http://evil.example, which
+// matched before (101 and the control role on a server without tokens;
+// /metrics answered any Host). Addresses, localhost and --allow-host names pass.
+TEST(Http, AHostNameThatIsNotTheServersIsRefused) {
+  server::ServerConfig cfg = http_config();
+  cfg.http_allowed_hosts = {"gmr.internal"};
+  TestServer s(cfg);
+  const std::uint16_t port = s.server.http_port();
+  const std::string p = std::to_string(port);
+  const auto rebound = refused_upgrade(port, "gmr.stream.v1", "http://evil.example:" + p, "evil.example");
+  EXPECT_EQ(rebound.status, 403u);
+  EXPECT_NE(rebound.body.find("Host 'evil.example:" + p + "' is not an address or a name of this server"),
+            std::string::npos)
+      << rebound.body;
+  auto metrics_with = [&](const std::string& host) {
+    return http_request(port, http::verb::get, "/metrics", "GET /metrics HTTP/1.1\r\nHost: " + host + "\r\n\r\n");
+  };
+  EXPECT_EQ(metrics_with("evil.example:" + p).status, 403u);
+  EXPECT_EQ(metrics_with("127.0.0.1:" + p).status, 200u);
+  EXPECT_EQ(metrics_with("[::1]:" + p).status, 200u);
+  EXPECT_EQ(metrics_with("localhost:" + p).status, 200u);
+  EXPECT_EQ(metrics_with("GMR.internal:" + p).status, 200u);
+  EXPECT_EQ(get(port, "/healthz").status, 200u);
+  // A page of an allowed name opens the WebSocket.
+  WsClient named(port, "gmr.stream.v1", "http://gmr.internal:" + p, "gmr.internal:" + p);
+  EXPECT_TRUE(named.open());
 }
 
 TEST(WebSocket, CarriesTheProtocolInBinaryWithFramesEqualToAQuery) {

@@ -29,8 +29,19 @@ struct ServerConfig {
   // HTTP connections open at once (a WebSocket counts as a client
   // connection instead, under max_connections), and how long one may sit
   // idle or take to send its request.
+  // When every session is taken, a new connection takes the place of the
+  // oldest one still waiting for a request (a health probe gets in while
+  // silent sockets hold the rest). One address (IPv6: its /64) holds at
+  // most max_http_sessions_per_address, and a request head must arrive
+  // within http_head_timeout of the connection or the previous answer.
   std::size_t max_http_sessions = 64;
+  std::size_t max_http_sessions_per_address = 16;
   std::chrono::milliseconds http_timeout{30000};
+  std::chrono::milliseconds http_head_timeout{5000};
+  // Host names (besides IP addresses, localhost and this machine's name, always allowed) the
+  // WebSocket and /metrics answer to. A page whose host name comes to point
+  // at this server (DNS rebinding) sends its own name as Host: refused.
+  std::vector<std::string> http_allowed_hosts;
   // Origins (scheme://host:port, or "*") besides the server's own whose
   // pages may open the WebSocket. A browser sends its page's origin; any
   // site open in a browser on this host could otherwise drive the server.
