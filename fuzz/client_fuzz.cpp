@@ -22,8 +22,9 @@ std::shared_ptr<client::Client::Impl::Sub> sub(std::size_t values) {
   auto s = std::make_shared<client::Client::Impl::Sub>();
   s->values = values;
   s->skeleton_version = 1;
-  s->on_frame = [values](const client::ReceivedFrame& f) {
-    if (values != 0 && f.positions.size() != values) std::abort();
+  // The count in effect when the frame is handed on (a skeleton change may set another).
+  s->on_frame = [self = s.get()](const client::ReceivedFrame& f) {
+    if (self->values != 0 && f.positions.size() != self->values) std::abort();
     if (!f.orientations.empty() && f.orientations.size() != f.positions.size()) std::abort();
   };
   s->on_end = [](const client::SubscriptionEnd&) {};

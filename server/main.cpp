@@ -151,6 +151,10 @@ int main(int argc, char** argv) {
                  "Tokens and their roles, one 'read TOKEN', 'control TOKEN' or 'publish TOKEN' per line "
                  "(docs/security.md)")
       ->check(CLI::ExistingFile);
+  app.add_option("--anonymous-share", cfg.anonymous_share,
+                 "With --auth-file: the part of --max-connections clients without a token may hold (1: no bound)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   app.add_option("--anonymous", anonymous,
                  "What clients without a token may do: none, read, control or publish (default: read with "
                  "--auth-file, control without; publishing live sources needs a 'publish' token or this)")

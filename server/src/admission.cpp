@@ -60,6 +60,7 @@ std::optional<Admission::Entry> Admission::remove(std::uint64_t id) {
   }
   connections_.erase(it);
   pending_hello_.erase(id);
+  anonymous_.erase(id);
   return entry;
 }
 
@@ -157,6 +158,17 @@ void Admission::auth_failed(const std::string& address) {
 }
 
 void Admission::auth_succeeded(const std::string& address) { auth_failures_.erase(address_group(address)); }
+
+std::string Admission::admit_anonymous(std::uint64_t id) {
+  const auto share = static_cast<std::size_t>(static_cast<double>(cfg_.max_connections) * cfg_.anonymous_share);
+  if (cfg_.anonymous_share < 1.0 && anonymous_.size() >= std::max<std::size_t>(1, share)) {
+    return "clients without a token hold " + std::to_string(anonymous_.size()) + " of the " +
+           std::to_string(cfg_.max_connections) + " connections, their share (--anonymous-share " +
+           std::to_string(cfg_.anonymous_share).substr(0, 4) + "): connect with a token, or later";
+  }
+  anonymous_.insert(id);
+  return {};
+}
 
 std::optional<std::string> Admission::commit_rate(double rate_hz, std::uint64_t rate_mhz) {
   if (cfg_.send_budget > 0 && static_cast<double>(committed_mhz_ + rate_mhz) > cfg_.send_budget * 1000.0) {

@@ -11,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -95,6 +96,10 @@ class Admission {
   std::optional<Clock::duration> auth_wait(const std::string& address) const;
   void auth_failed(const std::string& address);
   void auth_succeeded(const std::string& address);
+  // Clients without a token, with credentials (cfg.anonymous_share): why
+  // connection `id` may not join them (empty: it joined them).
+  std::string admit_anonymous(std::uint64_t id);
+  std::size_t anonymous_connections() const { return anonymous_.size(); }
   static constexpr std::uint32_t kFreeAuthFailures = 5;
   static constexpr Clock::duration kFirstAuthWait = std::chrono::milliseconds(250);
   static constexpr Clock::duration kLongestAuthWait = std::chrono::seconds(30);
@@ -136,6 +141,7 @@ class Admission {
     Clock::time_point until{};  // no Hello is checked before
   };
   std::map<std::string, AuthFailures> auth_failures_;  // by address_group, at most kMaxAuthAddresses
+  std::set<std::uint64_t> anonymous_;                  // connections in without a token (with credentials)
   // Frames per second the subscriptions ask for, in millihertz (integers:
   // no drift however many come and go), against cfg.send_budget.
   std::uint64_t committed_mhz_ = 0;

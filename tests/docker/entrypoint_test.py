@@ -69,7 +69,7 @@ def check_real_server(entrypoint, bin_dir, work):
     os.makedirs(secrets)
     auth = os.path.join(secrets, "gmr-auth")
     with open(auth, "w") as f:
-        f.write("control 0123456789abcdef0123\n")
+        f.write("control 0123456789abcdef0123456789abcdef\n")
     os.chmod(auth, 0o600)
     port_file = os.path.join(work, "port")
     env = dict(os.environ)
@@ -85,24 +85,24 @@ def check_real_server(entrypoint, bin_dir, work):
             time.sleep(0.05)
         port = open(port_file).read().strip()
         gmr = os.path.join(bin_dir, "gmr")
-        ok = subprocess.run([gmr, "ls", "--port", port, "--token", "0123456789abcdef0123"],
+        ok = subprocess.run([gmr, "ls", "--port", port, "--token", "0123456789abcdef0123456789abcdef"],
                             capture_output=True, text=True, timeout=30)
         assert ok.returncode == 0 and "walk" in ok.stdout, ok.stdout + ok.stderr
         refused = subprocess.run([gmr, "ls", "--port", port], capture_output=True, text=True, timeout=30)
         assert refused.returncode == 1 and "UNAUTHENTICATED" in refused.stderr, refused.stdout + refused.stderr
         # A new token, read again on SIGHUP: the old one stops working, the new one works.
         with open(auth, "w") as f:
-            f.write("control fedcba9876543210fedc\n")
+            f.write("control fedcba9876543210fedcba9876543210\n")
         server.send_signal(signal.SIGHUP)
         deadline = time.time() + 20
         while True:
-            new = subprocess.run([gmr, "ls", "--port", port, "--token", "fedcba9876543210fedc"],
+            new = subprocess.run([gmr, "ls", "--port", port, "--token", "fedcba9876543210fedcba9876543210"],
                                  capture_output=True, text=True, timeout=30)
             if new.returncode == 0:
                 break
             assert time.time() < deadline, new.stderr
             time.sleep(0.1)
-        old = subprocess.run([gmr, "ls", "--port", port, "--token", "0123456789abcdef0123"],
+        old = subprocess.run([gmr, "ls", "--port", port, "--token", "0123456789abcdef0123456789abcdef"],
                              capture_output=True, text=True, timeout=30)
         assert old.returncode == 1 and "UNAUTHENTICATED" in old.stderr, old.stdout + old.stderr
     finally:

@@ -7,6 +7,8 @@
 #include <map>
 #include <sstream>
 
+#include "transport/connection_log.h"
+
 namespace gmr::server {
 
 namespace {
@@ -133,6 +135,9 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
         static_cast<double>(s.server.connections_refused));
   f.add("gmr_hellos_refused_total", "Hellos refused for their token", T::Counter,
         static_cast<double>(s.server.hellos_refused));
+  f.add("gmr_log_lines_suppressed_total",
+        "Log lines about connections left out past the server-wide budget (50 a second)", T::Counter,
+        static_cast<double>(connection_log().suppressed_total()));
   f.add("gmr_views", "Views clients hold", T::Gauge, static_cast<double>(s.views));
   for (const char* transport : {"tcp", "udp", "websocket"}) {
     f.add("gmr_subscriptions", "Subscriptions, by the transport their frames take", T::Gauge,

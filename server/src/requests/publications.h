@@ -25,6 +25,7 @@ class Publications {
   Reply unpublish(const pb::Unpublish& r);
   // Every source this session publishes ends with `reason`.
   void end_all(const std::string& reason);
+  std::size_t count() const { return publications_.size(); }
 
  private:
   void end(std::uint32_t id, const std::string& reason);

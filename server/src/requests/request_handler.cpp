@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "gmr/wire/framing.h"
+#include "transport/connection_log.h"
 
 namespace gmr::server {
 
@@ -63,6 +64,8 @@ void RequestHandler::on_message(const std::string& body) {
     spdlog::error("conn {}: out of memory answering request {}", link_.connection_id, req.request_id());
     reply = Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "the server ran out of memory answering this request"};
   }
+  // Views and sources come and go only by requests (and the connection's end).
+  if (auto c = link_.connection()) c->set_holding(views_.count() > 0 || publications_.count() > 0);
   // A view edit computed off the I/O thread answers when it is done.
   if (std::exchange(edit_deferred_, false)) return;
   answer(req.request_id(), request_kind(req), began, std::move(reply));
@@ -189,8 +192,8 @@ bool RequestHandler::needs_control(pb::ClientMessage::BodyCase request) {
 
 Reply RequestHandler::hello(const pb::Hello& h) {
   if (h.protocol_version() != wire::kProtocolVersion) {
-    spdlog::warn("conn {}: refused protocol version {} (this server speaks {})", link_.connection_id,
-                 h.protocol_version(), wire::kProtocolVersion);
+    log_connection(spdlog::level::warn, "conn {}: refused protocol version {} (this server speaks {})",
+                   link_.connection_id, h.protocol_version(), wire::kProtocolVersion);
     if (auto c = link_.connection()) c->close_after_reply();
     return Refusal{pb::ERROR_CODE_VERSION_MISMATCH,
                    "client speaks protocol version " + std::to_string(h.protocol_version()) +
@@ -228,12 +231,20 @@ Reply RequestHandler::hello(const pb::Hello& h) {
                                                              : "this server needs a token (ClientOptions::auth_token, "
                                                                "gmr --token or GMR_TOKEN)"};
   }
+  // With tokens, clients without one share a bounded part of the slots.
+  if (cfg.credentials && h.auth_token().empty()) {
+    if (std::string why = admission.admit_anonymous(link_.connection_id); !why.empty()) {
+      if (auto c = link_.connection()) c->close_after_reply();
+      return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, why};
+    }
+  }
   admission.auth_succeeded(address);
   role_ = role;
   handshaked_ = true;
   if (auto c = link_.connection()) c->established();
   link_.services.admission.established(link_.connection_id);
-  spdlog::info("conn {}: hello from {} ({})", link_.connection_id, printable(h.client_name()), role_name(role_));
+  log_connection(spdlog::level::info, "conn {}: hello from {} ({})", link_.connection_id, printable(h.client_name()),
+                 role_name(role_));
   pb::ServerMessage out;
   auto* r = out.mutable_hello();
   r->set_protocol_version(wire::kProtocolVersion);
@@ -335,7 +346,8 @@ void RequestHandler::udp_registered(const udp::endpoint& ep) {
   const bool first = !udp_->endpoint || *udp_->endpoint != ep;
   udp_->endpoint = ep;
   if (first) {
-    spdlog::info("conn {}: UDP endpoint {}:{} registered", link_.connection_id, ep.address().to_string(), ep.port());
+    log_connection(spdlog::level::info, "conn {}: UDP endpoint {}:{} registered", link_.connection_id,
+                   ep.address().to_string(), ep.port());
   }
   pb::ServerMessage m;
   m.mutable_udp_registered()->set_endpoint(ep.address().to_string() + ":" + std::to_string(ep.port()));

@@ -9,6 +9,7 @@
 #include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
 #include "prometheus/histogram.h"
+#include "transport/connection_log.h"
 
 namespace gmr::server {
 
@@ -65,7 +66,8 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
     if (self->stopped_) return;
     tune_socket(self->socket_.tcp(), self->limits_, self->id_);
     self->last_read_ = self->last_write_ = Clock::now();
-    spdlog::info("conn {}: connected from {}{}", self->id_, self->peer_, self->socket_.tls() ? " (TLS)" : "");
+    log_connection(spdlog::level::info, "conn {}: connected from {}{}", self->id_, self->peer_,
+                   self->socket_.tls() ? " (TLS)" : "");
     self->arm_watchdog();
     if (!self->socket_.tls()) {
       self->read_prefix();
@@ -95,8 +97,8 @@ void Connection::stop(const std::string& reason) {
     Lock lock(m_);
     if (stopped_) return;
     stopped_.store(true, std::memory_order_release);
-    spdlog::info("conn {}: closed: {} (frames sent {}, dropped {})", id_, reason, counters_.frames_sent,
-                 counters_.frames_dropped);
+    log_connection(spdlog::level::info, "conn {}: closed: {} (frames sent {}, dropped {})", id_, reason,
+                   counters_.frames_sent, counters_.frames_dropped);
     std::string().swap(body_);
     body_received_ = 0;
     drop_queued();
@@ -279,7 +281,7 @@ void Connection::on_prefix(const boost::system::error_code& ec) {
   counters_.bytes_received += prefix_.size();
   const std::uint32_t length = wire::read_length_prefix(prefix_);
   if (auto s = wire::check_length(length, limits_.max_message_bytes); !s.ok()) {
-    spdlog::warn("conn {}: bad length prefix: {}; closing", id_, s.error().message);
+    log_connection(spdlog::level::warn, "conn {}: bad length prefix: {}; closing", id_, s.error().message);
     stop("bad length prefix");
     return;
   }
@@ -311,7 +313,8 @@ std::optional<std::string> Connection::on_body(const boost::system::error_code& 
   body_received_ += got;
   counters_.bytes_received += got;
   if (ec) {
-    spdlog::warn("conn {}: truncated message: {} of {} bytes announced; closing", id_, body_received_, body_expected_);
+    log_connection(spdlog::level::warn, "conn {}: truncated message: {} of {} bytes announced; closing", id_,
+                   body_received_, body_expected_);
     stop(asio::TlsSocket::peer_closed(ec) ? std::string("truncated message") : "read failed: " + ec.message());
     return std::nullopt;
   }

@@ -11,6 +11,7 @@
 #include <cstring>
 
 #include "gmr/wire/framing.h"
+#include "transport/connection_log.h"
 
 namespace gmr::server {
 
@@ -57,19 +58,26 @@ std::chrono::milliseconds watchdog_period(const ConnectionLimits& l, bool establ
 
 std::string watchdog_verdict(const LinkTimes& t, const ConnectionLimits& lim, Clock::time_point now, std::uint64_t id) {
   if (!t.established && lim.handshake_timeout.count() > 0 && now - t.started > lim.handshake_timeout) {
-    spdlog::warn("conn {}: no Hello within {} ms", id, lim.handshake_timeout.count());
+    log_connection(spdlog::level::warn, "conn {}: no Hello within {} ms", id, lim.handshake_timeout.count());
     return "no Hello in time";
   }
   // A client that only listens to a subscription is not idle while its
   // frames are written: a dead one stops taking them, and the write timeout
   // below closes it. Heartbeats the server writes do not count.
   if (now - t.last_read > lim.idle_timeout && now - t.last_frames_written > lim.idle_timeout) {
-    spdlog::warn("conn {}: idle for more than {} ms", id, lim.idle_timeout.count());
+    log_connection(spdlog::level::warn, "conn {}: idle for more than {} ms", id, lim.idle_timeout.count());
     return "idle timeout";
   }
+  // Heartbeats alone do not keep a slot: a connection that holds nothing
+  // and has made no request for the idle timeout goes (before, anonymous
+  // heartbeating connections from a few addresses held every slot).
+  if (t.established && !t.holding && now - t.last_held > lim.idle_timeout) {
+    spdlog::debug("conn {}: no view or source held and no request for {} ms", id, lim.idle_timeout.count());
+    return "idle timeout: no view or source held";
+  }
   if (t.writing && now - t.write_started > lim.write_timeout) {
-    spdlog::warn("conn {}: a write made no progress for {} ms: the client is not reading", id,
-                 lim.write_timeout.count());
+    log_connection(spdlog::level::warn, "conn {}: a write made no progress for {} ms: the client is not reading", id,
+                   lim.write_timeout.count());
     return "write timeout";
   }
   return {};

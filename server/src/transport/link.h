@@ -72,6 +72,8 @@ struct LinkTimes {
   bool established = false;  // said Hello
   bool writing = false;      // a write is in flight
   Clock::time_point started, last_read, write_started, last_frames_written;
+  bool holding = false;         // the session holds a view or a live source
+  Clock::time_point last_held;  // its last request or Hello while it held nothing
 };
 std::chrono::milliseconds watchdog_period(const ConnectionLimits& limits, bool established);
 std::string watchdog_verdict(const LinkTimes& times, const ConnectionLimits& limits, Clock::time_point now,

@@ -1,5 +1,7 @@
 #include "transport/net.h"
 
+#include "transport/connection_log.h"
+
 #include <algorithm>
 #include <memory>
 
@@ -46,6 +48,11 @@ std::string address_group(const std::string& address) {
   auto bytes = v6.to_bytes();
   std::fill(bytes.begin() + 8, bytes.end(), 0);
   return net::ip::address_v6(bytes).to_string() + "/64";
+}
+
+ConnectionLog& connection_log() {
+  static ConnectionLog log;
+  return log;
 }
 
 bool LogLimiter::allow(std::uint64_t& suppressed) {

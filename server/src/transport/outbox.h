@@ -75,6 +75,11 @@ class Outbox {
   virtual std::uint64_t end_frames(std::uint32_t key) = 0;
   // The client completed its handshake (the handshake deadline no longer applies).
   virtual void established() {}
+  // After each request: whether the session holds anything (a view, and so
+  // maybe subscriptions, or a live source). A connection that holds nothing
+  // and makes no request for the idle timeout is closed however often it
+  // sends heartbeats.
+  virtual void set_holding(bool holding) { (void)holding; }
   // While held, no more requests are read (those sent wait in the kernel);
   // releasing resumes reading. For a request answered from another thread.
   virtual void hold_reading(bool hold) { (void)hold; }

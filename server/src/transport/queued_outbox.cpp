@@ -29,6 +29,14 @@ bool QueuedOutbox::closing() const {
 void QueuedOutbox::established() {
   Lock lock(m_);
   established_ = true;
+  last_held_ = Clock::now();
+}
+
+void QueuedOutbox::set_holding(bool holding) {
+  Lock lock(m_);
+  // Called after each request: a request is activity, a heartbeat is not.
+  if (!holding) last_held_ = Clock::now();
+  holding_ = holding;
 }
 
 void QueuedOutbox::hold_reading(bool hold) {
@@ -173,7 +181,8 @@ std::string QueuedOutbox::watchdog_tick(Clock::time_point now) {
   // A client whose request the server is still on (its reads held for an
   // edit, or a body with the handler) waits for the server: not idle.
   if (reads_held_ || at_handler_) last_read_ = now;
-  const LinkTimes times{established_, writing_, started_, last_read_, write_started_, last_frames_written_};
+  const LinkTimes times{established_,         writing_, started_,  last_read_, write_started_,
+                        last_frames_written_, holding_, last_held_};
   if (std::string why = watchdog_verdict(times, limits_, now, id_); !why.empty()) return why;
   // Reads paused for the server-wide budget resume once it allows.
   resume_reading();

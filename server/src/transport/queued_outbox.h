@@ -51,6 +51,7 @@ class QueuedOutbox : public Outbox {
   std::uint64_t end_frames(std::uint32_t key) override;
   void close_after_reply() override;
   void established() override;
+  void set_holding(bool holding) override;
   void hold_reading(bool hold) override;
   void count_udp_frame_sent() override;
   void count_udp_frame_dropped() override;
@@ -109,6 +110,8 @@ class QueuedOutbox : public Outbox {
   bool close_after_flush_ = false;
   bool close_on_next_reply_ = false;  // close_after_reply: the next send() closes after it
   bool established_ = false;
+  bool holding_ = false;
+  Clock::time_point last_held_{};
   bool read_paused_ = false;
   bool reads_held_ = false;  // hold_reading
   bool at_handler_ = false;  // a request body is with the Handler (reading waits)

@@ -7,6 +7,7 @@
 #include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
 #include "prometheus/histogram.h"
+#include "transport/connection_log.h"
 
 namespace gmr::server {
 
@@ -66,7 +67,7 @@ void WsConnection::start(http::request<http::string_body> upgrade, Format format
     if (named) res.set(http::field::sec_websocket_protocol, protocol);
   }));
   last_read_ = last_write_ = Clock::now();
-  spdlog::info("conn {}: WebSocket ({}) from {}", id_, protocol, peer_);
+  log_connection(spdlog::level::info, "conn {}: WebSocket ({}) from {}", id_, protocol, peer_);
   arm_watchdog();
   // The request must outlive the accept: it is kept in the handler.
   auto request = std::make_shared<http::request<http::string_body>>(std::move(upgrade));
@@ -99,7 +100,8 @@ void WsConnection::on_read(const boost::system::error_code& ec, std::size_t byte
   if (stopped_) return;
   if (ec) {
     if (ec == websocket::error::message_too_big) {
-      spdlog::warn("conn {}: a WebSocket message longer than {} bytes; closing", id_, limits_.max_message_bytes);
+      log_connection(spdlog::level::warn, "conn {}: a WebSocket message longer than {} bytes; closing", id_,
+                     limits_.max_message_bytes);
       stop("message too large");
     } else if (ec == websocket::error::closed || ec == net::error::eof) {
       stop("the client closed the connection");
@@ -207,8 +209,8 @@ void WsConnection::write(std::string message, bool frame) {
 void WsConnection::stop(const std::string& reason) {
   if (stopped_) return;
   stopped_.store(true, std::memory_order_release);
-  spdlog::info("conn {}: closed: {} (frames sent {}, dropped {})", id_, reason, counters_.frames_sent,
-               counters_.frames_dropped);
+  log_connection(spdlog::level::info, "conn {}: closed: {} (frames sent {}, dropped {})", id_, reason,
+                 counters_.frames_sent, counters_.frames_dropped);
   if (handler_) handler_->on_stop();
   drop_queued();
   if (on_closed_) on_closed_(id_);

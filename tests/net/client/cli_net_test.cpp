@@ -353,7 +353,7 @@ TEST(CliNet, TlsAndTokensGiveTheSameRows) {
   server::ServerConfig cfg;
   cfg.tls_certificate_file = cert->cert.string();
   cfg.tls_key_file = cert->key.string();
-  auto auth = server::Credentials::parse("control 0123456789abcdef0123\n", "auth");
+  auto auth = server::Credentials::parse("control 0123456789abcdef0123456789abcdef\n", "auth");
   ASSERT_TRUE(auth.ok());
   cfg.credentials = std::make_shared<const server::Credentials>(std::move(auth).value());
   cfg.anonymous = server::Role::kRead;
@@ -363,18 +363,19 @@ TEST(CliNet, TlsAndTokensGiveTheSameRows) {
   const CommandRun expected = gmr(query + " --port " + std::to_string(plain.port()));
   ASSERT_EQ(expected.status, 0) << expected.out;
   const std::string secure = " --port " + std::to_string(tls.port()) + " --tls-ca '" + cert->cert.string() + "'";
-  const CommandRun with_token = gmr(query + secure + " --token 0123456789abcdef0123");
+  const CommandRun with_token = gmr(query + secure + " --token 0123456789abcdef0123456789abcdef");
   ASSERT_EQ(with_token.status, 0) << with_token.out;
   EXPECT_EQ(with_token.out, expected.out);
-  const CommandRun from_env = gmr("GMR_TOKEN=0123456789abcdef0123 " + std::string(GMR_CLI_PATH) + " " + query + secure,
-                                  /*prefix_binary=*/false);
+  const CommandRun from_env =
+      gmr("GMR_TOKEN=0123456789abcdef0123456789abcdef " + std::string(GMR_CLI_PATH) + " " + query + secure,
+          /*prefix_binary=*/false);
   ASSERT_EQ(from_env.status, 0) << from_env.out;
   EXPECT_EQ(from_env.out, expected.out);
   const CommandRun anonymous = gmr(query + secure);
   EXPECT_EQ(anonymous.status, 1);
   EXPECT_EQ(anonymous.out.rfind("gmr: PERMISSION_DENIED: this connection's role is 'read'", 0), 0u) << anonymous.out;
   EXPECT_EQ(std::count(anonymous.out.begin(), anonymous.out.end(), '\n'), 1);
-  const CommandRun wrong = gmr(query + secure + " --token 0123456789abcdef0124");
+  const CommandRun wrong = gmr(query + secure + " --token 0123456789abcdef0123456789abcdee");
   EXPECT_EQ(wrong.status, 1);
   EXPECT_NE(wrong.out.find("UNAUTHENTICATED: the server does not know this token"), std::string::npos) << wrong.out;
   const CommandRun untrusted = gmr("ls --tls --port " + std::to_string(tls.port()));

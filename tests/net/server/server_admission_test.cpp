@@ -11,6 +11,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <sstream>
 #include <thread>
@@ -121,6 +122,112 @@ TEST(Admission, OneAddressCannotTakeEverySlot) {
   EXPECT_EQ(s.server.stats().connections_refused, 1u);
   ::close(ninth);
   for (int fd : eight) ::close(fd);
+}
+
+// Before: connections that said Hello and sent a heartbeat every 10 s held
+// their slots for ever (4 addresses x 64 held all 256: a fifth address was
+// refused for as long as they stayed). Heartbeats alone no longer keep a
+// connection that holds nothing; a view (or a source) does.
+TEST(Admission, HeartbeatsAloneDoNotKeepAConnectionThatHoldsNothing) {
+  server::ServerConfig cfg;
+  cfg.idle_timeout = std::chrono::milliseconds(400);
+  cfg.heartbeat_interval = std::chrono::milliseconds(100);
+  TestServer s(cfg);
+  RawConnection empty(s.port()), viewer(s.port());
+  empty.handshake();
+  viewer.handshake();
+  ASSERT_TRUE(viewer.create_view(2, "walk").has_value());
+  pb::ClientMessage beat;
+  beat.mutable_heartbeat();
+  const auto start = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - start < std::chrono::milliseconds(1500)) {
+    if (!empty.closed()) empty.send(beat);
+    viewer.send(beat);
+    (void)empty.readable(std::chrono::milliseconds(0));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(empty.wait_closed(std::chrono::seconds(5))) << "heartbeats kept a connection that holds nothing";
+  EXPECT_FALSE(viewer.wait_closed(std::chrono::milliseconds(200))) << "a connection with a view stays";
+}
+
+// With tokens, clients without one share a quarter of the slots: token
+// holders always find a place.
+TEST(Admission, ClientsWithoutATokenShareABoundedPartOfTheSlots) {
+  server::ServerConfig cfg;
+  cfg.max_connections = 8;
+  auto creds = server::Credentials::parse("read 0123456789abcdef0123456789abcdef\n", "auth");
+  ASSERT_TRUE(creds.ok());
+  cfg.credentials = std::make_shared<const server::Credentials>(std::move(creds).value());
+  cfg.anonymous = server::Role::kRead;
+  TestServer s(cfg);
+  auto a = s.connect();
+  auto b = s.connect();
+  ASSERT_NE(a, nullptr);
+  ASSERT_NE(b, nullptr);
+  client::ClientOptions o;
+  o.host = "127.0.0.1";
+  o.port = s.port();
+  auto third = client::Client::connect(o);
+  ASSERT_FALSE(third.ok());
+  EXPECT_NE(third.error().message.find("clients without a token hold 2 of the 8 connections, their share"),
+            std::string::npos)
+      << third.error().message;
+  o.auth_token = "0123456789abcdef0123456789abcdef";
+  for (int k = 0; k < 5; ++k) {
+    auto holder = client::Client::connect(o);
+    EXPECT_TRUE(holder.ok()) << k << ": " << holder.error().to_string();
+  }
+  // One anonymous client goes: its place is free for another.
+  a.reset();
+  o.auth_token.clear();
+  bool in = false;
+  for (int k = 0; k < 50 && !in; ++k) {
+    in = client::Client::connect(o).ok();
+    if (!in) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_TRUE(in);
+}
+
+// Before: connect, 4 bad bytes, close wrote about 300 bytes of log per
+// connection with no bound (4.2 MB/s from one client process). Connection
+// lines now share a server-wide budget of 50 a second; the rest are counted
+// and the next line logged says how many.
+TEST(Admission, ConnectionLogLinesHaveOneServerWideBudget) {
+  std::ostringstream log;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  const auto previous = spdlog::default_logger();
+  const auto level = spdlog::get_level();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("capture", sink));
+  spdlog::set_level(spdlog::level::info);
+  const auto start = std::chrono::steady_clock::now();
+  std::size_t connections = 0;
+  {
+    TestServer s;
+    auto bad_bytes_and_close = [&] {
+      const int fd = connect_from("127.0.0.2", s.port());
+      ASSERT_GE(fd, 0);
+      (void)::send(fd, "\xff\xff\xff\xff", 4, MSG_NOSIGNAL);
+      char buf[256];
+      while (::recv(fd, buf, sizeof buf, 0) > 0) {
+      }
+      ::close(fd);
+      ++connections;
+    };
+    while (connections < 600) bad_bytes_and_close();
+    // The next window's first line reports what the last one left out.
+    std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+    bad_bytes_and_close();
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  spdlog::set_default_logger(previous);
+  spdlog::set_level(level);
+  const std::string text = log.str();
+  const auto lines = static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+  std::fprintf(stderr, "%zu connections with bad bytes in %.2f s: %zu log lines, %zu bytes\n", connections, seconds,
+               lines, text.size());
+  // At most 50 a second for the connections, and a few about the server itself.
+  EXPECT_LE(lines, static_cast<std::size_t>(50 * (seconds + 1)) + 20) << text.substr(0, 2000);
+  EXPECT_NE(text.find("connection lines suppressed before this one"), std::string::npos) << text.substr(0, 2000);
 }
 
 // The send budget: subscriptions' rates add up across connections, shared

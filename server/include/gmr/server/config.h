@@ -52,6 +52,9 @@ struct ServerConfig {
   // token gets `anonymous`. No credentials: every client is anonymous.
   std::shared_ptr<const Credentials> credentials;
   Role anonymous = Role::kControl;
+  // With credentials, the part of max_connections clients without a token
+  // may hold between them (the rest is kept for token holders); 1: no bound.
+  double anonymous_share = 0.25;
   // TLS on the TCP port (docs/security.md): a PEM certificate chain and its
   // private key. Both empty: plain TCP. With TLS the port speaks only TLS.
   std::string tls_certificate_file;
