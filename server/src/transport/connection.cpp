@@ -253,6 +253,16 @@ void Connection::arm_watchdog() {
 
 void Connection::read_prefix() {
   if (stopped_) return;
+  if (body_waiting_) {
+    // A body announced while the budget could not take it: read it once
+    // the budget can (the watchdog's tick and every write retry).
+    if (!reserve_body()) {
+      read_paused_ = true;
+      return;
+    }
+    read_body();
+    return;
+  }
   // Back-pressure: a client that sends requests faster than it reads the
   // replies is not read until they drain; its replies never pile up beyond
   // the cap. While the server's buffers are over budget, nor is a connection
@@ -288,7 +298,25 @@ void Connection::on_prefix(const boost::system::error_code& ec) {
   body_expected_ = length;
   body_received_ = 0;
   body_.clear();
+  body_waiting_ = true;
+  if (!reserve_body()) {
+    read_paused_ = true;  // the bytes wait in the kernel, not here
+    return;
+  }
   read_body();
+}
+
+bool Connection::reserve_body() {
+  if (budget_ != nullptr) {
+    if (!budget_->try_reserve(body_expected_, accounted_)) return false;
+    body_reserved_ = body_expected_;
+  }
+  body_waiting_ = false;
+  return true;
+}
+
+Connection::~Connection() {
+  if (budget_ != nullptr) budget_->unreserve(body_reserved_);
 }
 
 void Connection::read_body() {
@@ -327,6 +355,7 @@ std::optional<std::string> Connection::on_body(const boost::system::error_code& 
   std::string body = std::move(body_);
   body_ = std::string();  // a large request's buffer is not kept
   body_received_ = 0;
+  if (budget_ != nullptr) budget_->unreserve(std::exchange(body_reserved_, 0));
   at_handler_ = true;
   account();
   read_prefix();  // pauses: a request is with the Handler

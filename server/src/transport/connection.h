@@ -70,6 +70,7 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   // handshake comes first.
   Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
              BufferBudget* budget = nullptr, net::ssl::context* tls = nullptr, ConnectionPlacement placement = {});
+  ~Connection() override;
 
   // Starts reading and the watchdog (on the lane). `on_closed` runs once,
   // on the control loop, when it stopped.
@@ -99,6 +100,8 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   void read_prefix();
   void on_prefix(const boost::system::error_code& ec);
   void read_body();
+  // Reserves the announced body against the server's buffer budget; false when it cannot yet.
+  bool reserve_body();
   // A whole request body, for hand_over (called without m_).
   std::optional<std::string> on_body(const boost::system::error_code& ec, std::size_t got);
   // Gives a request to the Handler on the control loop; when it has
@@ -121,6 +124,8 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   std::string body_;
   std::size_t body_expected_ = 0;  // bytes the length prefix announced
   std::size_t body_received_ = 0;
+  std::size_t body_reserved_ = 0;  // BufferBudget::reserved for the body being read
+  bool body_waiting_ = false;      // announced, but the budget cannot take it yet
 
   std::vector<std::shared_ptr<const std::string>> hold_;  // what the write in flight points into
   std::vector<std::string> hold_heads_;

@@ -39,6 +39,21 @@ struct BufferBudget {
   void release(std::uint64_t accounted) { held.fetch_sub(accounted, std::memory_order_relaxed); }
   // Whether a connection holding `accounted` bytes may be read.
   bool allows_reading(std::uint64_t accounted) const { return !(over() && accounted > fair_share); }
+  // Request bodies announced by their length prefix are reserved before a
+  // byte of them is read, from half the limit: bytes in flight stay inside
+  // it however many connections announce large messages and trickle them.
+  // The reservations are apart from `held` (what is there): announcing
+  // without sending holds no frame back. A connection whose own bytes stay
+  // within its fair share always may (a small request is always read).
+  std::atomic<std::uint64_t> reserved{0};
+  bool try_reserve(std::uint64_t n, std::uint64_t accounted) {
+    std::uint64_t r = reserved.load(std::memory_order_relaxed);
+    do {
+      if (limit != 0 && r + n > limit / 2 && accounted + n > fair_share) return false;
+    } while (!reserved.compare_exchange_weak(r, r + n, std::memory_order_relaxed));
+    return true;
+  }
+  void unreserve(std::uint64_t n) { reserved.fetch_sub(n, std::memory_order_relaxed); }
 };
 
 struct ConnectionLimits {

@@ -2,10 +2,15 @@
 // 64 clients that edit views, subscribe at high rates and never read stay
 // within the server's stated budget, and a well-behaved client meanwhile
 // keeps its rate.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <fstream>
 #include <mutex>
+#include <thread>
 
 #include "gmr/wire/framing.h"
 #include "net_test_util.h"
@@ -252,6 +257,67 @@ TEST(Memory, DeclaredLengthsReserveNothing) {
   if (!kSlowBuild) {
     EXPECT_LT(grown, 16u << 20);
   }
+}
+
+// Before: --max-buffered-bytes was checked before a length prefix, not while
+// a body was read: 252 connections each sending a 4 MiB message one byte
+// short held 1,031 MB (the server's own gmr_buffered_bytes at 1.06 GB against
+// 256 MiB). Now a body is reserved before it is read, from half the budget;
+// the rest wait in the kernel.
+TEST(Memory, BodiesInFlightAreReservedWithinTheBudgetBeforeTheyAreRead) {
+  server::ServerConfig cfg;
+  cfg.max_connections_per_address = 0;
+  cfg.max_pending_handshakes = 100;
+  cfg.max_buffered_bytes = 16u << 20;  // 8 MiB of it for bodies: two 4 MiB messages at a time
+  TestServer s(cfg);
+  const std::uint32_t length = wire::kDefaultMaxMessageBytes - 1;
+  std::string prefix(4, '\0');
+  for (int i = 0; i < 4; ++i) prefix[static_cast<std::size_t>(i)] = static_cast<char>(length >> (24 - 8 * i));
+  const std::string all_but_one = prefix + std::string(length - 1, 'x');
+  constexpr int kSenders = 24;
+  std::vector<int> fds;
+  std::vector<std::size_t> sent(kSenders, 0);
+  for (int i = 0; i < kSenders; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(s.port());
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    (void)::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    fds.push_back(fd);
+  }
+  // Push as much of each message as the kernel takes, for two seconds.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  std::uint64_t peak = 0;
+  while (std::chrono::steady_clock::now() < until) {
+    for (int i = 0; i < kSenders; ++i) {
+      auto& at = sent[static_cast<std::size_t>(i)];
+      if (at == all_but_one.size()) continue;
+      const ssize_t n = ::send(fds[static_cast<std::size_t>(i)], all_but_one.data() + at, all_but_one.size() - at,
+                               MSG_NOSIGNAL | MSG_DONTWAIT);
+      if (n > 0) at += static_cast<std::size_t>(n);
+    }
+    peak = std::max(peak, s.server.stats().max_buffered_bytes);
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  std::size_t whole = 0, total = 0;
+  for (auto n : sent) {
+    whole += n == all_but_one.size();
+    total += n;
+  }
+  // A well-behaved client is still served meanwhile.
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  EXPECT_TRUE(c->list_motions().ok());
+  const auto st = s.server.stats();
+  std::printf(
+      "%d connections sent %.1f MB of 4 MiB messages (%zu sent all but the last byte): the server held at most "
+      "%.1f MB (budget %.1f MB)\n",
+      kSenders, static_cast<double>(total) / 1e6, whole, static_cast<double>(st.max_buffered_bytes) / 1e6,
+      static_cast<double>(cfg.max_buffered_bytes) / 1e6);
+  EXPECT_GT(total, 3u * length) << "the senders pushed more than the budget could hold";
+  EXPECT_LE(st.max_buffered_bytes, cfg.max_buffered_bytes) << "bodies in flight stay within the budget";
+  for (int fd : fds) ::close(fd);
 }
 
 }  // namespace
