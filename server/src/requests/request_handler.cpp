@@ -308,8 +308,25 @@ Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point 
   if (!v) return unknown_view(view_id);
   auto edit = make(*v);
   if (!edit.ok()) return refusal_of(edit.error());
-  // A short motion's edit costs less than a trip to the edit thread.
-  if (edit->values() <= link_.services.cfg.edit_inline_values) {
+  // What the edit may write, before any of it is computed: past a view
+  // limit it is refused here (before, a channel-less 2^20-frame BVH and one
+  // SetRoots took 4.29 GB and 10 s before the limit was checked on the copy).
+  const ServerConfig& cfg = link_.services.cfg;
+  const std::uint64_t bound = edit->values_bound();
+  const std::uint64_t bound_bytes = bound * sizeof(double);
+  const std::uint64_t limit = std::min<std::uint64_t>(cfg.max_view_bytes_per_connection, cfg.max_view_bytes);
+  if (bound_bytes > limit) {
+    const Motion& m = *edit->base()->motion;
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "the edit could write up to " + std::to_string(bound_bytes) + " bytes (" +
+                       std::to_string(m.frame_count) + " frames x " +
+                       std::to_string(bound / std::max<std::uint64_t>(1, m.frame_count)) +
+                       " channels), above the view limit of " + std::to_string(limit) +
+                       " bytes (--max-view-bytes-per-connection, --max-view-bytes)"};
+  }
+  // A short motion's edit costs less than a trip to the edit thread; what it
+  // may write counts, not only what it reads.
+  if (std::max<std::uint64_t>(edit->values(), bound) <= cfg.edit_inline_values) {
     return views_.commit_edit(view_id, *edit, edit->run(), decorate);
   }
   // A long one is computed on the edit thread; meanwhile this connection's

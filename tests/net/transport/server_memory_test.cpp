@@ -259,6 +259,48 @@ TEST(Memory, DeclaredLengthsReserveNothing) {
   }
 }
 
+// Before: an 875-byte channel-less BVH (a 30-joint chain, 2^20 frames) and
+// one SetRoots of its 30 joints took 4.29 GB and about 10 s, no client
+// answered meanwhile, before the view limit was checked on the copy. The
+// edit's output is now bounded from frames x channels before anything is
+// computed, and refused with the figures.
+TEST(Memory, AnEditThatWouldExplodeIsRefusedBeforeItIsComputed) {
+  std::vector<Joint> chain;
+  std::vector<std::string> names;
+  for (int j = 0; j < 30; ++j) {
+    Joint k;
+    k.name = "j" + std::to_string(j);
+    k.parent = j - 1;
+    k.offset = Eigen::Vector3d(0, 1, 0);
+    names.push_back(k.name);
+    chain.push_back(k);
+  }
+  auto m = std::make_shared<Motion>();
+  m->skeleton = Skeleton::create(std::move(chain)).value();
+  m->frame_count = std::size_t{1} << 20;
+  m->frame_time = 0.01;
+  TestServer s({}, {{"chain", "chain.bvh", m}});
+  const std::uint64_t before = resident_bytes();
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("chain");
+  ASSERT_TRUE(v.ok());
+  const auto start = std::chrono::steady_clock::now();
+  auto edited = c->set_roots(v->id, names);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_FALSE(edited.ok());
+  EXPECT_NE(edited.error().message.find("RESOURCE_EXHAUSTED: the edit could write up to 1509949440 bytes (1048576 "
+                                        "frames x 180 channels), above the view limit of 67108864 bytes"),
+            std::string::npos)
+      << edited.error().message;
+  const std::uint64_t grown = resident_bytes() - before;
+  std::printf("SetRoots of 30 joints on 2^20 channel-less frames: refused in %.3f s, RSS grew %.1f MB\n", seconds,
+              static_cast<double>(grown) / 1e6);
+  EXPECT_LT(grown, 64u << 20);
+  // The view is as it was, and the connection goes on.
+  EXPECT_TRUE(c->list_motions().ok());
+}
+
 // Before: --max-buffered-bytes was checked before a length prefix, not while
 // a body was read: 252 connections each sending a 4 MiB message one byte
 // short held 1,031 MB (the server's own gmr_buffered_bytes at 1.06 GB against

@@ -89,6 +89,14 @@ class ViewEdit {
   const std::shared_ptr<const ViewContent>& base() const { return base_; }
   // Values (frames x channels) it reads: what it costs.
   std::size_t values() const { return base_->motion->values.size(); }
+  // At most the values it writes, known before anything is computed: every
+  // frame, every joint with all six channels (no edit gives a joint more).
+  // A channel-less motion of 2^20 frames reads nothing and may write much.
+  std::uint64_t values_bound() const {
+    const Motion& m = *base_->motion;
+    return static_cast<std::uint64_t>(m.frame_count) *
+           std::max<std::uint64_t>(m.stride(), 6 * static_cast<std::uint64_t>(m.skeleton.size()));
+  }
   // What the last run() reported.
   const EditReport& report() const { return *report_; }
 
