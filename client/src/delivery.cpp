@@ -141,7 +141,7 @@ void Client::Impl::on_push(const pb::ServerMessage& m) {
     auto sk = wire::from_proto(c.skeleton());
     // A change whose joints do not fit its skeleton is not taken: the frames
     // of its version are then dropped as another skeleton's.
-    const bool usable = sk.ok() && bad_joints(c.joints(), sk->size()).empty();
+    const bool usable = sk.ok() && sk->size() > 0 && bad_joints(c.joints(), sk->size()).empty();
     if (sub && usable) {
       std::lock_guard lock(mutex);
       sub->skeleton_version = c.skeleton_version();

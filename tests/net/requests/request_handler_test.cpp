@@ -143,6 +143,23 @@ TEST_F(RequestHandlerTest, RefusesEverythingButHelloFirstThenAnswers) {
   EXPECT_EQ(outbox_->replies.back().error().code(), pb::ERROR_CODE_BAD_REQUEST);
 }
 
+// Before, a second Hello re-evaluated the role while what the first one
+// opened (a publication, subscriptions) went on. The role is settled once.
+TEST_F(RequestHandlerTest, ASecondHelloIsRefusedAndTheFirstRoleStays) {
+  ASSERT_TRUE(hello().has_hello());
+  create_view("walk");
+  pb::ClientMessage again;
+  again.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+  again.mutable_hello()->set_auth_token("another-token-0123456789abcdef");
+  const auto r = ask(again, 3);
+  EXPECT_EQ(r.error().code(), pb::ERROR_CODE_BAD_REQUEST) << r.DebugString();
+  EXPECT_NE(r.error().message().find("Hello was already said on this connection (as 'control')"), std::string::npos)
+      << r.error().message();
+  pb::ClientMessage list;
+  list.mutable_list_motions();
+  EXPECT_TRUE(ask(list, 4).has_motions()) << "the connection goes on";
+}
+
 TEST_F(RequestHandlerTest, LibraryErrorsBecomeProtocolCodesWithoutPrechecks) {
   hello();
   const std::uint32_t v = create_view("walk");
