@@ -9,6 +9,10 @@
 #include <openssl/x509v3.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -252,6 +256,18 @@ void LibraryMotionTest::SetUp() {
 Certificate::~Certificate() {
   std::error_code ec;
   std::filesystem::remove_all(dir, ec);
+}
+
+CommandRun run_command(const std::string& command_line) {
+  CommandRun r;
+  FILE* p = ::popen((command_line + " 2>&1").c_str(), "r");
+  if (!p) return r;
+  std::array<char, 65536> buf;
+  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) r.out.append(buf.data(), n);
+  const int st = ::pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  r.signalled = WIFSIGNALED(st);
+  return r;
 }
 
 std::unique_ptr<Certificate> self_signed(const std::string& names) {

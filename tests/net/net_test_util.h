@@ -83,6 +83,16 @@ struct Certificate {
 };
 std::unique_ptr<Certificate> self_signed(const std::string& names);
 
+// A command line run through the shell, stdout captured and stderr merged
+// into it: its exit status (-1 when it did not exit), whether a signal ended
+// it, and what it printed.
+struct CommandRun {
+  int status = -1;
+  bool signalled = false;
+  std::string out;
+};
+CommandRun run_command(const std::string& command_line);
+
 // A value that another thread sets; wait() has a deadline.
 template <class T>
 class Latch {

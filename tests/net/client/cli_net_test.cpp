@@ -24,24 +24,11 @@
 namespace gmr::test {
 namespace {
 
-struct CommandRun {
-  int status = -1;
-  std::string out;
-};
-
 // Runs the gmr command with `args` (shell-quoted by the caller), stdout
 // captured, stderr merged. Without `prefix_binary`, `args` is the whole
 // command line.
 CommandRun gmr(const std::string& args, bool prefix_binary = true) {
-  CommandRun r;
-  const std::string cmd = (prefix_binary ? std::string(GMR_CLI_PATH) + " " : std::string()) + args + " 2>&1";
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) return r;
-  std::array<char, 65536> buf;
-  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) r.out.append(buf.data(), n);
-  const int st = ::pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
+  return run_command((prefix_binary ? std::string(GMR_CLI_PATH) + " " : std::string()) + args);
 }
 
 TEST(CliNet, QueryPrintsExactlyWhatPositionsPrints) {

@@ -9,7 +9,6 @@
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <array>
@@ -337,24 +336,7 @@ TEST(HostileServer, ASubscriptionNamingAJointPastTheSkeletonIsRefused) {
       << sub.error().message;
 }
 
-struct CommandRun {
-  int status = -1;
-  bool signalled = false;
-  std::string out;
-};
-
-CommandRun gmr(const std::string& args) {
-  CommandRun r;
-  const std::string cmd = std::string(GMR_CLI_PATH) + " " + args + " 2>&1";
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) return r;
-  std::array<char, 65536> buf;
-  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) r.out.append(buf.data(), n);
-  const int st = ::pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  r.signalled = WIFSIGNALED(st);
-  return r;
-}
+CommandRun gmr(const std::string& args) { return run_command(std::string(GMR_CLI_PATH) + " " + args); }
 
 TEST(HostileServer, TheCommandChecksEveryCountAndEscapesEveryName) {
   // Before: `gmr stream` read positions[j] for every joint of the view
