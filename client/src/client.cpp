@@ -157,19 +157,28 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
     d.hello.clock_offset_ns = r->hello().server_time_ns() - (hello_sent + (hello_answered - hello_sent) / 2);
   }
   d.server_udp = udp::endpoint(remote.address(), d.hello.udp_port);
-  d.udp_socket.open(remote.address().is_v4() ? udp::v4() : udp::v6(), ec);
-  if (!ec)
-    d.udp_socket.bind(udp::endpoint(remote.address().is_loopback() ? remote.address() : net::ip::address(), 0), ec);
-  // A deep receive buffer rides out scheduling stalls of the I/O thread (the
-  // kernel caps it at net.core.rmem_max).
-  if (!ec) d.udp_socket.set_option(net::socket_base::receive_buffer_size(4 << 20), ec);
-  net::post(d.strand, [impl = c->impl_] {
-    // The server may have gone already (closed, reset, garbage right after
-    // its HelloReply): then the UDP socket opened above is closed here.
-    if (!impl->open) return impl->shut();
-    if (impl->udp_socket.is_open()) impl->read_udp();
-    impl->arm_heartbeat();
+  // The UDP socket is opened on the strand, as every socket of this client
+  // is used: the server may have gone already (closed, reset, garbage right
+  // after its HelloReply), and the I/O thread shut everything meanwhile.
+  std::promise<void> udp_ready;
+  auto udp_future = udp_ready.get_future();
+  net::post(d.strand, [impl = c->impl_, address = remote.address(), &udp_ready] {
+    if (impl->open) {
+      boost::system::error_code e;
+      impl->udp_socket.open(address.is_v4() ? udp::v4() : udp::v6(), e);
+      if (!e) impl->udp_socket.bind(udp::endpoint(address.is_loopback() ? address : net::ip::address(), 0), e);
+      // A deep receive buffer rides out scheduling stalls of the I/O thread
+      // (the kernel caps it at net.core.rmem_max).
+      if (!e) impl->udp_socket.set_option(net::socket_base::receive_buffer_size(4 << 20), e);
+      impl->udp_open = !e;
+      if (impl->udp_open) impl->read_udp();
+      impl->arm_heartbeat();
+    } else {
+      impl->shut();
+    }
+    udp_ready.set_value();
   });
+  udp_future.wait();
   return c;
 }
 

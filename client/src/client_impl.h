@@ -82,6 +82,7 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   std::optional<net::ssl::context> tls_context;  // options.tls.enabled; outlives the socket
   asio::TlsSocket socket{net::any_io_executor(strand)};
   udp::socket udp_socket{strand};
+  std::atomic<bool> udp_open{false};  // the UDP socket opened (on the strand) at connect
   udp::endpoint server_udp;
   net::steady_timer heartbeat{strand};
   std::thread thread;             // own loop only

@@ -4,7 +4,7 @@ namespace gmr::client {
 
 Status Client::register_udp() {
   auto& d = *impl_;
-  if (!d.udp_socket.is_open() || d.hello.udp_port == 0) return make_error("the server offers no UDP");
+  if (!d.udp_open || d.hello.udp_port == 0) return make_error("the server offers no UDP");
   wire::UdpToken token;
   std::memcpy(token.data(), d.hello.udp_token.data(), token.size());
   const std::string datagram = wire::make_register_datagram(token);
