@@ -187,7 +187,8 @@ Result<PositionsTable> parse_positions_csv(std::string_view text, const std::str
       continue;
     }
     if (line.empty()) {
-      if (text.substr(start).find_first_not_of("\r\n") == std::string_view::npos) break;  // blank lines at the end
+      // Blank lines at the end (the last one may have no line break: start is then past the text).
+      if (start >= text.size() || text.substr(start).find_first_not_of("\r\n") == std::string_view::npos) break;
       return fail(0, "an empty row");
     }
     std::size_t bad_at = 0;

@@ -85,6 +85,18 @@ TEST(PositionsCsv, ReadsBackWhatItWrites) {
   }
 }
 
+// Found by the csv fuzzer: a file whose last line is a lone carriage return
+// without a line break threw std::out_of_range (the end-of-file check read
+// past the text) instead of ending the table.
+TEST(PositionsCsv, ALastLineOfOnlyACarriageReturnEndsTheTable) {
+  for (const std::string tail : {"\r", "\r\n", "\r\n\r", "\n\r"}) {
+    SCOPED_TRACE(static_cast<int>(tail.size()));
+    auto t = parse_positions_csv("frame,joint,x,y,z\r\n0,a,1,2,3\r\n" + tail, "p.csv");
+    ASSERT_TRUE(t.ok()) << t.error().to_string();
+    EXPECT_EQ(t->frames, 1u);
+  }
+}
+
 TEST(PositionsCsv, BadFilesSayWhereAndWhat) {
   struct Case {
     std::string text;
