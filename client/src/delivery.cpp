@@ -44,11 +44,13 @@ void Client::Impl::on_message(const pb::ServerMessage& m, bool via_udp) {
 
 std::shared_ptr<Client::Impl::Sub> Client::Impl::deliver_frame(const pb::Frame& f, bool via_udp) {
   std::shared_ptr<Sub> sub;
+  std::size_t values = 0;  // what the frame must carry (0: not stated)
   {
     std::lock_guard lock(mutex);
     (via_udp ? counters.frames_udp : counters.frames_tcp)++;
     if (auto it = subs.find(f.subscription_id()); it != subs.end()) {
       sub = it->second;
+      values = sub->values;
       ++sub->arrived;
       if (f.skeleton_version() != sub->skeleton_version) {
         ++counters.frames_other_skeleton;
@@ -73,12 +75,7 @@ std::shared_ptr<Client::Impl::Sub> Client::Impl::deliver_frame(const pb::Frame& 
     return sub;
   }
   auto decoded = wire::decode_frame(f);
-  bool malformed = !decoded.ok();
-  if (!malformed) {
-    std::lock_guard lock(mutex);
-    malformed = sub->values != 0 && decoded->positions.size() != sub->values;
-  }
-  if (malformed) {
+  if (!decoded.ok() || (values != 0 && decoded->positions.size() != values)) {
     std::lock_guard lock(mutex);
     ++counters.frames_malformed;
     return sub;
