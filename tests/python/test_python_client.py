@@ -474,6 +474,18 @@ class HostileServer(unittest.TestCase):
         self.addCleanup(thread.join, 5)
         return listener.getsockname()[1]
 
+    @staticmethod
+    def subscribed(request, joints):
+        """A Subscribed reply to `request`: subscription 7 of a two-joint
+        chain a-b, naming `joints`."""
+        r = gmr_client.stream_pb2.ServerMessage(request_id=request.request_id)
+        r.subscribed.subscription_id = 7
+        r.subscribed.joints.extend(joints)
+        for k, name in enumerate(["a", "b"]):
+            j = r.subscribed.skeleton.joints.add()
+            j.name, j.parent = name, k - 1
+        return r
+
     def test_a_4_gib_message_is_refused_without_buffering_it(self):
         def huge(sock, send, read):
             read()  # list_motions
@@ -499,14 +511,7 @@ class HostileServer(unittest.TestCase):
 
     def test_a_subscription_naming_a_joint_past_its_skeleton_is_refused(self):
         def bad_joints(sock, send, read):
-            m = read()
-            r = gmr_client.stream_pb2.ServerMessage(request_id=m.request_id)
-            r.subscribed.subscription_id = 7
-            r.subscribed.joints.extend([0, 1000000])
-            for k, name in enumerate(["a", "b"]):
-                j = r.subscribed.skeleton.joints.add()
-                j.name, j.parent = name, k - 1
-            send(r)
+            send(self.subscribed(read(), [0, 1000000]))
 
         with gmr_client.Client(port=self.serve(bad_joints)) as c, self.assertRaises(gmr_client.GmrError) as e:
             c.subscribe(1)
@@ -515,15 +520,8 @@ class HostileServer(unittest.TestCase):
 
     def test_frames_whose_values_do_not_fit_are_dropped_and_counted(self):
         def frames(sock, send, read):
-            m = read()
             pb = gmr_client.stream_pb2
-            r = pb.ServerMessage(request_id=m.request_id)
-            r.subscribed.subscription_id = 7
-            r.subscribed.joints.extend([0, 1])
-            for k, name in enumerate(["a", "b"]):
-                j = r.subscribed.skeleton.joints.add()
-                j.name, j.parent = name, k - 1
-            send(r)
+            send(self.subscribed(read(), [0, 1]))
             for index, joints in enumerate([0, 1, 2, 3, 2]):
                 f = pb.ServerMessage()
                 f.frame.subscription_id = 7

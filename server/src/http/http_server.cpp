@@ -35,6 +35,12 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   const std::string& group() const { return group_; }
   // Still waiting for a request head (not answering, not upgrading).
   bool waiting() const { return waiting_; }
+  // Closed to make room for a newer connection (it was waiting for a request).
+  void evict() {
+    waiting_ = false;
+    close();
+    end();
+  }
 
   // `refusal`: why it is turned away (one answer, then the connection closes).
   void start(const std::string& refusal) {
@@ -252,15 +258,6 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     }
   }
 
- public:
-  // Closed to make room for a newer connection (it was waiting for a request).
-  void evict() {
-    waiting_ = false;
-    close();
-    end();
-  }
-
- private:
   HttpListener& listener_;
   const HttpServices& server_;
   beast::tcp_stream stream_;

@@ -320,7 +320,8 @@ Connection::~Connection() {
 }
 
 void Connection::read_body() {
-  // Grows as bytes arrive (a declared length alone reserves nothing).
+  // The buffer grows as bytes arrive (a declared length allocates nothing;
+  // reserve_body() counted it against the budget).
   const std::size_t chunk =
       std::min({kBodyChunk, std::max(kFirstChunk, body_received_), body_expected_ - body_received_});
   body_.resize(body_received_ + chunk);

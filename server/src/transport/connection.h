@@ -13,8 +13,10 @@
 // The outbox, its bounds and the watchdog's rules are QueuedOutbox's
 // (queued_outbox.h), shared with WebSocket; this class is the socket's side.
 // Replies held above max_reply_queue_bytes stop the read loop until they
-// drain (a client that sends faster than it reads waits); a request body
-// grows as its bytes arrive (a length prefix reserves nothing). With TLS,
+// drain (a client that sends faster than it reads waits); a request body's
+// length is reserved against the buffer budget before it is read (it waits
+// in the kernel until the budget can take it), and its buffer grows as its
+// bytes arrive. With TLS,
 // the handshake comes before the first read.
 //
 // Threads (io_threads.h): the socket, its reads and writes and the watchdog
