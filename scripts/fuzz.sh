@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Coverage-guided fuzzing of every reader and the wire decoders (libFuzzer,
-# with ASan and UBSan), each for FUZZ_SECONDS (default 60; 30 under CI=true,
+# with ASan and UBSan), each for FUZZ_SECONDS (default 60; 20 under CI=true,
 # which keeps CI under its time budget), two at a time.
 # Seeds: the corpus files of ../shared/data with the harness's extension, and
 # fuzz/seeds/<harness>/ (files made here: .gmr has no third-party corpus).
@@ -10,7 +10,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD=${FUZZ_BUILD:-build-fuzz}
-if [ "${CI:-}" = true ]; then SECONDS_EACH=${FUZZ_SECONDS:-30}; else SECONDS_EACH=${FUZZ_SECONDS:-60}; fi
+if [ "${CI:-}" = true ]; then SECONDS_EACH=${FUZZ_SECONDS:-20}; else SECONDS_EACH=${FUZZ_SECONDS:-60}; fi
 JOBS=${JOBS:-$(nproc)}
 DATA=../shared/data
 
