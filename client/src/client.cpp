@@ -383,6 +383,7 @@ Result<ServerCounters> Client::stats() {
   c.live_sources = s.live_sources();
   c.live_frames_received = s.live_frames_received();
   c.live_frames_refused = s.live_frames_refused();
+  c.live_frames_over_rate = s.live_frames_over_rate();
   c.multicast_frames_sent = s.multicast_frames_sent();
   c.frames_sent_total = s.frames_sent_total();
   c.frames_dropped_total = s.frames_dropped_total();

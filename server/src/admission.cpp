@@ -170,15 +170,16 @@ std::string Admission::admit_anonymous(std::uint64_t id) {
   return {};
 }
 
-std::optional<std::string> Admission::commit_rate(double rate_hz, std::uint64_t rate_mhz) {
+std::optional<std::string> Admission::commit_rate(double rate_hz, std::uint64_t rate_mhz, Asker asker) {
   if (cfg_.send_budget > 0 && static_cast<double>(committed_mhz_ + rate_mhz) > cfg_.send_budget * 1000.0) {
-    ++subscriptions_refused_;
+    ++(asker == Asker::kSubscription ? subscriptions_refused_ : publications_refused_);
     char text[320];
     std::snprintf(text, sizeof text,
                   "the server's subscriptions already ask for %.0f of the %.0f frames/s it can send "
-                  "(--send-budget); %.1f Hz more would pass it: subscribe at a lower rate, or connect to "
-                  "another replica",
-                  static_cast<double>(committed_mhz_) / 1000.0, cfg_.send_budget, rate_hz);
+                  "(--send-budget; live sources count their declared rate); %.1f Hz more would pass it: %s",
+                  static_cast<double>(committed_mhz_) / 1000.0, cfg_.send_budget, rate_hz,
+                  asker == Asker::kSubscription ? "subscribe at a lower rate, or connect to another replica"
+                                                : "publish at a lower rate, or to another replica");
     return std::string(text);
   }
   committed_mhz_ += rate_mhz;

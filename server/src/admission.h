@@ -108,12 +108,16 @@ class Admission {
 
   // --- The send budget (docs/protocol.md, "Admission") --------------------
   // Commits `rate_hz` (in millihertz, `rate_mhz`) of frames per second, or
-  // says why the budget refuses it (counted).
-  std::optional<std::string> commit_rate(double rate_hz, std::uint64_t rate_mhz);
+  // says why the budget refuses it (counted). A live source commits its
+  // declared rate (every frame it takes is computed for its views, whoever
+  // watches), which RateHold holds it to.
+  enum class Asker { kSubscription, kPublication };
+  std::optional<std::string> commit_rate(double rate_hz, std::uint64_t rate_mhz, Asker asker = Asker::kSubscription);
   void release_rate(std::uint64_t rate_mhz) { committed_mhz_ -= rate_mhz; }
   double committed_frames_per_second() const { return static_cast<double>(committed_mhz_) / 1000.0; }
   std::uint64_t committed_mhz() const { return committed_mhz_; }
   std::uint64_t subscriptions_refused() const { return subscriptions_refused_; }
+  std::uint64_t publications_refused() const { return publications_refused_; }
 
   // --- View bytes: motion bytes views own (edited copies) -----------------
   std::uint64_t view_bytes() const { return view_bytes_; }
@@ -146,6 +150,7 @@ class Admission {
   // no drift however many come and go), against cfg.send_budget.
   std::uint64_t committed_mhz_ = 0;
   std::uint64_t subscriptions_refused_ = 0;
+  std::uint64_t publications_refused_ = 0;
   std::uint64_t view_bytes_ = 0;
 };
 

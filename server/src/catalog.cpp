@@ -81,6 +81,18 @@ std::vector<std::shared_ptr<LiveSource>> Catalog::local_sources() const {
   return out;
 }
 
-void Catalog::count_live_frame(bool accepted) { ++(accepted ? live_frames_received_ : live_frames_refused_); }
+void Catalog::count_live_frame(FrameFate fate) {
+  switch (fate) {
+    case FrameFate::kAccepted:
+      ++live_frames_received_;
+      break;
+    case FrameFate::kRefused:
+      ++live_frames_refused_;
+      break;
+    case FrameFate::kOverRate:
+      ++live_frames_over_rate_;
+      break;
+  }
+}
 
 }  // namespace gmr::server

@@ -57,10 +57,11 @@ class Catalog final : public LiveDirectory {
                                        double metres_per_unit) override;
   void remove_live(const std::shared_ptr<LiveSource>& source) override;
   std::vector<std::shared_ptr<LiveSource>> local_sources() const override;
-  void count_live_frame(bool accepted) override;
+  void count_live_frame(FrameFate fate) override;
 
   std::uint64_t live_frames_received() const { return live_frames_received_; }
   std::uint64_t live_frames_refused() const { return live_frames_refused_; }
+  std::uint64_t live_frames_over_rate() const { return live_frames_over_rate_; }
 
  private:
   std::vector<LibraryEntry> library_;
@@ -70,8 +71,9 @@ class Catalog final : public LiveDirectory {
   // leaves when its publication ends.
   std::map<std::string, std::shared_ptr<LiveSource>, std::less<>> live_;
   std::uint64_t next_live_serial_ = 1;
-  std::uint64_t live_frames_received_ = 0;  // frames published and accepted, all sources
-  std::uint64_t live_frames_refused_ = 0;   // refused (wrong size, not finite, unknown publication)
+  std::uint64_t live_frames_received_ = 0;   // frames published and accepted, all sources
+  std::uint64_t live_frames_refused_ = 0;    // refused (wrong size, not finite, unknown publication)
+  std::uint64_t live_frames_over_rate_ = 0;  // faster than the declared rate: dropped (RateHold)
 };
 
 }  // namespace gmr::server

@@ -145,6 +145,8 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   }
   f.add("gmr_subscriptions_refused_total", "Subscriptions refused for the send budget", T::Counter,
         static_cast<double>(s.server.subscriptions_refused));
+  f.add("gmr_publications_refused_total", "Live sources refused for the send budget (their declared rate)", T::Counter,
+        static_cast<double>(s.server.publications_refused));
   f.add("gmr_streams", "Streams (one kinematics and one encoding per tick, shared by their subscribers)", T::Gauge,
         static_cast<double>(s.server.streams));
   f.add("gmr_committed_frames_per_second", "Frames per second all subscriptions ask for (against the send budget)",
@@ -202,6 +204,9 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
         static_cast<double>(s.live_frames_received));
   f.add("gmr_live_frames_refused_total", "Frames published to live sources and refused (wrong size, not finite)",
         T::Counter, static_cast<double>(s.live_frames_refused));
+  f.add("gmr_live_frames_over_rate_total",
+        "Frames published to live sources faster than their declared rate, dropped (a burst of a second passes)",
+        T::Counter, static_cast<double>(s.live_frames_over_rate));
   f.add("gmr_relay_announces_refused_total",
         "Live sources other replicas announced and this one refused (invalid, or past --max-remote-sources)",
         T::Counter, static_cast<double>(s.relay_announces_refused));
@@ -209,7 +214,8 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
         static_cast<double>(s.server.udp_rejected));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,
         static_cast<double>(s.server.buffered_bytes));
-  f.add("gmr_view_bytes", "Motion bytes edited views own", T::Gauge, static_cast<double>(s.server.view_bytes));
+  f.add("gmr_view_bytes", "Motion bytes edited views and live sources own", T::Gauge,
+        static_cast<double>(s.server.view_bytes));
 
   auto families = registry_->Collect();
   for (auto& family : f.families()) families.push_back(std::move(family));

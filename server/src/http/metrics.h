@@ -39,7 +39,7 @@ struct MetricsSnapshot {
   std::uint64_t udp_bytes_sent = 0;
   std::uint64_t multicast_frames_sent = 0;
   std::size_t live_sources = 0;
-  std::uint64_t live_frames_received = 0, live_frames_refused = 0;
+  std::uint64_t live_frames_received = 0, live_frames_refused = 0, live_frames_over_rate = 0;
   std::uint64_t relay_announces_refused = 0;
 };
 

@@ -24,8 +24,9 @@ class LiveDirectory {
   virtual void remove_live(const std::shared_ptr<LiveSource>& source) = 0;
   // The sources published on this replica (no origin), for re-announcing.
   virtual std::vector<std::shared_ptr<LiveSource>> local_sources() const = 0;
-  // A frame pushed to a live source was accepted, or refused.
-  virtual void count_live_frame(bool accepted) = 0;
+  // What became of a frame pushed to a live source.
+  enum class FrameFate { kAccepted, kRefused, kOverRate };
+  virtual void count_live_frame(FrameFate fate) = 0;
 };
 
 }  // namespace gmr::server

@@ -8,6 +8,8 @@
 // Touched only on the I/O thread.
 #pragma once
 
+#include <algorithm>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -24,11 +26,42 @@ namespace gmr::server {
 
 class Stream;
 
+// The declared rate, held: a token bucket that fills at `rate_hz` and holds
+// kBurstSeconds of frames (at least kMinBurst). A publisher's jitter and a
+// network's bunching pass; a source declared at 1 Hz that sends 300,000
+// frames a second gets one a second through, the rest dropped.
+class RateHold {
+ public:
+  static constexpr double kBurstSeconds = 1.0;
+  static constexpr double kMinBurst = 16.0;
+  RateHold(double rate_hz, Clock::time_point now)
+      : rate_(rate_hz), capacity_(std::max(kMinBurst, rate_hz * kBurstSeconds)), tokens_(capacity_), last_(now) {}
+  // Whether a frame arriving at `now` is within the rate (it takes a token).
+  bool take(Clock::time_point now) {
+    if (now > last_) {
+      tokens_ = std::min(capacity_, tokens_ + rate_ * std::chrono::duration<double>(now - last_).count());
+      last_ = now;
+    }
+    if (tokens_ < 1.0) return false;
+    tokens_ -= 1.0;
+    return true;
+  }
+
+ private:
+  double rate_, capacity_, tokens_;
+  Clock::time_point last_;
+};
+
 class LiveSource : public std::enable_shared_from_this<LiveSource> {
  public:
   // `skeleton`: the publisher's, pre-rotation channels. `serial` tells this
   // publication from an earlier one of the same name (share keys).
   LiveSource(std::string name, std::uint64_t serial, Skeleton skeleton, double frame_time, double metres_per_unit);
+
+  // Bytes a source of `skeleton` holds while it lives (its skeleton and
+  // newest frame, in the copies a frame's fan-out keeps), an estimate for
+  // the memory budget.
+  static std::uint64_t held_bytes(const Skeleton& skeleton);
 
   const std::string& name() const { return name_; }
   std::uint64_t serial() const { return serial_; }
@@ -47,8 +80,14 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   // Checks one frame (its size, finite values) and sends it to every stream
   // of this source. An error says which value and why; nothing is sent then.
   // `index`: the frame's number when another replica numbered it (frames
-  // that never came are a gap); none: the next.
-  Status push(std::span<const double> values, std::optional<std::uint64_t> index = std::nullopt);
+  // that never came are a gap, of at most kMaxIndexGap); none: the next.
+  // A frame that comes faster than the declared rate allows (RateHold) is
+  // dropped: kOverRate, nothing sent, counted in over_rate().
+  enum class Pushed { kSent, kOverRate };
+  Result<Pushed> push(std::span<const double> values, std::optional<std::uint64_t> index = std::nullopt,
+                      Clock::time_point now = Clock::now());
+  static constexpr std::uint64_t kMaxIndexGap = 65536;
+  std::uint64_t over_rate() const { return over_rate_; }
   // Ends the source: every stream's subscribers are told `reason`.
   void end(const std::string& reason);
 
@@ -79,6 +118,8 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   bool ended_ = false;
   std::vector<std::weak_ptr<Stream>> streams_;
   std::uint64_t replay_failures_ = 0;
+  RateHold hold_;
+  std::uint64_t over_rate_ = 0;
   std::string origin_;
   std::unique_ptr<Motion> recording_;
   std::size_t record_max_bytes_ = 0;

@@ -154,10 +154,12 @@ void Replicas::on_relay(relay_pb::LiveRelay m) {
       if (it == remote_.end() || !it->second.source) return;  // announced later, or ignored
       it->second.heard = Clock::now();
       const auto& f = m.frame();
-      directory_.count_live_frame(
-          it->second.source
-              ->push(std::span<const double>(f.values().data(), static_cast<std::size_t>(f.values_size())), f.index())
-              .ok());
+      auto pushed = it->second.source->push(
+          std::span<const double>(f.values().data(), static_cast<std::size_t>(f.values_size())), f.index());
+      using Fate = LiveDirectory::FrameFate;
+      directory_.count_live_frame(!pushed.ok()                                      ? Fate::kRefused
+                                  : pushed.value() == LiveSource::Pushed::kOverRate ? Fate::kOverRate
+                                                                                    : Fate::kAccepted);
       return;
     }
     case relay_pb::LiveRelay::kEnd: {

@@ -62,6 +62,27 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
     }
     recording = recording_path(cfg.record_dir, r.name()).string();
   }
+  // The memory budget: the skeleton and its newest frame, as views count
+  // their edited copies.
+  Admission& admission = link_.services.admission;
+  const std::uint64_t bytes = LiveSource::held_bytes(std::get<Skeleton>(checked));
+  const std::uint64_t mine = link_.held_bytes + bytes, all = admission.view_bytes() + bytes;
+  if (mine > cfg.max_view_bytes_per_connection || all > cfg.max_view_bytes) {
+    const bool own = mine > cfg.max_view_bytes_per_connection;
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "the live source's skeleton takes " + std::to_string(bytes) + " bytes; views and live sources " +
+                       (own ? "of this connection" : "of all connections") + " would then hold " +
+                       std::to_string(own ? mine : all) + " bytes, above the server's limit of " +
+                       std::to_string(own ? cfg.max_view_bytes_per_connection : cfg.max_view_bytes)};
+  }
+  // The send budget: every frame the source takes is computed for its views.
+  const double rate = 1.0 / r.frame_time();
+  const auto rate_mhz = static_cast<std::uint64_t>(std::llround(rate * 1000.0));
+  if (auto refused = admission.commit_rate(rate, rate_mhz, Admission::Asker::kPublication)) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, *refused};
+  }
+  link_.held_bytes = mine;
+  admission.set_view_bytes(all);
   auto source = link_.services.catalog.add_live(r.name(), std::move(std::get<Skeleton>(checked)), r.frame_time(),
                                                 r.metres_per_unit());
   if (!recording.empty()) {
@@ -69,7 +90,7 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
     recordings_[source.get()] = recording;
   }
   const std::uint32_t id = next_publication_++;
-  publications_[id] = source;
+  publications_[id] = Held{source, bytes, rate_mhz};
   link_.services.replicas.announce(*source);
   spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", link_.connection_id,
                printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(),
@@ -82,20 +103,31 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
 }
 
 Reply Publications::publish_frame(const pb::PublishFrame& r) {
+  using Fate = LiveDirectory::FrameFate;
   auto it = publications_.find(r.publication_id());
   if (it == publications_.end()) {
-    link_.services.catalog.count_live_frame(false);
+    link_.services.catalog.count_live_frame(Fate::kRefused);
     return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown publication " + std::to_string(r.publication_id())};
   }
-  LiveSource& source = *it->second;
-  if (Status s = source.push(std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
-      !s.ok()) {
-    link_.services.catalog.count_live_frame(false);
-    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "live '" + source.name() + "': " + s.error().message};
+  LiveSource& source = *it->second.source;
+  const std::span<const double> values(r.values().data(), static_cast<std::size_t>(r.values_size()));
+  auto pushed = source.push(values);
+  if (!pushed.ok()) {
+    link_.services.catalog.count_live_frame(Fate::kRefused);
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "live '" + source.name() + "': " + pushed.error().message};
   }
-  link_.services.catalog.count_live_frame(true);
-  link_.services.replicas.frame(source,
-                                std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
+  if (pushed.value() == LiveSource::Pushed::kOverRate) {
+    // Dropped, not refused: a publisher a little ahead of its clock is not
+    // told off per frame. Counted, and logged at a bounded rate.
+    link_.services.catalog.count_live_frame(Fate::kOverRate);
+    if (std::uint64_t more = 0; over_rate_log_.allow(more)) {
+      spdlog::warn("conn {}: live {} sends faster than its declared {:.3g} Hz: {} frames dropped so far",
+                   link_.connection_id, printable(source.name(), 200), 1.0 / source.frame_time(), source.over_rate());
+    }
+    return pb::ServerMessage{};
+  }
+  link_.services.catalog.count_live_frame(Fate::kAccepted);
+  link_.services.replicas.frame(source, values);
   return pb::ServerMessage{};  // no reply
 }
 
@@ -110,7 +142,10 @@ Reply Publications::unpublish(const pb::Unpublish& r) {
 void Publications::end(std::uint32_t id, const std::string& reason) {
   auto it = publications_.find(id);
   if (it == publications_.end()) return;
-  auto source = std::move(it->second);
+  auto source = std::move(it->second.source);
+  link_.held_bytes -= it->second.bytes;
+  link_.services.admission.release_view_bytes(it->second.bytes);
+  link_.services.admission.release_rate(it->second.rate_mhz);
   publications_.erase(it);
   link_.services.catalog.remove_live(source);
   spdlog::info("conn {}: live {} ended after {} frames: {}", link_.connection_id, printable(source->name(), 200),

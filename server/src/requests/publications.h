@@ -31,9 +31,15 @@ class Publications {
   void end(std::uint32_t id, const std::string& reason);
 
   SessionLink& link_;
-  std::map<std::uint32_t, std::shared_ptr<LiveSource>> publications_;
+  struct Held {
+    std::shared_ptr<LiveSource> source;
+    std::uint64_t bytes = 0;     // LiveSource::held_bytes, in the memory budget
+    std::uint64_t rate_mhz = 0;  // its declared rate, in the send budget
+  };
+  std::map<std::uint32_t, Held> publications_;
   std::map<const LiveSource*, std::string> recordings_;  // of publications_, those recorded: the file
   std::uint32_t next_publication_ = 1;
+  LogLimiter over_rate_log_{1, std::chrono::seconds(10)};
 };
 
 }  // namespace gmr::server

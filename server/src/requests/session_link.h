@@ -21,6 +21,10 @@ class SessionLink {
 
   Services& services;
   const std::uint64_t connection_id;
+  // Motion bytes this session's views (edited copies) and live sources
+  // (skeleton and newest frame) own, against max_view_bytes_per_connection;
+  // also counted in Admission::view_bytes, against max_view_bytes.
+  std::uint64_t held_bytes = 0;
 
   // The connection, while it is there.
   std::shared_ptr<Outbox> connection() const { return connection_.lock(); }

@@ -83,7 +83,7 @@ Reply Views::commit_edit(std::uint32_t view_id, const ViewEdit& edit, Result<std
   // The view budget: an edit whose copy would pass it is undone and refused.
   const std::uint64_t new_bytes = link_.services.catalog.owned_bytes(*v);
   const ServerConfig& cfg = link_.services.cfg;
-  const std::uint64_t mine = view_bytes_ - old_bytes + new_bytes;
+  const std::uint64_t mine = link_.held_bytes - old_bytes + new_bytes;
   const std::uint64_t all = link_.services.admission.view_bytes() - old_bytes + new_bytes;
   if (new_bytes > old_bytes && (mine > cfg.max_view_bytes_per_connection || all > cfg.max_view_bytes)) {
     v->restore(before);
@@ -95,7 +95,7 @@ Reply Views::commit_edit(std::uint32_t view_id, const ViewEdit& edit, Result<std
                        std::to_string(own ? cfg.max_view_bytes_per_connection : cfg.max_view_bytes) +
                        ": close views you no longer use"};
   }
-  view_bytes_ = mine;
+  link_.held_bytes = mine;
   link_.services.admission.set_view_bytes(all);
   if (changed_) changed_(*v);
   pb::ServerMessage out;
@@ -193,7 +193,7 @@ Reply Views::query(const pb::QueryFrames& r) const {
 
 void Views::forget(const View& v) {
   const std::uint64_t bytes = link_.services.catalog.owned_bytes(v);
-  view_bytes_ -= bytes;
+  link_.held_bytes -= bytes;
   link_.services.admission.release_view_bytes(bytes);
 }
 

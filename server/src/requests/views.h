@@ -52,7 +52,6 @@ class Views {
   SessionLink& link_;
   std::function<void(const View&)> changed_;
   std::map<std::uint32_t, std::unique_ptr<View>> views_;
-  std::uint64_t view_bytes_ = 0;  // Catalog::owned_bytes of views_, also counted in Admission
   std::uint32_t next_view_ = 1;
 };
 

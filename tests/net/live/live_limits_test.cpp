@@ -1,0 +1,199 @@
+// Live sources inside the server's limits (docs/protocol.md, "Live
+// sources"): a publisher is held to the rate it declared, its declared rate
+// counts against the send budget, and its skeleton against the memory
+// budget, as a subscription's rate and a view's edited copy do.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "gmr/client/client.h"
+#include "gmr/skeleton/skeleton.h"
+#include "net_test_util.h"
+
+namespace gmr::test {
+namespace {
+
+using client::Client;
+
+const std::string kPublishToken = "publish-5b0c2e8d41f7a9c3e6d2b8f0a4c1e7d9";
+const std::string kControlToken = "control-8e3a91c7d2f04b6e5a1c9d7f3b2e8a60";
+
+server::ServerConfig publish_config() {
+  server::ServerConfig cfg;
+  auto c = server::Credentials::parse("publish " + kPublishToken + "\ncontrol " + kControlToken + "\n", "auth");
+  EXPECT_TRUE(c.ok());
+  cfg.credentials = std::make_shared<const server::Credentials>(std::move(c).value());
+  cfg.anonymous = server::Role::kRead;
+  return cfg;
+}
+
+std::unique_ptr<Client> connect_as(TestServer& s, const std::string& token) {
+  client::ClientOptions o;
+  o.auth_token = token;
+  return s.connect(o);
+}
+std::unique_ptr<Client> publisher(TestServer& s) { return connect_as(s, kPublishToken); }
+
+// A chain of `n` joints, each with three rotation channels (the first also
+// with three translations).
+Skeleton chain(int n) {
+  std::vector<Joint> joints(static_cast<std::size_t>(n));
+  for (int j = 0; j < n; ++j) {
+    auto& joint = joints[static_cast<std::size_t>(j)];
+    joint.name = "joint" + std::to_string(j);
+    joint.parent = j - 1;
+    joint.offset = Eigen::Vector3d(0, 1, 0);
+    if (j == 0) joint.channels = {ChannelType::kXposition, ChannelType::kYposition, ChannelType::kZposition};
+    for (auto c : {ChannelType::kZrotation, ChannelType::kXrotation, ChannelType::kYrotation}) {
+      joint.channels.push_back(c);
+    }
+  }
+  return Skeleton::create(std::move(joints)).value();
+}
+
+TEST(LiveLimits, FramesFasterThanTheDeclaredRateAreDroppedAndCounted) {
+  TestServer s(publish_config());
+  auto pub = publisher(s);
+  auto sub = connect_as(s, kControlToken);  // stats need the control role
+  ASSERT_TRUE(pub && sub);
+  const Skeleton sk = chain(3);
+  client::PublishOptions po;
+  po.name = "declared 2 Hz";
+  po.frame_time = 0.5;
+  const auto publication = pub->publish(sk, po);
+  ASSERT_TRUE(publication.ok()) << publication.error().to_string();
+  auto view = sub->create_view(po.name);
+  ASSERT_TRUE(view.ok()) << view.error().to_string();
+  std::atomic<std::size_t> received{0};
+  client::SubscribeOptions so;
+  so.max_staleness = std::chrono::milliseconds(0);
+  ASSERT_TRUE(sub->subscribe(view->id, so, [&](const client::ReceivedFrame&) { ++received; }).ok());
+
+  // 2,000 frames as fast as the client writes them: a source declared at
+  // 2 Hz gets its burst (16 frames) and 2 a second after it, whatever it sends.
+  const std::size_t sent = 2000;
+  std::vector<double> values(static_cast<std::size_t>(sk.channel_count()), 0.0);
+  const auto began = std::chrono::steady_clock::now();
+  for (std::size_t f = 0; f < sent; ++f) {
+    values[0] = static_cast<double>(f);
+    ASSERT_TRUE(pub->publish_frame(publication->id, values).ok());
+  }
+  ASSERT_TRUE(pub->list_motions().ok());  // a round trip: the server has taken all of them
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count();
+  EXPECT_TRUE(pub->take_errors().empty()) << "dropped frames are not refused one by one";
+
+  const auto stats = sub->stats().value();
+  const auto allowed = static_cast<std::uint64_t>(16 + 2.0 * seconds + 1);
+  EXPECT_GE(stats.live_frames_received, 16u);
+  EXPECT_LE(stats.live_frames_received, allowed) << "in " << seconds << " s";
+  EXPECT_EQ(stats.live_frames_received + stats.live_frames_over_rate, sent);
+  // Subscribers get only what the source took.
+  for (int i = 0; i < 200 && received < 16; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_LE(received.load(), stats.live_frames_received);
+  EXPECT_GE(received.load(), 1u);
+
+  // Held to the rate, not cut off: after a pause of a second, frames pass again.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  for (int f = 0; f < 2; ++f) ASSERT_TRUE(pub->publish_frame(publication->id, values).ok());
+  ASSERT_TRUE(pub->list_motions().ok());
+  EXPECT_GE(sub->stats().value().live_frames_received, stats.live_frames_received + 2);
+}
+
+TEST(LiveLimits, APublicationCommitsItsDeclaredRateAgainstTheSendBudget) {
+  server::ServerConfig cfg = publish_config();
+  cfg.send_budget = 100;
+  TestServer s(cfg);
+  auto pub = publisher(s);
+  auto sub = connect_as(s, kControlToken);  // stats need the control role
+  ASSERT_TRUE(pub && sub);
+  const Skeleton sk = chain(3);
+  client::PublishOptions po;
+  po.name = "fast";
+  po.frame_time = 1.0 / 120;
+  const auto refused = pub->publish(sk, po);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("RESOURCE_EXHAUSTED"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("publish at a lower rate"), std::string::npos) << refused.error().message;
+
+  po.name = "sixty";
+  po.frame_time = 1.0 / 60;
+  const auto sixty = pub->publish(sk, po);
+  ASSERT_TRUE(sixty.ok()) << sixty.error().to_string();
+  EXPECT_NEAR(sub->stats().value().committed_frames_per_second, 60.0, 1e-9);
+  // 60 Hz of the 100 are the source's: a 60 Hz subscription does not fit.
+  auto view = sub->create_view("walk");
+  ASSERT_TRUE(view.ok());
+  client::SubscribeOptions so;
+  so.rate_hz = 60;
+  EXPECT_FALSE(sub->subscribe(view->id, so, [](const client::ReceivedFrame&) {}).ok());
+  // Its end gives the rate back.
+  ASSERT_TRUE(pub->unpublish(sixty->id).ok());
+  EXPECT_NEAR(sub->stats().value().committed_frames_per_second, 0.0, 1e-9);
+  EXPECT_TRUE(sub->subscribe(view->id, so, [](const client::ReceivedFrame&) {}).ok());
+  const auto st = s.server.stats();
+  EXPECT_EQ(st.publications_refused, 1u);
+  EXPECT_EQ(st.subscriptions_refused, 1u);
+}
+
+TEST(LiveLimits, LiveSkeletonsCountInTheMemoryBudget) {
+  server::ServerConfig cfg = publish_config();
+  cfg.max_live_joints = 4096;
+  cfg.max_view_bytes_per_connection = 4u << 20;
+  cfg.max_view_bytes = 9u << 19;  // 4.5 MiB
+  TestServer s(cfg);
+  const Skeleton big = chain(4096);
+  client::PublishOptions po;
+  po.frame_time = 1.0 / 30;
+
+  // Each 4,096-joint source holds about 2.5 MB: one fits one connection's
+  // 4 MiB, not two; a second connection then meets the server's 4.5 MiB.
+  auto a = publisher(s);
+  ASSERT_TRUE(a);
+  std::vector<std::uint32_t> held;
+  std::string refusal;
+  for (int k = 0; k < 8 && refusal.empty(); ++k) {
+    po.name = "big/a" + std::to_string(k);
+    auto p = a->publish(big, po);
+    if (p.ok()) {
+      held.push_back(p->id);
+    } else {
+      refusal = p.error().message;
+    }
+  }
+  ASSERT_FALSE(refusal.empty()) << "8 sources of 4,096 joints fit in 4 MiB";
+  EXPECT_GE(held.size(), 1u);
+  EXPECT_LE(held.size(), 4u);
+  EXPECT_NE(refusal.find("RESOURCE_EXHAUSTED"), std::string::npos) << refusal;
+  EXPECT_NE(refusal.find("of this connection"), std::string::npos) << refusal;
+  const std::uint64_t after_a = s.server.stats().view_bytes;
+  EXPECT_GT(after_a, 0u);
+  EXPECT_LE(after_a, cfg.max_view_bytes_per_connection);
+
+  auto b = publisher(s);
+  ASSERT_TRUE(b);
+  std::string global;
+  for (int k = 0; k < 8 && global.empty(); ++k) {
+    po.name = "big/b" + std::to_string(k);
+    auto p = b->publish(big, po);
+    if (!p.ok()) global = p.error().message;
+  }
+  EXPECT_NE(global.find("of all connections"), std::string::npos) << global;
+  EXPECT_LE(s.server.stats().view_bytes, cfg.max_view_bytes);
+
+  // Ending the sources gives their bytes back.
+  b->close();
+  for (auto id : held) ASSERT_TRUE(a->unpublish(id).ok());
+  for (int i = 0; i < 200 && s.server.stats().view_bytes != 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(s.server.stats().view_bytes, 0u);
+  po.name = "big/again";
+  EXPECT_TRUE(a->publish(big, po).ok());
+}
+
+}  // namespace
+}  // namespace gmr::test
