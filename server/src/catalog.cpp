@@ -65,6 +65,7 @@ std::shared_ptr<LiveSource> Catalog::add_live(const std::string& name, Skeleton 
                                               double metres_per_unit) {
   auto source =
       std::make_shared<LiveSource>(name, next_live_serial_++, std::move(skeleton), frame_time, metres_per_unit);
+  if (replay_work_) source->set_replay(*replay_work_, *replay_home_);
   live_[name] = source;
   return source;
 }

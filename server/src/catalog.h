@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -51,6 +52,13 @@ class Catalog final : public LiveDirectory {
   // no view holds one: memory follows what is being streamed).
   std::shared_ptr<const CompiledForm> compiled_form(std::size_t index);
 
+  // Where live sources replay their views' edits, and where the frames
+  // return (LiveSource::set_replay); not set: inline.
+  void set_replay(net::any_io_executor work, net::any_io_executor home) {
+    replay_work_ = std::move(work);
+    replay_home_ = std::move(home);
+  }
+
   // LiveDirectory.
   bool serves(std::string_view name) const override;
   std::shared_ptr<LiveSource> add_live(const std::string& name, Skeleton skeleton, double frame_time,
@@ -71,6 +79,7 @@ class Catalog final : public LiveDirectory {
   // leaves when its publication ends.
   std::map<std::string, std::shared_ptr<LiveSource>, std::less<>> live_;
   std::uint64_t next_live_serial_ = 1;
+  std::optional<net::any_io_executor> replay_work_, replay_home_;
   std::uint64_t live_frames_received_ = 0;   // frames published and accepted, all sources
   std::uint64_t live_frames_refused_ = 0;    // refused (wrong size, not finite, unknown publication)
   std::uint64_t live_frames_over_rate_ = 0;  // faster than the declared rate: dropped (RateHold)

@@ -17,7 +17,9 @@
 namespace gmr::server {
 
 Server::Impl::Impl(ServerConfig config, std::vector<LibraryEntry> entries, bool is_ready)
-    : cfg(std::move(config)), catalog(std::move(entries)), ready(is_ready) {}
+    : cfg(std::move(config)), catalog(std::move(entries)), ready(is_ready) {
+  catalog.set_replay(live_pool.get_executor(), io.get_executor());
+}
 
 void Server::Impl::install_library(std::vector<LibraryEntry> entries) {
   if (ready || stopping) return;
@@ -351,6 +353,7 @@ void Server::wait() {
   if (d.thread.joinable()) d.thread.join();
   if (d.lanes) d.lanes->join();  // their connections closed with the control loop's last work
   d.edit_pool.join();            // an edit still running finishes; its answer has no loop to run in
+  d.live_pool.join();            // so does a replay
   d.replicas.close();
   d.recordings.wait();  // the I/O thread is done: nobody adds one
 }

@@ -75,6 +75,9 @@ struct Server::Impl {
   // edits queue rather than take the I/O thread's core. After io: joined
   // before io goes (a finished edit posts its answer to io).
   net::thread_pool edit_pool{1};
+  // Live views' edits replayed on each published frame (LiveSource::set_replay):
+  // a thread of their own, so a long edit does not hold live frames back.
+  net::thread_pool live_pool{1};
   Services services{cfg, io,        edit_pool, catalog,    admission, streams, counters,
                     udp, multicast, replicas,  recordings, metrics,   lanes};
   std::thread thread;

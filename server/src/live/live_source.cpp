@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <map>
+#include <utility>
 
 #include "streams/stream.h"
 
@@ -111,49 +112,104 @@ Result<LiveSource::Pushed> LiveSource::push(std::span<const double> values, std:
     }
   }
 
-  // Each distinct edit list is replayed once per frame, whatever the number
-  // of streams showing it.
-  std::vector<std::shared_ptr<Stream>> streams;
-  streams.reserve(streams_.size());
+  // Unedited views get the frame now; each distinct edit list is replayed
+  // once per frame, whatever the number of streams showing it.
+  ReplayBatch batch{index, latest_, {}};
+  std::map<const std::vector<LiveStep>*, std::size_t> group_of;
   std::erase_if(streams_, [&](const std::weak_ptr<Stream>& w) {
     auto s = w.lock();
     if (!s || s->idle()) return true;
-    streams.push_back(std::move(s));
+    const auto& content = s->content();
+    if (!content->live_steps || content->live_steps->empty()) {
+      s->live_frame(at_frame(*content, latest_), index);
+      return false;
+    }
+    auto [it, added] = group_of.emplace(content->live_steps.get(), batch.groups.size());
+    if (added) batch.groups.push_back(ReplayGroup{content->live_steps, {}});
+    batch.groups[it->second].streams.push_back(w);
     return false;
   });
-  std::map<const std::vector<LiveStep>*, std::shared_ptr<const Motion>> made;
-  for (const auto& s : streams) {
-    const auto& content = s->content();
-    const std::vector<LiveStep>* steps = content->live_steps.get();
-    auto it = made.find(steps);
-    if (it == made.end()) {
-      std::shared_ptr<const Motion> motion = latest_;
-      if (steps != nullptr && !steps->empty()) {
-        auto r = replay(*steps, latest_);
-        if (!r.ok()) {
-          if (replay_failures_++ % 1000 == 0) {
-            spdlog::warn("live '{}': frame {}: a view's edits failed on it, so its subscribers skip it: {}", name_,
-                         index, r.error().to_string());
-          }
-          motion = nullptr;
-        } else {
-          motion = std::move(r).value();
-        }
-      }
-      it = made.emplace(steps, std::move(motion)).first;
+  if (batch.groups.empty()) return Pushed::kSent;
+  if (!replay_work_) {
+    for (auto& g : batch.groups) {
+      g.made = replay(*g.steps, latest_);
+      deliver(g, index);
     }
-    if (!it->second) {
+  } else if (replaying_) {
+    // The newest frame waits for the batch under way; one that waited
+    // before it is skipped by its streams.
+    if (replay_next_) skip(*replay_next_);
+    replay_next_ = std::move(batch);
+  } else {
+    start_replay(std::move(batch));
+  }
+  return Pushed::kSent;
+}
+
+void LiveSource::set_replay(net::any_io_executor work, net::any_io_executor home) {
+  replay_work_ = std::move(work);
+  replay_home_ = std::move(home);
+}
+
+void LiveSource::skip(const ReplayBatch& batch) {
+  for (const auto& g : batch.groups) {
+    for (const auto& w : g.streams) {
+      if (auto s = w.lock()) s->live_skipped();
+    }
+  }
+}
+
+void LiveSource::start_replay(ReplayBatch batch) {
+  replaying_ = true;
+  net::post(*replay_work_, [self = shared_from_this(), batch = std::move(batch)]() mutable {
+    // The replay thread: only the batch (its own motions, the edit lists'
+    // functions, which hold no mutable state) is touched here.
+    for (auto& g : batch.groups) g.made = replay(*g.steps, batch.frame);
+    net::post(*self->replay_home_,
+              [self, batch = std::move(batch)]() mutable { self->finish_replay(std::move(batch)); });
+  });
+}
+
+void LiveSource::finish_replay(ReplayBatch batch) {
+  replaying_ = false;
+  for (const auto& g : batch.groups) deliver(g, batch.index);
+  if (replay_next_) {
+    auto next = std::move(*replay_next_);
+    replay_next_.reset();
+    start_replay(std::move(next));
+  } else if (end_reason_) {
+    tell_ended(std::exchange(end_reason_, std::nullopt).value());
+  }
+}
+
+void LiveSource::deliver(const ReplayGroup& g, std::uint64_t index) {
+  if (!g.made.ok() && replay_failures_++ % 1000 == 0) {
+    spdlog::warn("live '{}': frame {}: a view's edits failed on it, so its subscribers skip it: {}", name_, index,
+                 g.made.error().to_string());
+  }
+  for (const auto& w : g.streams) {
+    auto s = w.lock();
+    if (!s || s->idle()) continue;
+    // A view edited since the replay began shows other edits: it skips this frame.
+    if (!g.made.ok() || s->content()->live_steps != g.steps) {
       s->live_skipped();
       continue;
     }
-    s->live_frame(at_frame(*content, it->second), index);
+    s->live_frame(at_frame(*s->content(), g.made.value()), index);
   }
-  return Pushed::kSent;
 }
 
 void LiveSource::end(const std::string& reason) {
   if (ended_) return;
   ended_ = true;
+  if (replaying_) {
+    end_reason_ = reason;  // finish_replay tells them
+    return;
+  }
+  tell_ended(reason);
+}
+
+void LiveSource::tell_ended(const std::string& reason) {
   auto streams = std::move(streams_);
   streams_.clear();
   for (const auto& w : streams) {

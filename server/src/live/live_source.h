@@ -5,6 +5,13 @@
 // instead of a timer: each published frame is computed once per distinct view
 // content and encoded once per stream, as a library tick is.
 //
+// Replays of edits run off the control loop (set_replay): a frame goes at
+// once to the streams of unedited views, and to the others when the replay
+// thread has made their motions. One replay batch per source runs at a time;
+// frames that come meanwhile wait, the newest only (the streams they skip
+// count them as skipped), so a source with many edited views costs the
+// control loop nothing but the hand-off, and its lag stays one frame.
+//
 // Touched only on the I/O thread.
 #pragma once
 
@@ -88,7 +95,8 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
                       Clock::time_point now = Clock::now());
   static constexpr std::uint64_t kMaxIndexGap = 65536;
   std::uint64_t over_rate() const { return over_rate_; }
-  // Ends the source: every stream's subscribers are told `reason`.
+  // Ends the source: it takes no more frames, and every stream's subscribers
+  // are told `reason` once the frames it took before reached them.
   void end(const std::string& reason);
 
   // Keeps every accepted frame from now on, up to `max_bytes` of values.
@@ -96,6 +104,10 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   // The frames recorded (null when not recording), once the source ended;
   // `truncated` says whether the limit cut it short.
   std::shared_ptr<const Motion> recording(bool* truncated) const;
+
+  // Where edit replays run (`work`) and where their frames come back to
+  // (`home`, the control loop). Not set: replays run inline, in push().
+  void set_replay(net::any_io_executor work, net::any_io_executor home);
 
   // A stream that shows this source from now on (Stream::set_live): it gets
   // every frame pushed from now on.
@@ -118,6 +130,31 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   bool ended_ = false;
   std::vector<std::weak_ptr<Stream>> streams_;
   std::uint64_t replay_failures_ = 0;
+  // A frame's edited views, for the replay thread: each distinct edit list
+  // once, with the streams that show it.
+  struct ReplayGroup {
+    std::shared_ptr<const std::vector<LiveStep>> steps;
+    std::vector<std::weak_ptr<Stream>> streams;
+    Result<std::shared_ptr<const Motion>> made = std::shared_ptr<const Motion>();
+  };
+  struct ReplayBatch {
+    std::uint64_t index = 0;
+    std::shared_ptr<const Motion> frame;
+    std::vector<ReplayGroup> groups;
+  };
+  void start_replay(ReplayBatch batch);
+  void finish_replay(ReplayBatch batch);
+  // Hands group `g`'s motion (or its failure) to its streams.
+  void deliver(const ReplayGroup& g, std::uint64_t index);
+  std::optional<net::any_io_executor> replay_work_, replay_home_;
+  bool replaying_ = false;
+  std::optional<ReplayBatch> replay_next_;
+  // An end that waits for the replays under way: their frames were taken
+  // before it, so subscribers get them first.
+  std::optional<std::string> end_reason_;
+  void tell_ended(const std::string& reason);
+  // Streams of `batch` count its frame as skipped.
+  static void skip(const ReplayBatch& batch);
   RateHold hold_;
   std::uint64_t over_rate_ = 0;
   std::string origin_;
