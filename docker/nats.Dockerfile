@@ -5,4 +5,7 @@ RUN apt-get update -qq && apt-get install -y -qq --no-install-recommends nats-se
  && rm -rf /var/lib/apt/lists/*
 USER nobody
 EXPOSE 4222
-ENTRYPOINT ["nats-server", "-a", "0.0.0.0", "-p", "4222"]
+# deploy/k8s gives it a configuration with authorization (-c /etc/nats/nats.conf);
+# without arguments it listens on every address, unauthenticated.
+ENTRYPOINT ["nats-server"]
+CMD ["-a", "0.0.0.0", "-p", "4222"]

@@ -176,8 +176,17 @@ int main(int argc, char** argv) {
                  "239.255.74.2 is gmr discover's)");
   app.add_option("--discovery-port", cfg.discovery_port, "Port of the discovery group")->capture_default_str();
   app.add_option("--nats", cfg.nats_url,
-                 "A NATS server (nats://host:4222) through which replicas share live sources (docs/operations.md)");
+                 "A NATS server (nats://host:4222) through which replicas share live sources (docs/deployment.md)");
   app.add_option("--nats-subject", cfg.nats_subject, "The NATS subject of live sources")->capture_default_str();
+  app.add_option("--nats-creds", cfg.nats_credentials_file,
+                 "NATS credentials: a .creds file (JWT and seed), or lines 'user NAME' + 'password PASS', "
+                 "'token TOKEN', or 'nkey PUBLIC' + 'seed SEED' (docs/deployment.md)")
+      ->check(CLI::ExistingFile);
+  std::string relay_secret_file;
+  app.add_option("--relay-secret-file", relay_secret_file,
+                 "A secret every replica shares (at least 32 characters): relay messages are authenticated with "
+                 "HMAC-SHA256 under it, and others refused (docs/deployment.md)")
+      ->check(CLI::ExistingFile);
   int relay_timeout_ms = static_cast<int>(cfg.relay_timeout.count());
   app.add_option("--relay-timeout-ms", relay_timeout_ms,
                  "End another replica's live source after this long without word from it")
@@ -261,6 +270,14 @@ int main(int argc, char** argv) {
     cfg.anonymous = Role::kRead;
   }
   if (!anonymous.empty()) cfg.anonymous = parse_role(anonymous).value();
+  if (!relay_secret_file.empty()) {
+    auto secret = gmr::server::read_relay_secret(relay_secret_file);
+    if (!secret.ok()) {
+      std::fprintf(stderr, "gmr-server: %s\n", secret.error().to_string().c_str());
+      return 1;
+    }
+    cfg.relay_secret = std::move(secret).value();
+  }
 
   if (http_port < -1 || http_port > 65535) {
     std::fprintf(stderr, "gmr-server: --http-port must be -1 (no HTTP) or a port number\n");

@@ -190,6 +190,7 @@ ServerStats Server::Impl::snapshot(bool sessions) {
   st.send_budget = cfg.send_budget;
   st.subscriptions_refused = admission.subscriptions_refused();
   st.publications_refused = admission.publications_refused();
+  st.relay_messages_refused = replicas.messages_refused();
   st.buffered_bytes = admission.buffers.held.load();
   st.max_buffered_bytes = admission.buffers.max_held.load();
   st.view_bytes = admission.view_bytes();
@@ -218,6 +219,7 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.live_frames_refused = catalog.live_frames_refused();
   s.live_frames_over_rate = catalog.live_frames_over_rate();
   s.relay_announces_refused = replicas.announces_refused();
+  s.relay_messages_refused = replicas.messages_refused();
   return s;
 }
 

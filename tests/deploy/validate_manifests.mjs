@@ -109,6 +109,26 @@ for (const s of byKind("Service")) {
     if (!named) problems.push(`Service ${s.metadata.name}: targetPort ${p.targetPort} is no container's port`);
   }
 }
+// The relay is authenticated both ways (docs/deployment.md): NATS requires
+// a user, and gmr-server gives its credentials and the relay secret, from
+// files the pod mounts.
+for (const d of byKind("Deployment").filter((w) => w.metadata.name === "gmr-server")) {
+  const c = d.spec.template.spec.containers[0];
+  const args = c.args ?? [];
+  const mounted = (file) => (c.volumeMounts ?? []).some((m) => file.startsWith(m.mountPath + "/"));
+  for (const flag of ["--nats-creds", "--relay-secret-file"]) {
+    const i = args.indexOf(flag);
+    if (i < 0) problems.push(`Deployment gmr-server: no ${flag} in its args`);
+    else if (!mounted(args[i + 1])) problems.push(`Deployment gmr-server: ${flag} ${args[i + 1]} is on no mounted volume`);
+  }
+}
+{
+  const conf = byKind("ConfigMap").find((m) => m.metadata.name === "gmr-nats-config")?.data?.["nats.conf"] ?? "";
+  if (!/authorization\s*{[^}]*\busers\s*=/s.test(conf)) problems.push("ConfigMap gmr-nats-config: nats.conf has no authorization users");
+  const nats = byKind("StatefulSet").find((s) => s.metadata.name === "gmr-nats");
+  const args = nats?.spec.template.spec.containers[0].args ?? [];
+  if (args.join(" ") !== "-c /etc/nats/nats.conf") problems.push("StatefulSet gmr-nats: does not run nats.conf");
+}
 for (const h of byKind("HorizontalPodAutoscaler")) {
   const ref = h.spec.scaleTargetRef;
   if (!workloads.some((w) => w.kind === ref.kind && w.metadata.name === ref.name)) {

@@ -210,6 +210,10 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   f.add("gmr_relay_announces_refused_total",
         "Live sources other replicas announced and this one refused (invalid, or past --max-remote-sources)",
         T::Counter, static_cast<double>(s.relay_announces_refused));
+  f.add("gmr_relay_messages_refused_total",
+        "Relay messages refused before they were read: no MAC or a wrong one (no relay secret), unparsable, "
+        "out of sequence (replayed), or past the messages waiting for the server",
+        T::Counter, static_cast<double>(s.relay_messages_refused));
   f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm", T::Counter,
         static_cast<double>(s.server.udp_rejected));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 
+#include "gmr/core/names.h"
 #include "gmr/wire/convert.h"
 #include "live/announcement.h"
 
@@ -36,11 +37,22 @@ Replicas::~Replicas() { close(); }
 
 void Replicas::start() {
   if (cfg_.nats_url.empty()) return;
-  relay_ = std::make_unique<NatsRelay>(io_, cfg_.nats_url, cfg_.nats_subject, random_origin(),
+  relay_ = std::make_unique<NatsRelay>(io_,
+                                       NatsRelay::Options{.url = cfg_.nats_url,
+                                                          .subject = cfg_.nats_subject,
+                                                          .origin = random_origin(),
+                                                          .credentials_file = cfg_.nats_credentials_file,
+                                                          .secret = cfg_.relay_secret},
                                        [this](relay_pb::LiveRelay m) { on_relay(std::move(m)); });
   if (Status s = relay_->start(); !s.ok()) throw std::runtime_error(s.error().to_string());
-  spdlog::info("replica {}: live sources shared on NATS {} subject {}", relay_->origin(), cfg_.nats_url,
-               cfg_.nats_subject);
+  spdlog::info("replica {}: live sources shared on NATS {} subject {}{}", relay_->origin(), cfg_.nats_url,
+               cfg_.nats_subject, cfg_.nats_credentials_file.empty() ? "" : " with credentials");
+  if (cfg_.relay_secret.empty()) {
+    spdlog::warn(
+        "replica {}: relay messages are not authenticated: whoever may publish on {} can put live sources "
+        "here (--relay-secret-file, docs/deployment.md)",
+        relay_->origin(), cfg_.nats_subject);
+  }
   timer_ = std::make_unique<net::steady_timer>(io_);
   tick();
 }
@@ -166,7 +178,8 @@ void Replicas::on_relay(relay_pb::LiveRelay m) {
       if (it == remote_.end()) return;
       if (auto source = it->second.source) {
         directory_.remove_live(source);
-        source->end(m.end());
+        // The reason reaches subscribers' screens: the rule names follow.
+        source->end(name_problem(m.end(), 200).empty() ? m.end() : "the live source ended on another replica");
       }
       remote_.erase(it);
       return;

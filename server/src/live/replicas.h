@@ -48,6 +48,8 @@ class Replicas {
   void on_relay(relay_pb::LiveRelay m);
 
   std::uint64_t announces_refused() const { return announces_refused_; }
+  // Relay messages refused before parsing (NatsRelay::refused): 0 without NATS.
+  std::uint64_t messages_refused() const { return relay_ ? relay_->refused() : 0; }
   std::size_t remote_sources() const { return remote_.size(); }
 
  private:

@@ -19,7 +19,10 @@
 #include <map>
 #include <thread>
 
+#include <nats/nats.h>
+
 #include "gmr/io/motion_file.h"
+#include "gmr/relay/v1/relay.pb.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/server/library.h"
 #include "gmr/server/auth.h"
@@ -867,6 +870,125 @@ TEST(LiveReplicas, NatsGoingAwayIsLoggedRetriedAndSurvived) {
   po.name = "second";
   ASSERT_TRUE(pub->publish(source->skeleton, po).ok());
   EXPECT_TRUE(wait_listed(*sub, "second")) << "B did not hear of a source published after NATS came back";
+}
+
+// The relay with NATS credentials and a shared secret (docs/deployment.md):
+// two replicas that hold both share a source; a publisher on the subject
+// that has the NATS credentials but not the secret is refused and counted,
+// whatever it sends (an old-style message, a forged MAC, a real message
+// replayed); a replica without the credentials is kept out by NATS itself.
+TEST(LiveReplicas, RelayMessagesNeedTheSharedSecretAndNatsTheCredentials) {
+  GMR_REQUIRE_NATS(nats_binary);
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  TempDir dir;
+  const std::uint16_t nats_port = free_port();
+  const std::string password = "nats-pw-6f1e0c9a83b24d57a1e8c3f0";
+  {
+    std::ofstream conf(dir.path / "nats.conf");
+    conf << "listen: 127.0.0.1:" << nats_port << "\nauthorization {\n  users = [ {user: gmr, password: \"" << password
+         << "\"} ]\n}\n";
+    std::ofstream creds(dir.path / "nats.creds");
+    creds << "# gmr's NATS user\nuser gmr\npassword " << password << "\n";
+  }
+  Child nats({nats_binary, "-c", (dir.path / "nats.conf").string()}, dir.path / "nats.log");
+  for (int i = 0; i < 500 && !accepts(nats_port); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE(accepts(nats_port)) << nats.output();
+  const std::string url = "nats://127.0.0.1:" + std::to_string(nats_port);
+
+  server::ServerConfig cfg = live_config();
+  cfg.nats_url = url;
+  cfg.nats_credentials_file = (dir.path / "nats.creds").string();
+  cfg.relay_secret = "relay-secret-3c9d1f7a0b6e4852c1d9a7f3e5b08264";
+  TestServer a(cfg), b(cfg);
+  // A replica without the NATS credentials does not start: NATS refuses it.
+  server::ServerConfig outsider = cfg;
+  outsider.nats_credentials_file.clear();
+  try {
+    TestServer refused(outsider);
+    ADD_FAILURE() << "a replica without NATS credentials started";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("--nats-creds"), std::string::npos) << e.what();
+  }
+
+  auto pub = connect_as(a, kPublishToken);
+  auto sub = connect_as(b, kControlToken);
+  ASSERT_TRUE(pub && sub);
+
+  // A rogue on the subject: it has the NATS credentials, not the secret.
+  natsConnection* rogue = nullptr;
+  natsOptions* opts = nullptr;
+  ASSERT_EQ(natsOptions_Create(&opts), NATS_OK);
+  natsOptions_SetURL(opts, url.c_str());
+  natsOptions_SetUserInfo(opts, "gmr", password.c_str());
+  ASSERT_EQ(natsConnection_Connect(&rogue, opts), NATS_OK);
+  natsOptions_Destroy(opts);
+  natsSubscription* tap = nullptr;
+  ASSERT_EQ(natsConnection_SubscribeSync(&tap, rogue, cfg.nats_subject.c_str()), NATS_OK);
+
+  client::PublishOptions po;
+  po.name = "replicated";
+  po.frame_time = source->frame_time;
+  const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
+  ASSERT_TRUE(wait_listed(*sub, "replicated")) << "replica B never heard of the source";
+  // A real message of replica A, as the rogue saw it go by.
+  natsMsg* captured = nullptr;
+  ASSERT_EQ(natsSubscription_NextMsg(&captured, tap, 5000), NATS_OK);
+  const std::string real(natsMsg_GetData(captured), static_cast<std::size_t>(natsMsg_GetDataLength(captured)));
+  natsMsg_Destroy(captured);
+
+  const auto publish = [&](const std::string& bytes) {
+    ASSERT_EQ(natsConnection_Publish(rogue, cfg.nats_subject.c_str(), bytes.data(), static_cast<int>(bytes.size())),
+              NATS_OK);
+  };
+  relay::v1::LiveRelay forged;
+  forged.set_origin("0123456789abcdef");
+  forged.set_serial(1);
+  forged.set_sequence(1);
+  forged.mutable_announce()->set_name("rogue/forged");
+  wire::to_proto(source->skeleton, *forged.mutable_announce()->mutable_skeleton());
+  forged.mutable_announce()->set_frame_time(source->frame_time);
+  publish(forged.SerializeAsString());  // the format before signing
+  relay::v1::SignedRelay wrong_mac;
+  wrong_mac.set_relay(forged.SerializeAsString());
+  wrong_mac.set_mac(std::string(32, 'x'));
+  publish(wrong_mac.SerializeAsString());
+  relay::v1::SignedRelay no_mac;
+  no_mac.set_relay(forged.SerializeAsString());
+  publish(no_mac.SerializeAsString());
+  // A real message replayed once A has moved on (it re-announces every second).
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));
+  publish(real);
+  natsConnection_Flush(rogue);
+
+  // B refused all four; A the three forged ones (the replayed message is
+  // its own, which it ignores). Nothing of the rogue's is listed.
+  for (auto [r, want] : {std::pair{&a, 3u}, std::pair{&b, 4u}}) {
+    std::uint64_t refused = 0;
+    for (int i = 0; i < 500 && refused < want; ++i) {
+      refused = r->server.stats().relay_messages_refused;
+      if (refused < want) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    EXPECT_EQ(r->server.stats().relay_messages_refused, want);
+  }
+  EXPECT_TRUE(wait_listed(*sub, "rogue/forged", false));
+  const auto listed = sub->list_motions().value();
+  EXPECT_TRUE(std::none_of(listed.begin(), listed.end(), [](auto& m) { return m.name == "rogue/forged"; }));
+  // Replica B still streams A's source.
+  auto view = sub->create_view("replicated");
+  ASSERT_TRUE(view.ok());
+  Latch<std::uint64_t> got;
+  client::SubscribeOptions so;
+  ASSERT_TRUE(sub->subscribe(view->id, so, [&](const ReceivedFrame& f) { got.set(f.frame_index); }).ok());
+  for (std::size_t f = 0; f < 40 && !got.wait(std::chrono::milliseconds(0)); ++f) {
+    ASSERT_TRUE(pub->publish_frame(id, source->frame(f % source->frame_count)).ok());
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_TRUE(got.wait(std::chrono::seconds(5)).has_value()) << "no frame of A's source reached B";
+
+  natsSubscription_Destroy(tap);
+  natsConnection_Destroy(rogue);
 }
 
 #endif  // GMR_SERVER_PATH

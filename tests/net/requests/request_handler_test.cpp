@@ -299,6 +299,25 @@ TEST_F(RequestHandlerTest, RelayedAnnouncesAreCheckedAsPublishesAreAndBounded) {
   server_.replicas.on_relay(frame);
   EXPECT_EQ(server_.catalog.live_frames_received(), 1u);
   EXPECT_EQ(server_.catalog.live_sources().at("remote/walk")->frames(), 1u);
+  // An index far ahead would freeze the source (every later frame "came
+  // after" it): refused, as are values that are not finite.
+  frame.mutable_frame()->set_index(std::numeric_limits<std::uint64_t>::max() - 1);
+  server_.replicas.on_relay(frame);
+  frame.mutable_frame()->set_index(1);
+  frame.mutable_frame()->set_values(0, std::numeric_limits<double>::infinity());
+  server_.replicas.on_relay(frame);
+  EXPECT_EQ(server_.catalog.live_frames_refused(), 3u);
+  frame.mutable_frame()->set_values(0, 0.0);
+  server_.replicas.on_relay(frame);
+  EXPECT_EQ(server_.catalog.live_sources().at("remote/walk")->frames(), 2u);
+  auto source = server_.catalog.live_sources().at("remote/walk");
+  gmr::relay::v1::LiveRelay end;
+  end.set_origin("replica-b");
+  end.set_serial(s);
+  end.set_end("bye\x1b[2J");
+  server_.replicas.on_relay(end);
+  EXPECT_TRUE(source->ended());
+  EXPECT_FALSE(server_.catalog.live_sources().contains("remote/walk"));
 }
 
 }  // namespace

@@ -106,6 +106,16 @@ struct ServerConfig {
   // replica on the same subject serves every replica's live sources.
   std::string nats_url;
   std::string nats_subject = "gmr.live";
+  // The NATS credentials (--nats-creds): a NATS .creds file (JWT and nkey
+  // seed, as nsc writes it), or our own lines "user NAME" + "password
+  // PASS", "token TOKEN", or "nkey PUBLIC" + "seed SEED" (docs/deployment.md).
+  // Empty: none.
+  std::string nats_credentials_file;
+  // The secret every replica shares (--relay-secret-file, at least 32
+  // characters): each relay message carries its HMAC-SHA256 under it, and
+  // one whose MAC does not check is refused and counted. Empty: relay
+  // messages are not authenticated (logged at start).
+  std::string relay_secret;
   // A source of another replica not heard of for this long has ended (its
   // replica went away without saying so).
   std::chrono::milliseconds relay_timeout{3000};
@@ -191,5 +201,11 @@ struct ServerConfig {
   // How long a graceful stop waits for replies to drain before closing.
   std::chrono::milliseconds shutdown_grace{2000};
 };
+
+// The relay secret in `path` (--relay-secret-file; ServerConfig::relay_secret):
+// its first line without surrounding blanks, at least kMinRelaySecret
+// characters. An error says which file and why.
+inline constexpr std::size_t kMinRelaySecret = 32;
+Result<std::string> read_relay_secret(const std::string& path);
 
 }  // namespace gmr::server
