@@ -165,6 +165,14 @@ int main(int argc, char** argv) {
   app.add_option("--max-record-bytes", cfg.max_record_bytes,
                  "Values one recording may hold; past them it stops growing")
       ->capture_default_str();
+  app.add_option("--max-record-total-bytes", cfg.max_record_total_bytes,
+                 "Bytes all recordings under way may hold together; past them they stop growing and new ones are "
+                 "refused")
+      ->capture_default_str();
+  app.add_option("--max-record-dir-bytes", cfg.max_record_dir_bytes,
+                 "Bytes the record directory may hold, its files and the recordings under way (0: no bound; 256 MiB "
+                 "of the disk always stay free)")
+      ->capture_default_str();
   app.add_option("--multicast-group", cfg.multicast_group,
                  "IPv4 multicast group (239.255.74.1) for shared streams subscribed over multicast (default: none)");
   app.add_option("--multicast-port", cfg.multicast_port, "Port of the multicast group")->capture_default_str();

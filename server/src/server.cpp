@@ -191,6 +191,10 @@ ServerStats Server::Impl::snapshot(bool sessions) {
   st.subscriptions_refused = admission.subscriptions_refused();
   st.publications_refused = admission.publications_refused();
   st.relay_messages_refused = replicas.messages_refused();
+  st.relay_connected = replicas.relay_connected();
+  st.record_bytes = recordings.budget().held();
+  st.recordings_refused = recordings.budget().refused();
+  st.recordings_cut = recordings.budget().cut();
   st.buffered_bytes = admission.buffers.held.load();
   st.max_buffered_bytes = admission.buffers.max_held.load();
   st.view_bytes = admission.view_bytes();

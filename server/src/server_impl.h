@@ -52,7 +52,7 @@ struct Server::Impl {
   // /readyz says so, and TCP connections are accepted.
   bool ready = false;
   Metrics metrics;
-  Recordings recordings;  // waited for by Server::wait()
+  Recordings recordings{cfg};  // waited for by Server::wait()
 
   // Declared before io: connections that io's handlers still hold at
   // destruction give their bytes back to its budget.

@@ -29,7 +29,7 @@ struct ServerParts {
   server::ServerConfig cfg;
   server::Catalog catalog;
   server::Metrics metrics;
-  server::Recordings recordings;
+  server::Recordings recordings{cfg};
   server::Admission admission{cfg};
   std::unique_ptr<server::IoThreads> lanes;  // none: everything on io
   server::net::io_context io;

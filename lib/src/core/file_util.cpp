@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <utility>
 #include <vector>
 
 #include "core/number_format.h"
@@ -217,6 +218,107 @@ Status write_file_atomic(const fs::path& path, std::string_view bytes) {
   auto tmp = write_temporary(path, bytes);
   if (!tmp) return tmp.error();
   return rename_into_place(*tmp, path);
+}
+
+Result<AtomicFileWriter> AtomicFileWriter::open(const fs::path& path, std::string_view head) {
+  auto tmp = write_temporary(path, head);
+  if (!tmp) return tmp.error();
+  AtomicFileWriter w;
+  w.path_ = path;
+  w.tmp_ = std::move(tmp).value();
+  w.size_ = head.size();
+  // Not O_APPEND: on Linux pwrite() to such a file appends (patch() needs it not to).
+  w.fd_ = ::open(w.tmp_.c_str(), O_WRONLY | O_CLOEXEC);
+  if (w.fd_ >= 0 && ::lseek(w.fd_, 0, SEEK_END) < 0) {
+    ::close(w.fd_);
+    w.fd_ = -1;
+  }
+  if (w.fd_ < 0) {
+    const int err = errno;
+    remove_and_untrack(w.tmp_);
+    w.tmp_.clear();
+    return file_error(path, "cannot reopen its temporary file", err);
+  }
+  return w;
+}
+
+AtomicFileWriter::AtomicFileWriter(AtomicFileWriter&& other) noexcept
+    : path_(std::move(other.path_)),
+      tmp_(std::exchange(other.tmp_, {})),
+      fd_(std::exchange(other.fd_, -1)),
+      buffer_(std::move(other.buffer_)),
+      size_(other.size_) {}
+
+AtomicFileWriter& AtomicFileWriter::operator=(AtomicFileWriter&& other) noexcept {
+  if (this != &other) {
+    discard();
+    path_ = std::move(other.path_);
+    tmp_ = std::exchange(other.tmp_, {});
+    fd_ = std::exchange(other.fd_, -1);
+    buffer_ = std::move(other.buffer_);
+    size_ = other.size_;
+  }
+  return *this;
+}
+
+AtomicFileWriter::~AtomicFileWriter() { discard(); }
+
+void AtomicFileWriter::discard() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  if (!tmp_.empty()) remove_and_untrack(tmp_);
+  tmp_.clear();
+  buffer_.clear();
+}
+
+Status AtomicFileWriter::flush() {
+  std::size_t done = 0;
+  while (done < buffer_.size()) {
+    const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return file_error(path_, "cannot write file", errno);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  buffer_.clear();
+  return Ok{};
+}
+
+Status AtomicFileWriter::append(std::string_view bytes) {
+  if (fd_ < 0) return file_error(path_, "cannot write file", EBADF);
+  constexpr std::size_t kBuffer = std::size_t{256} << 10;
+  buffer_.append(bytes);
+  size_ += bytes.size();
+  if (buffer_.size() >= kBuffer) return flush();
+  return Ok{};
+}
+
+Status AtomicFileWriter::patch(std::size_t offset, std::string_view bytes) {
+  if (fd_ < 0) return file_error(path_, "cannot write file", EBADF);
+  if (offset + bytes.size() > size_ - buffer_.size()) {
+    if (Status s = flush(); !s) return s;
+  }
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(offset + done));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return file_error(path_, "cannot write file", errno);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  return Ok{};
+}
+
+Status AtomicFileWriter::commit() {
+  if (fd_ < 0) return file_error(path_, "cannot write file", EBADF);
+  if (Status s = flush(); !s) return s;
+  if (::fsync(fd_) != 0) return file_error(path_, "cannot flush file", errno);
+  const int fd = std::exchange(fd_, -1);
+  if (::close(fd) != 0) return file_error(path_, "cannot close file", errno);
+  const fs::path tmp = std::exchange(tmp_, {});
+  return rename_into_place(tmp, path_);
 }
 
 Status write_files_atomic(std::span<const FileContent> files) {

@@ -384,6 +384,51 @@ Result<std::string> format_gmrb(const Motion& motion) {
   return out;
 }
 
+Result<GmrbAppender> GmrbAppender::open(const Motion& pattern, const std::filesystem::path& path) {
+  Motion head;
+  head.skeleton = pattern.skeleton;
+  head.convention = pattern.convention;
+  head.frame_time = pattern.frame_time;
+  head.frame_count = 0;
+  auto bytes = format_gmrb(head);
+  if (!bytes) {
+    Error e = bytes.error();
+    if (e.file.empty()) e.file = path.string();
+    return e;
+  }
+  auto file = AtomicFileWriter::open(path, *bytes);
+  if (!file) return file.error();
+  return GmrbAppender(std::move(file).value(), static_cast<std::size_t>(head.skeleton.channel_count()));
+}
+
+Status GmrbAppender::append(std::span<const double> frame) {
+  if (frame.size() != stride_) {
+    return make_error("a frame of " + std::to_string(frame.size()) + " values; the skeleton has " +
+                      std::to_string(stride_) + " channels");
+  }
+  std::string out;
+  if constexpr (std::endian::native == std::endian::little) {
+    out.assign(reinterpret_cast<const char*>(frame.data()), frame.size() * sizeof(double));
+  } else {
+    for (double v : frame) put(out, v);
+  }
+  if (Status s = file_.append(out); !s) return s;
+  ++frames_;
+  return Ok{};
+}
+
+Result<std::uint64_t> GmrbAppender::finish() {
+  // The frame count: after magic, version, byte-order mark, header size,
+  // convention, joint count and channel count (format_gmrb's order).
+  constexpr std::size_t kFrameCountOffset = sizeof kMagic + 4 + 4 + 4 + 4 + 8 + 8;
+  std::string count;
+  put(count, frames_);
+  if (Status s = file_.patch(kFrameCountOffset, count); !s) return s.error();
+  const std::uint64_t size = file_.size();
+  if (Status s = file_.commit(); !s) return s.error();
+  return size;
+}
+
 Status write_gmrb(const Motion& motion, const std::filesystem::path& path) {
   auto bytes = format_gmrb(motion);
   if (!bytes) {

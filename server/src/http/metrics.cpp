@@ -214,6 +214,15 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
         "Relay messages refused before they were read: no MAC or a wrong one (no relay secret), unparsable, "
         "out of sequence (replayed), or past the messages waiting for the server",
         T::Counter, static_cast<double>(s.relay_messages_refused));
+  f.add("gmr_relay_connected", "1 when the relay reaches NATS (--nats), 0 while it does not or was refused", T::Gauge,
+        s.server.relay_connected ? 1.0 : 0.0);
+  f.add("gmr_record_bytes", "Bytes of the record budget that recordings under way hold (--max-record-total-bytes)",
+        T::Gauge, static_cast<double>(s.server.record_bytes));
+  f.add("gmr_recordings_refused_total", "Recordings refused: no room in the record budget", T::Counter,
+        static_cast<double>(s.server.recordings_refused));
+  f.add("gmr_recordings_cut_total",
+        "Recordings that stopped growing at a bound (their own, the budget's, a write error)", T::Counter,
+        static_cast<double>(s.server.recordings_cut));
   f.add("gmr_udp_datagrams_rejected_total", "UDP datagrams that were not a valid registration or confirm", T::Counter,
         static_cast<double>(s.server.udp_rejected));
   f.add("gmr_buffered_bytes", "Bytes all connections hold (replies, frames, writes, request bodies)", T::Gauge,

@@ -101,16 +101,7 @@ Result<LiveSource::Pushed> LiveSource::push(std::span<const double> values, std:
   latest_ = std::move(m);
   if (index_given) frames_ = *index_given;
   const std::uint64_t index = frames_++;
-  if (recording_) {
-    if ((recording_->values.size() + values.size()) * sizeof(double) <= record_max_bytes_) {
-      recording_->values.insert(recording_->values.end(), values.begin(), values.end());
-      ++recording_->frame_count;
-    } else if (!record_truncated_) {
-      record_truncated_ = true;
-      spdlog::warn("live {}: the recording stops at frame {}: {} bytes of values is the limit (--max-record-bytes)",
-                   name_, index, record_max_bytes_);
-    }
-  }
+  if (recording_) recording_->add(values);
 
   // Unedited views get the frame now; each distinct edit list is replayed
   // once per frame, whatever the number of streams showing it.
@@ -215,20 +206,6 @@ void LiveSource::tell_ended(const std::string& reason) {
   for (const auto& w : streams) {
     if (auto s = w.lock()) s->live_ended(reason);
   }
-}
-
-void LiveSource::record(std::size_t max_bytes) {
-  recording_ = std::make_unique<Motion>();
-  recording_->skeleton = latest_->skeleton;
-  recording_->convention = Convention::kPreRotation;
-  recording_->frame_time = frame_time_;
-  record_max_bytes_ = max_bytes;
-}
-
-std::shared_ptr<const Motion> LiveSource::recording(bool* truncated) const {
-  if (!recording_ || !ended_) return nullptr;
-  if (truncated) *truncated = record_truncated_;
-  return std::make_shared<const Motion>(*recording_);
 }
 
 void LiveSource::attach(const std::shared_ptr<Stream>& stream) { streams_.push_back(stream); }

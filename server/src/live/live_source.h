@@ -27,6 +27,7 @@
 #include "gmr/core/error.h"
 #include "gmr/motion/motion.h"
 #include "gmr/server/view.h"
+#include "live/recordings.h"
 #include "transport/net.h"
 
 namespace gmr::server {
@@ -99,11 +100,10 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   // are told `reason` once the frames it took before reached them.
   void end(const std::string& reason);
 
-  // Keeps every accepted frame from now on, up to `max_bytes` of values.
-  void record(std::size_t max_bytes);
-  // The frames recorded (null when not recording), once the source ended;
-  // `truncated` says whether the limit cut it short.
-  std::shared_ptr<const Motion> recording(bool* truncated) const;
+  // Every accepted frame goes to `recording` from now on.
+  void record(std::unique_ptr<Recording> recording) { recording_ = std::move(recording); }
+  // The recording (null when not recording), to finish once the source ended.
+  std::unique_ptr<Recording> take_recording() { return std::move(recording_); }
 
   // Where edit replays run (`work`) and where their frames come back to
   // (`home`, the control loop). Not set: replays run inline, in push().
@@ -158,9 +158,7 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   RateHold hold_;
   std::uint64_t over_rate_ = 0;
   std::string origin_;
-  std::unique_ptr<Motion> recording_;
-  std::size_t record_max_bytes_ = 0;
-  bool record_truncated_ = false;
+  std::unique_ptr<Recording> recording_;
 };
 
 }  // namespace gmr::server

@@ -119,8 +119,17 @@ void on_complete(void* closure) {
   if (!s->completed_set.exchange(true)) s->completed.set_value();
 }
 
-void on_closed(natsConnection*, void* closure) {
+void on_closed(natsConnection* nc, void* closure) {
   auto* s = static_cast<NatsRelay::Shared*>(closure);
+  if (s->open) {
+    // Not by stop(): NATS refused this replica (its authorization), for good.
+    const char* last = nullptr;
+    natsConnection_GetLastError(nc, &last);
+    spdlog::error(
+        "nats: {} closed the connection{}: live sources are not shared with other replicas (are "
+        "--nats-creds right?)",
+        s->url, last != nullptr && *last != '\0' ? std::string(": ") + last : std::string());
+  }
   if (!s->closed_set.exchange(true)) s->closed.set_value();
 }
 
@@ -159,6 +168,10 @@ Result<std::string> read_relay_secret(const std::string& path) {
 }
 
 std::uint64_t NatsRelay::refused() const { return shared_->refused; }
+
+bool NatsRelay::connected() const {
+  return connection_ != nullptr && natsConnection_Status(connection_) == NATS_CONN_STATUS_CONNECTED;
+}
 
 NatsRelay::NatsRelay(net::io_context& io, Options options, Handler on_message) : io_(io), options_(std::move(options)) {
   shared_ = std::make_shared<Shared>();

@@ -68,6 +68,9 @@ class NatsRelay {
   // Messages refused before parsing: unauthenticated (no MAC, or a wrong
   // one), unparsable, out of sequence, or past kMaxMessagesInFlight.
   std::uint64_t refused() const;
+  // Whether NATS is connected now (not while reconnecting, nor once it
+  // refused this replica).
+  bool connected() const;
 
   struct Shared;  // relay.cpp: what libnats's threads reach
 

@@ -50,6 +50,8 @@ class Replicas {
   std::uint64_t announces_refused() const { return announces_refused_; }
   // Relay messages refused before parsing (NatsRelay::refused): 0 without NATS.
   std::uint64_t messages_refused() const { return relay_ ? relay_->refused() : 0; }
+  // Whether the relay reaches NATS now (false without one).
+  bool relay_connected() const { return relay_ && relay_->connected(); }
   std::size_t remote_sources() const { return remote_.size(); }
 
  private:

@@ -81,14 +81,33 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
   if (auto refused = admission.commit_rate(rate, rate_mhz, Admission::Asker::kPublication)) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, *refused};
   }
+  // The recording: streamed to a temporary beside its file from the first
+  // frame, within the record budget (live/recordings.h).
+  std::unique_ptr<Recording> recorder;
+  if (!recording.empty()) {
+    RecordBudget& budget = link_.services.recordings.budget();
+    if (const std::string why = budget.admit(); !why.empty()) {
+      admission.release_rate(rate_mhz);
+      spdlog::warn("conn {}: live {} not recorded: {}", link_.connection_id, printable(r.name(), 200), why);
+      return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "this server cannot record now: " + why};
+    }
+    Motion pattern;
+    pattern.skeleton = std::get<Skeleton>(checked);
+    pattern.convention = Convention::kPreRotation;
+    pattern.frame_time = r.frame_time();
+    auto file = GmrbAppender::open(pattern, recording);
+    if (!file.ok()) {
+      budget.release(RecordBudget::kStep, 0);
+      admission.release_rate(rate_mhz);
+      return Refusal{pb::ERROR_CODE_INTERNAL, "the recording cannot be written: " + file.error().to_string()};
+    }
+    recorder = std::make_unique<Recording>(std::move(file).value(), cfg.max_record_bytes, budget, r.name());
+  }
   link_.held_bytes = mine;
   admission.set_view_bytes(all);
   auto source = link_.services.catalog.add_live(r.name(), std::move(std::get<Skeleton>(checked)), r.frame_time(),
                                                 r.metres_per_unit());
-  if (!recording.empty()) {
-    source->record(cfg.max_record_bytes);
-    recordings_[source.get()] = recording;
-  }
+  if (recorder) source->record(std::move(recorder));
   const std::uint32_t id = next_publication_++;
   publications_[id] = Held{source, bytes, rate_mhz};
   link_.services.replicas.announce(*source);
@@ -152,17 +171,9 @@ void Publications::end(std::uint32_t id, const std::string& reason) {
                source->frames(), reason);
   source->end(reason);
   link_.services.replicas.end(*source, reason);
-  if (auto path = recordings_.extract(source.get())) {
-    bool truncated = false;
-    auto motion = source->recording(&truncated);
-    if (!motion || motion->frame_count == 0) {
-      spdlog::info("live {}: nothing recorded (no frames)", printable(source->name(), 200));
-      return;
-    }
-    // Written off the I/O thread (save_motion is atomic: a file appears
-    // whole or not at all); the server waits for it when it stops.
-    link_.services.recordings.write(std::move(motion), std::move(path.mapped()), source->name(), truncated);
-  }
+  // Put in place off the I/O thread (atomic: a file appears whole or not at
+  // all); the server waits for it when it stops.
+  if (auto recording = source->take_recording()) link_.services.recordings.finish(std::move(recording));
 }
 
 void Publications::end_all(const std::string& reason) {

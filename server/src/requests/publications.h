@@ -37,7 +37,6 @@ class Publications {
     std::uint64_t rate_mhz = 0;  // its declared rate, in the send budget
   };
   std::map<std::uint32_t, Held> publications_;
-  std::map<const LiveSource*, std::string> recordings_;  // of publications_, those recorded: the file
   std::uint32_t next_publication_ = 1;
   LogLimiter over_rate_log_{1, std::chrono::seconds(10)};
 };

@@ -6,13 +6,16 @@
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "gmr/client/client.h"
+#include "gmr/io/motion_file.h"
 #include "gmr/skeleton/skeleton.h"
 #include "net_test_util.h"
+#include "test_data.h"
 
 namespace gmr::test {
 namespace {
@@ -193,6 +196,92 @@ TEST(LiveLimits, LiveSkeletonsCountInTheMemoryBudget) {
   EXPECT_EQ(s.server.stats().view_bytes, 0u);
   po.name = "big/again";
   EXPECT_TRUE(a->publish(big, po).ok());
+}
+
+// Recordings go to disk as frames come (a temporary beside the file grows;
+// the server holds a write buffer, not the take) and are bounded in sum:
+// two sources that would record 4.8 MB under a 3 MiB total stop growing at
+// it, a third finds the directory's budget spent and is refused, and each
+// file holds exactly the frames published up to its cut.
+TEST(LiveLimits, RecordingsStreamToDiskWithinTheRecordBudget) {
+  TempDir dir;
+  server::ServerConfig cfg = publish_config();
+  cfg.record_dir = dir.path.string();
+  cfg.max_record_total_bytes = 3u << 20;
+  cfg.max_record_dir_bytes = 7u << 19;  // 3.5 MiB
+  TestServer s(cfg);
+  auto pub = publisher(s);
+  ASSERT_TRUE(pub);
+  const Skeleton sk = chain(100);  // 303 channels: 2,424 bytes a frame
+  client::PublishOptions po;
+  po.frame_time = 1.0 / 1000;
+  po.record = true;
+  std::vector<client::Publication> pubs;
+  for (const char* name : {"take/a", "take/b"}) {
+    po.name = name;
+    auto p = pub->publish(sk, po);
+    ASSERT_TRUE(p.ok()) << p.error().to_string();
+    pubs.push_back(*p);
+  }
+  const std::size_t sent = 1000;  // within the declared rate's burst
+  std::vector<double> values(static_cast<std::size_t>(sk.channel_count()), 0.0);
+  for (const auto& p : pubs) {
+    for (std::size_t f = 0; f < sent; ++f) {
+      values[0] = static_cast<double>(f);
+      values[5] = -static_cast<double>(f) / 7.0;
+      ASSERT_TRUE(pub->publish_frame(p.id, values).ok());
+      if (f % 100 == 99) ASSERT_TRUE(pub->list_motions().ok());  // the client's write queue is bounded
+    }
+  }
+  ASSERT_TRUE(pub->list_motions().ok());  // the server has taken every frame
+
+  // On disk already, before the sources end: the temporaries hold the frames.
+  std::uintmax_t on_disk = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir.path)) {
+    EXPECT_NE(e.path().extension(), ".gmrb") << "in place before its source ended: " << e.path();
+    on_disk += e.file_size();
+  }
+  EXPECT_GT(on_disk, 2u << 20) << "the recordings are not on disk while they run";
+  const auto during = s.server.stats();
+  EXPECT_GE(during.recordings_cut, 1u);
+  EXPECT_LE(during.record_bytes, cfg.max_record_total_bytes);
+
+  for (const auto& p : pubs) ASSERT_TRUE(pub->unpublish(p.id).ok());
+  std::uint64_t recorded_frames = 0, file_bytes = 0;
+  for (const auto& p : pubs) {
+    const std::filesystem::path file = p.recording;
+    for (int i = 0; i < 500 && !std::filesystem::exists(file); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    auto m = load_motion(file);
+    ASSERT_TRUE(m.ok()) << m.error().to_string();
+    ASSERT_EQ(m->stride(), values.size());
+    EXPECT_LE(m->frame_count, sent);
+    for (std::size_t f = 0; f < m->frame_count; ++f) {
+      ASSERT_EQ(m->values[f * m->stride()], static_cast<double>(f)) << file << " frame " << f;
+      ASSERT_EQ(m->values[f * m->stride() + 5], -static_cast<double>(f) / 7.0);
+    }
+    recorded_frames += m->frame_count;
+    file_bytes += std::filesystem::file_size(file);
+  }
+  EXPECT_LT(recorded_frames, 2 * sent) << "nothing was cut";
+  EXPECT_LE(recorded_frames * values.size() * sizeof(double), cfg.max_record_total_bytes);
+  EXPECT_GT(recorded_frames * values.size() * sizeof(double), 2u << 20);
+
+  // The directory now holds about 3 MiB of its 3.5: a new recording is refused.
+  po.name = "take/c";
+  const auto refused = pub->publish(sk, po);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("RESOURCE_EXHAUSTED"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("--max-record-dir-bytes"), std::string::npos) << refused.error().message;
+  const auto after = s.server.stats();
+  EXPECT_EQ(after.recordings_refused, 1u);
+  EXPECT_EQ(after.record_bytes, 0u);
+  std::printf(
+      "[ figures  ] 2 x %zu frames of %zu bytes sent; %llu frames recorded, %llu bytes of files; "
+      "the recordings held %llu bytes of budget at most\n",
+      sent, values.size() * sizeof(double), static_cast<unsigned long long>(recorded_frames),
+      static_cast<unsigned long long>(file_bytes), static_cast<unsigned long long>(during.record_bytes));
 }
 
 // A 1,024-joint source at 120 Hz shown re-rooted in 64 views: each frame's

@@ -219,6 +219,54 @@ TEST(GmrbCorrupt, NonFiniteValuesAreFoundInAnyBlockAndExtremeFiniteValuesPass) {
   }
 }
 
+// A recording written frame by frame is the file write_gmrb makes of the
+// whole motion, byte for byte; until finish() nothing is at the path, and
+// an appender dropped unfinished leaves nothing behind (not its temporary).
+TEST(GmrbAppend, FrameByFrameIsTheWholeFileAndAtomic) {
+  TempDir dir;
+  const Motion m = small_motion();
+  const fs::path whole = dir.path / "whole.gmrb", appended = dir.path / "appended.gmrb";
+  ASSERT_TRUE(write_gmrb(m, whole));
+  {
+    auto a = GmrbAppender::open(m, appended);
+    ASSERT_TRUE(a) << a.error().to_string();
+    const std::size_t stride = m.stride();
+    for (std::size_t f = 0; f < m.frame_count; ++f) {
+      ASSERT_TRUE(a->append(std::span<const double>(m.values).subspan(f * stride, stride)));
+      EXPECT_FALSE(fs::exists(appended)) << "in place before finish()";
+    }
+    EXPECT_FALSE(a->append(std::span<const double>(m.values).subspan(0, stride - 1)))
+        << "a frame of the wrong size is refused";
+    auto size = a->finish();
+    ASSERT_TRUE(size) << size.error().to_string();
+    EXPECT_EQ(*size, fs::file_size(appended));
+  }
+  EXPECT_EQ(read_file(whole).value(), read_file(appended).value());
+  expect_identical(m, read_gmrb(appended).value());
+  // Large enough to pass the write buffer several times.
+  Motion big = random_motion(40, Convention::kPreRotation, 3000);
+  {
+    auto a = GmrbAppender::open(big, dir.path / "big.gmrb");
+    ASSERT_TRUE(a);
+    for (std::size_t f = 0; f < big.frame_count; ++f) {
+      ASSERT_TRUE(a->append(std::span<const double>(big.values).subspan(f * big.stride(), big.stride())));
+    }
+    ASSERT_TRUE(a->finish());
+  }
+  expect_identical(big, read_gmrb(dir.path / "big.gmrb").value());
+  {
+    auto a = GmrbAppender::open(m, dir.path / "dropped.gmrb");
+    ASSERT_TRUE(a);
+    ASSERT_TRUE(a->append(std::span<const double>(m.values).subspan(0, m.stride())));
+  }
+  std::size_t files = 0;
+  for (const auto& e : fs::directory_iterator(dir.path)) {
+    ++files;
+    EXPECT_NE(e.path().filename(), "dropped.gmrb");
+  }
+  EXPECT_EQ(files, 3u) << "whole, appended and big only";
+}
+
 TEST(GmrbErrors, MissingFileAndWrongInput) {
   auto r = read_gmrb("/nonexistent/dir/x.gmrb");
   ASSERT_FALSE(r.ok());

@@ -39,6 +39,40 @@ struct FileContent {
 };
 Status write_files_atomic(std::span<const FileContent> files);
 
+// A file written in pieces, then put in place whole, as write_file_atomic
+// puts one (a live recording, whose frames come one by one: nothing of it
+// is held in memory but a write buffer). open() makes the temporary beside
+// `path` with its first bytes; append() adds to it (buffered); patch()
+// overwrites bytes already written (a header's count); commit() flushes,
+// syncs and renames it into place. A writer destroyed uncommitted removes
+// its temporary, as do the signals remove_temporaries_on_signals() handles.
+// Move-only; one thread at a time.
+class AtomicFileWriter {
+ public:
+  static Result<AtomicFileWriter> open(const std::filesystem::path& path, std::string_view head);
+  AtomicFileWriter(AtomicFileWriter&& other) noexcept;
+  AtomicFileWriter& operator=(AtomicFileWriter&& other) noexcept;
+  AtomicFileWriter(const AtomicFileWriter&) = delete;
+  AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+  ~AtomicFileWriter();
+
+  Status append(std::string_view bytes);
+  Status patch(std::size_t offset, std::string_view bytes);
+  Status commit();
+  // Bytes in the file so far (written or buffered).
+  std::size_t size() const { return size_; }
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  AtomicFileWriter() = default;
+  Status flush();
+  void discard();
+  std::filesystem::path path_, tmp_;
+  int fd_ = -1;
+  std::string buffer_;
+  std::size_t size_ = 0;
+};
+
 // Makes SIGINT, SIGTERM, SIGHUP and SIGQUIT remove the temporaries of the
 // writes in progress before the process ends as the signal says, and makes
 // a write past the file size limit (SIGXFSZ) an error instead of the end of

@@ -10,7 +10,11 @@
 #include <string>
 #include <string_view>
 
+#include <cstdint>
+#include <span>
+
 #include "gmr/core/error.h"
+#include "gmr/core/file_util.h"
 #include "gmr/motion/motion.h"
 
 namespace gmr {
@@ -29,5 +33,30 @@ Result<Motion> read_gmrb(const std::filesystem::path& path);
 Result<std::string> format_gmrb(const Motion& motion);
 // Writes format_gmrb() atomically (temporary file, then rename).
 Status write_gmrb(const Motion& motion, const std::filesystem::path& path);
+
+// A .gmrb written a frame at a time (a live recording): the header and the
+// skeleton when it opens, each frame's values appended as they come, the
+// frame count set and the file put in place by finish() (atomic: `path`
+// appears whole or not at all; an appender destroyed unfinished leaves
+// nothing). Memory: a write buffer, whatever the length.
+class GmrbAppender {
+ public:
+  // `pattern`: the skeleton, convention and frame time (its values are not
+  // written).
+  static Result<GmrbAppender> open(const Motion& pattern, const std::filesystem::path& path);
+  Status append(std::span<const double> frame);
+  // The file in place; its size in bytes.
+  Result<std::uint64_t> finish();
+  std::uint64_t frames() const { return frames_; }
+  std::uint64_t bytes() const { return file_.size(); }
+  std::size_t stride() const { return stride_; }
+  const std::filesystem::path& path() const { return file_.path(); }
+
+ private:
+  explicit GmrbAppender(AtomicFileWriter file, std::size_t stride) : file_(std::move(file)), stride_(stride) {}
+  AtomicFileWriter file_;
+  std::size_t stride_;
+  std::uint64_t frames_ = 0;
+};
 
 }  // namespace gmr

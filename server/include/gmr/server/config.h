@@ -86,6 +86,13 @@ struct ServerConfig {
   // growing at max_record_bytes of values (the file keeps what came before).
   std::string record_dir;
   std::size_t max_record_bytes = std::size_t{256} << 20;
+  // The record budget (live/recordings.h): recordings under way hold at
+  // most max_record_total_bytes together; those and the directory's files
+  // at most max_record_dir_bytes (0: no such bound); and 256 MiB of the
+  // disk stay free. A recording stops growing at a bound; a new one that
+  // finds no room is refused.
+  std::size_t max_record_total_bytes = std::size_t{1} << 30;
+  std::size_t max_record_dir_bytes = std::size_t{8} << 30;
   // Multicast (docs/protocol.md, "Multicast"): shared streams a subscriber
   // asks for over TRANSPORT_MULTICAST go once per frame to this IPv4 group
   // and port, from the UDP socket; empty: multicast is refused. TTL 1 keeps

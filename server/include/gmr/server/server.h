@@ -50,15 +50,20 @@ struct ServerStats {
   std::uint64_t udp_rejected = 0;           // datagrams that were not a valid registration or confirm
   std::uint64_t udp_challenges = 0;         // challenges sent (one per valid registration datagram)
   std::uint64_t connections_refused = 0;
-  std::uint64_t hellos_refused = 0;          // unknown token, or none where one is needed
-  double committed_frames_per_second = 0;    // what all subscriptions ask for (against send_budget)
-  double send_budget = 0;                    // config.send_budget, or what --send-budget auto measured (0: none)
-  std::uint64_t subscriptions_refused = 0;   // refused for the send budget
-  std::uint64_t publications_refused = 0;    // live sources refused for the send budget
-  std::uint64_t relay_messages_refused = 0;  // from NATS: unauthenticated, unparsable, replayed or past the backlog
-  std::uint64_t buffered_bytes = 0;          // now: all connections' replies, frames, writes, request bodies
-  std::uint64_t max_buffered_bytes = 0;      // high-water mark of buffered_bytes
-  std::uint64_t view_bytes = 0;              // now: motion bytes views own (edited copies) and live skeletons
+  std::uint64_t hellos_refused = 0;         // unknown token, or none where one is needed
+  double committed_frames_per_second = 0;   // what all subscriptions ask for (against send_budget)
+  double send_budget = 0;                   // config.send_budget, or what --send-budget auto measured (0: none)
+  std::uint64_t subscriptions_refused = 0;  // refused for the send budget
+  std::uint64_t publications_refused = 0;   // live sources refused for the send budget
+  std::uint64_t relay_messages_refused = 0;
+  bool relay_connected = false;          // --nats: NATS reached now
+  std::uint64_t record_bytes = 0;        // now: the record budget recordings under way hold
+  std::uint64_t recordings_refused = 0;  // Publish.record refused: no room in the record budget
+  std::uint64_t recordings_cut = 0;      // recordings that stopped growing at a bound  // from NATS: unauthenticated,
+                                         // unparsable, replayed or past the backlog
+  std::uint64_t buffered_bytes = 0;      // now: all connections' replies, frames, writes, request bodies
+  std::uint64_t max_buffered_bytes = 0;  // high-water mark of buffered_bytes
+  std::uint64_t view_bytes = 0;          // now: motion bytes views own (edited copies) and live skeletons
   std::vector<SessionStats> sessions;
 };
 
