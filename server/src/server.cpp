@@ -223,7 +223,6 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.live_frames_refused = catalog.live_frames_refused();
   s.live_frames_over_rate = catalog.live_frames_over_rate();
   s.relay_announces_refused = replicas.announces_refused();
-  s.relay_messages_refused = replicas.messages_refused();
   return s;
 }
 

@@ -213,7 +213,7 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   f.add("gmr_relay_messages_refused_total",
         "Relay messages refused before they were read: no MAC or a wrong one (no relay secret), unparsable, "
         "out of sequence (replayed), or past the messages waiting for the server",
-        T::Counter, static_cast<double>(s.relay_messages_refused));
+        T::Counter, static_cast<double>(s.server.relay_messages_refused));
   f.add("gmr_relay_connected", "1 when the relay reaches NATS (--nats), 0 while it does not or was refused", T::Gauge,
         s.server.relay_connected ? 1.0 : 0.0);
   f.add("gmr_record_bytes", "Bytes of the record budget that recordings under way hold (--max-record-total-bytes)",

@@ -41,7 +41,6 @@ struct MetricsSnapshot {
   std::size_t live_sources = 0;
   std::uint64_t live_frames_received = 0, live_frames_refused = 0, live_frames_over_rate = 0;
   std::uint64_t relay_announces_refused = 0;
-  std::uint64_t relay_messages_refused = 0;
 };
 
 class Metrics final : public RequestObserver {
