@@ -91,8 +91,13 @@ void WsConnection::read() {
     return;
   }
   reading_ = true;
-  ws_.async_read(
-      in_, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) { self->on_read(ec, n); });
+  // A message is read a piece at a time and counted against the buffer
+  // budget as it arrives (reading_bytes): a connection holding more than
+  // its share of a budget that is over is not read until it drains, so
+  // messages in flight cannot take the server past --max-buffered-bytes.
+  ws_.async_read_some(in_, kReadPiece, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
+    self->on_read(ec, n);
+  });
 }
 
 void WsConnection::on_read(const boost::system::error_code& ec, std::size_t bytes) {
@@ -112,6 +117,11 @@ void WsConnection::on_read(const boost::system::error_code& ec, std::size_t byte
   }
   counters_.bytes_received += bytes;
   last_read_ = Clock::now();
+  if (!ws_.is_message_done()) {
+    account();
+    read();
+    return;
+  }
   std::string body = beast::buffers_to_string(in_.data());
   in_.consume(in_.size());
   if (in_.capacity() > kKeptReadBuffer) in_ = beast::flat_buffer();

@@ -70,6 +70,8 @@ class WsConnection final : public QueuedOutbox, public std::enable_shared_from_t
   bool frames_wait() const override { return writing_ || !open_; }
   bool link_ready() const override { return open_; }
 
+  // At most this much of a message is read at once.
+  static constexpr std::size_t kReadPiece = 64 << 10;
   void read();
   void on_read(const boost::system::error_code& ec, std::size_t bytes);
   void flush();
