@@ -66,7 +66,7 @@ HttpServices Server::Impl::http_services() {
 void Server::Impl::open_websocket(tcp::socket socket, http::request<http::string_body> upgrade,
                                   WsConnection::Format format, const std::string& address) {
   auto c = std::make_shared<WsConnection>(io, std::move(socket), admission.next_id(), connection_limits(cfg),
-                                          &admission.buffers);
+                                          &admission.buffers, json_pool.get_executor());
   c->set_frame_wait_histogram(&metrics.frame_wait(c->transport()));
   c->start(std::move(upgrade), format, add_connection(c, address),
            [this](std::uint64_t closed) { connection_closed(closed); });

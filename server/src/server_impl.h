@@ -78,6 +78,8 @@ struct Server::Impl {
   // Live views' edits replayed on each published frame (LiveSource::set_replay):
   // a thread of their own, so a long edit does not hold live frames back.
   net::thread_pool live_pool{1};
+  // WebSocket clients' large JSON replies are made here (WsConnection::kConvertAsideFrom).
+  net::thread_pool json_pool{1};
   Services services{cfg, io,        edit_pool, catalog,    admission, streams, counters,
                     udp, multicast, replicas,  recordings, metrics,   lanes};
   std::thread thread;

@@ -19,9 +19,15 @@ constexpr std::size_t kKeptReadBuffer = 256 * 1024;
 
 }  // namespace
 
+namespace {
+std::atomic<std::uint64_t> g_converted_aside{0};
+}  // namespace
+
+std::uint64_t WsConnection::converted_aside() { return g_converted_aside.load(std::memory_order_relaxed); }
+
 WsConnection::WsConnection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
-                           BufferBudget* budget)
-    : QueuedOutbox(id, limits, budget), ws_(std::move(socket)), watchdog_(io) {
+                           BufferBudget* budget, std::optional<net::any_io_executor> convert)
+    : QueuedOutbox(id, limits, budget), ws_(std::move(socket)), watchdog_(io), convert_(std::move(convert)) {
   boost::system::error_code ec;
   const auto ep = beast::get_lowest_layer(ws_).socket().remote_endpoint(ec);
   peer_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
@@ -167,10 +173,32 @@ std::string WsConnection::to_client(std::string_view framed) const {
 void WsConnection::flush() {
   if (writing_ || stopped_ || !open_) return;
   if (!replies_.empty()) {
-    std::string message = to_client(*replies_.front());
-    reply_bytes_ -= replies_.front()->size();
+    auto reply = std::move(replies_.front());
+    reply_bytes_ -= reply->size();
     replies_.pop_front();
-    write(std::move(message), false);
+    if (format_ == Format::kJson && convert_ && reply->size() >= kConvertAsideFrom) {
+      // The JSON is made on the conversion thread; meanwhile the write slot
+      // is held (nothing overtakes this reply) and its bytes are counted.
+      writing_ = true;
+      in_flight_bytes_ = reply->size();
+      account();
+      net::post(*convert_, [self = shared_from_this(), reply = std::move(reply)] {
+        std::string json = self->to_client(*reply);  // touches format_ and id_ only, which do not change
+        g_converted_aside.fetch_add(1, std::memory_order_relaxed);
+        net::post(self->ws_.get_executor(), [self, json = std::move(json)]() mutable {
+          self->writing_ = false;
+          self->in_flight_bytes_ = 0;
+          if (self->stopped_) {
+            self->account();
+            self->close_socket();
+            return;
+          }
+          self->write(std::move(json), false);
+        });
+      });
+      return;
+    }
+    write(to_client(*reply), false);
     return;
   }
   // One frame per message, the subscriptions taking turns.

@@ -45,9 +45,15 @@ class WsConnection final : public QueuedOutbox, public std::enable_shared_from_t
   enum class Format { kBinary, kJson };
 
   // `socket` carried `upgrade`, an HTTP request websocket::is_upgrade accepted.
-  // `budget` (may be null) outlives the connection.
+  // `budget` (may be null) outlives the connection. `convert`: where JSON
+  // replies of kConvertAsideFrom bytes or more are made (none: here).
   WsConnection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
-               BufferBudget* budget);
+               BufferBudget* budget, std::optional<net::any_io_executor> convert = std::nullopt);
+  // A reply this large (a block of QueryFrames) is turned into JSON off the
+  // control loop: the write slot waits for it, so replies keep their order.
+  static constexpr std::size_t kConvertAsideFrom = 64 << 10;
+  // Replies converted so, by every connection since the process started.
+  static std::uint64_t converted_aside();
 
   // The format the client's Sec-WebSocket-Protocol asks for; nullopt: none
   // this server speaks (the upgrade is then refused).
@@ -94,6 +100,7 @@ class WsConnection final : public QueuedOutbox, public std::enable_shared_from_t
   std::string out_;             // the message being written
   std::uint32_t next_key_ = 0;  // frames are written key by key from here (round robin)
   net::steady_timer watchdog_;
+  std::optional<net::any_io_executor> convert_;
 };
 
 }  // namespace gmr::server

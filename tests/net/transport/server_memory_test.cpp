@@ -424,10 +424,11 @@ TEST(Memory, WebSocketMessagesInFlightAreCountedAsTheyArrive) {
   EXPECT_TRUE(c->list_motions().ok()) << "a well-behaved client is served meanwhile";
   const auto st = s.server.stats();
   const std::uint64_t grew = resident_bytes() - std::min(resident_bytes(), rss_before);
-  std::printf("[ figures  ] %d WebSockets sent %.1f MB of 4 MiB messages: the server counted at most %.1f MB "
-              "(budget %.1f MB); the process grew by %.1f MB\n",
-              kSenders, static_cast<double>(total) / 1e6, static_cast<double>(st.max_buffered_bytes) / 1e6,
-              static_cast<double>(cfg.max_buffered_bytes) / 1e6, static_cast<double>(grew) / 1e6);
+  std::printf(
+      "[ figures  ] %d WebSockets sent %.1f MB of 4 MiB messages: the server counted at most %.1f MB "
+      "(budget %.1f MB); the process grew by %.1f MB\n",
+      kSenders, static_cast<double>(total) / 1e6, static_cast<double>(st.max_buffered_bytes) / 1e6,
+      static_cast<double>(cfg.max_buffered_bytes) / 1e6, static_cast<double>(grew) / 1e6);
   EXPECT_GT(total, 3u * length) << "the senders pushed more than the budget could hold";
   EXPECT_GT(st.max_buffered_bytes, 4u << 20) << "messages in flight are counted as they arrive";
   // The budget, and a piece (64 KiB, grown by the buffer's doubling) per connection past it.
