@@ -66,7 +66,9 @@ Result<LiveSource::Pushed> LiveSource::push(std::span<const double> values, std:
   if (index_given && *index_given < frames_) {
     return make_error("frame " + std::to_string(*index_given) + " came after frame " + std::to_string(frames_ - 1));
   }
-  if (index_given && *index_given - frames_ > kMaxIndexGap) {
+  // A replica that joins a running source takes its first frame's number
+  // as it comes; after that the numbers may skip at most kMaxIndexGap.
+  if (index_given && frames_ > 0 && *index_given - frames_ > kMaxIndexGap) {
     return make_error("frame " + std::to_string(*index_given) + " would skip " +
                       std::to_string(*index_given - frames_) + " frames after frame " + std::to_string(frames_) +
                       "; at most " + std::to_string(kMaxIndexGap) + " may be missing at once");
@@ -105,21 +107,28 @@ Result<LiveSource::Pushed> LiveSource::push(std::span<const double> values, std:
 
   // Unedited views get the frame now; each distinct edit list is replayed
   // once per frame, whatever the number of streams showing it.
-  ReplayBatch batch{index, latest_, {}};
-  std::map<const std::vector<LiveStep>*, std::size_t> group_of;
+  // The streams are gathered first: handing one a frame may end
+  // subscriptions, which must not touch the list being walked.
+  std::vector<std::shared_ptr<Stream>> streams;
+  streams.reserve(streams_.size());
   std::erase_if(streams_, [&](const std::weak_ptr<Stream>& w) {
     auto s = w.lock();
     if (!s || s->idle()) return true;
-    const auto& content = s->content();
+    streams.push_back(std::move(s));
+    return false;
+  });
+  ReplayBatch batch{index, latest_, {}};
+  std::map<const std::vector<LiveStep>*, std::size_t> group_of;
+  for (const auto& s : streams) {
+    const auto content = s->content();
     if (!content->live_steps || content->live_steps->empty()) {
       s->live_frame(at_frame(*content, latest_), index);
-      return false;
+      continue;
     }
     auto [it, added] = group_of.emplace(content->live_steps.get(), batch.groups.size());
     if (added) batch.groups.push_back(ReplayGroup{content->live_steps, {}});
-    batch.groups[it->second].streams.push_back(w);
-    return false;
-  });
+    batch.groups[it->second].streams.push_back(s);
+  }
   if (batch.groups.empty()) return Pushed::kSent;
   if (!replay_work_) {
     for (auto& g : batch.groups) {
@@ -127,10 +136,13 @@ Result<LiveSource::Pushed> LiveSource::push(std::span<const double> values, std:
       deliver(g, index);
     }
   } else if (replaying_) {
-    // The newest frame waits for the batch under way; one that waited
-    // before it is skipped by its streams.
-    if (replay_next_) skip(*replay_next_);
-    replay_next_ = std::move(batch);
+    // The frame waits for the batch under way; with the queue full, the
+    // oldest waiting one is skipped by its streams.
+    if (replay_next_.size() >= kReplayQueue) {
+      skip(replay_next_.front());
+      replay_next_.pop_front();
+    }
+    replay_next_.push_back(std::move(batch));
   } else {
     start_replay(std::move(batch));
   }
@@ -164,9 +176,9 @@ void LiveSource::start_replay(ReplayBatch batch) {
 void LiveSource::finish_replay(ReplayBatch batch) {
   replaying_ = false;
   for (const auto& g : batch.groups) deliver(g, batch.index);
-  if (replay_next_) {
-    auto next = std::move(*replay_next_);
-    replay_next_.reset();
+  if (!replay_next_.empty()) {
+    auto next = std::move(replay_next_.front());
+    replay_next_.pop_front();
     start_replay(std::move(next));
   } else if (end_reason_) {
     tell_ended(std::exchange(end_reason_, std::nullopt).value());

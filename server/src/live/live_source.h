@@ -8,9 +8,10 @@
 // Replays of edits run off the control loop (set_replay): a frame goes at
 // once to the streams of unedited views, and to the others when the replay
 // thread has made their motions. One replay batch per source runs at a time;
-// frames that come meanwhile wait, the newest only (the streams they skip
-// count them as skipped), so a source with many edited views costs the
-// control loop nothing but the hand-off, and its lag stays one frame.
+// frames that come meanwhile wait, at most kReplayQueue of them (past that
+// the oldest waiting is skipped, and its streams count it), so a burst of
+// frames passes whole, a source with many edited views costs the control
+// loop nothing but the hand-off, and its lag stays bounded.
 //
 // Touched only on the I/O thread.
 #pragma once
@@ -18,6 +19,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <span>
@@ -148,7 +150,10 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   void deliver(const ReplayGroup& g, std::uint64_t index);
   std::optional<net::any_io_executor> replay_work_, replay_home_;
   bool replaying_ = false;
-  std::optional<ReplayBatch> replay_next_;
+  // Frames waiting for the batch under way, at most kReplayQueue: past that
+  // the oldest waiting is skipped by its streams.
+  static constexpr std::size_t kReplayQueue = 8;
+  std::deque<ReplayBatch> replay_next_;
   // An end that waits for the replays under way: their frames were taken
   // before it, so subscribers get them first.
   std::optional<std::string> end_reason_;

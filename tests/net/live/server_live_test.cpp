@@ -824,10 +824,12 @@ TEST(LiveReplicas, ASourcePublishedOnOneReplicaStreamsFromAnotherAndEndsWhenItsR
     const auto end = w->end.wait(std::chrono::seconds(10));
     ASSERT_TRUE(end.has_value()) << "B's subscriber was not ended";
     EXPECT_EQ(end->reason, "the replica publishing the live source went away");
-    // Every relayed frame was delivered, or counted as dropped (TCP, in order).
-    EXPECT_EQ(end->frames_sent, n);
+    // Every relayed frame was delivered, or counted: dropped (TCP, in
+    // order), or skipped by an edited view whose replays fell behind a
+    // burst (a busy machine).
+    EXPECT_EQ(end->frames_sent + end->frames_skipped, n);
     std::lock_guard lock(w->mutex);
-    EXPECT_EQ(w->indices.size() + end->frames_dropped, n);
+    EXPECT_EQ(w->indices.size() + end->frames_dropped + end->frames_skipped, n);
   }
   EXPECT_TRUE(wait_listed(*sub, "replicated", false));
   EXPECT_TRUE(sub->list_motions().ok());

@@ -299,8 +299,21 @@ TEST_F(RequestHandlerTest, RelayedAnnouncesAreCheckedAsPublishesAreAndBounded) {
   server_.replicas.on_relay(frame);
   EXPECT_EQ(server_.catalog.live_frames_received(), 1u);
   EXPECT_EQ(server_.catalog.live_sources().at("remote/walk")->frames(), 1u);
-  // An index far ahead would freeze the source (every later frame "came
-  // after" it): refused, as are values that are not finite.
+  // A replica that joins a running source takes its first frame's number
+  // as it comes (a source may be hours in).
+  server_.cfg.max_remote_sources = 6;
+  pb::Publish late = good;
+  late.set_name("remote/late");
+  const std::uint64_t late_serial = announce(late, "replica-b");
+  gmr::relay::v1::LiveRelay first = frame;
+  first.set_serial(late_serial);
+  first.mutable_frame()->set_index(10'000'000);
+  server_.replicas.on_relay(first);
+  ASSERT_TRUE(server_.catalog.live_sources().contains("remote/late"));
+  EXPECT_EQ(server_.catalog.live_sources().at("remote/late")->frames(), 10'000'001u);
+  EXPECT_EQ(server_.catalog.live_frames_received(), 2u);
+  // After it, an index far ahead would freeze the source (every later frame
+  // "came after" it): refused, as are values that are not finite.
   frame.mutable_frame()->set_index(std::numeric_limits<std::uint64_t>::max() - 1);
   server_.replicas.on_relay(frame);
   frame.mutable_frame()->set_index(1);
