@@ -133,14 +133,15 @@ Result<LiveSource::Pushed> LiveSource::push(std::span<const double> values, std:
   if (!replay_work_) {
     for (auto& g : batch.groups) {
       g.made = replay(*g.steps, latest_);
-      deliver(g, index);
+      deliver(g, index, 0);
     }
   } else if (replaying_) {
     // The frame waits for the batch under way; with the queue full, the
     // oldest waiting one is skipped by its streams.
     if (replay_next_.size() >= kReplayQueue) {
-      skip(replay_next_.front());
+      const std::uint64_t dropped = replay_next_.front().skipped_before + 1;
       replay_next_.pop_front();
+      (replay_next_.empty() ? batch : replay_next_.front()).skipped_before += dropped;
     }
     replay_next_.push_back(std::move(batch));
   } else {
@@ -157,7 +158,8 @@ void LiveSource::set_replay(net::any_io_executor work, net::any_io_executor home
 void LiveSource::skip(const ReplayBatch& batch) {
   for (const auto& g : batch.groups) {
     for (const auto& w : g.streams) {
-      if (auto s = w.lock()) s->live_skipped();
+      auto s = w.lock();
+      for (std::uint64_t k = 0; s && k <= batch.skipped_before; ++k) s->live_skipped();
     }
   }
 }
@@ -175,7 +177,13 @@ void LiveSource::start_replay(ReplayBatch batch) {
 
 void LiveSource::finish_replay(ReplayBatch batch) {
   replaying_ = false;
-  for (const auto& g : batch.groups) deliver(g, batch.index);
+  for (const auto& g : batch.groups) deliver(g, batch.index, batch.skipped_before);
+  if (end_reason_) {
+    // Ended: what still waits is skipped rather than replayed (a queue of
+    // costly replays would hold the end back).
+    for (const auto& waiting : replay_next_) skip(waiting);
+    replay_next_.clear();
+  }
   if (!replay_next_.empty()) {
     auto next = std::move(replay_next_.front());
     replay_next_.pop_front();
@@ -185,7 +193,7 @@ void LiveSource::finish_replay(ReplayBatch batch) {
   }
 }
 
-void LiveSource::deliver(const ReplayGroup& g, std::uint64_t index) {
+void LiveSource::deliver(const ReplayGroup& g, std::uint64_t index, std::uint64_t skipped_before) {
   if (!g.made.ok() && replay_failures_++ % 1000 == 0) {
     spdlog::warn("live '{}': frame {}: a view's edits failed on it, so its subscribers skip it: {}", name_, index,
                  g.made.error().to_string());
@@ -193,6 +201,7 @@ void LiveSource::deliver(const ReplayGroup& g, std::uint64_t index) {
   for (const auto& w : g.streams) {
     auto s = w.lock();
     if (!s || s->idle()) continue;
+    for (std::uint64_t k = 0; k < skipped_before; ++k) s->live_skipped();
     // A view edited since the replay began shows other edits: it skips this frame.
     if (!g.made.ok() || s->content()->live_steps != g.steps) {
       s->live_skipped();

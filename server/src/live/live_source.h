@@ -143,22 +143,28 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
     std::uint64_t index = 0;
     std::shared_ptr<const Motion> frame;
     std::vector<ReplayGroup> groups;
+    // Frames dropped from the queue just before this one: its streams count
+    // them as skipped when it is delivered, so sequence numbers stay in
+    // step with frame numbers.
+    std::uint64_t skipped_before = 0;
   };
   void start_replay(ReplayBatch batch);
   void finish_replay(ReplayBatch batch);
-  // Hands group `g`'s motion (or its failure) to its streams.
-  void deliver(const ReplayGroup& g, std::uint64_t index);
+  // Hands group `g`'s motion (or its failure) to its streams, after
+  // `skipped_before` skipped frames.
+  void deliver(const ReplayGroup& g, std::uint64_t index, std::uint64_t skipped_before);
   std::optional<net::any_io_executor> replay_work_, replay_home_;
   bool replaying_ = false;
   // Frames waiting for the batch under way, at most kReplayQueue: past that
-  // the oldest waiting is skipped by its streams.
+  // the oldest waiting is skipped by its streams. When the source ends, the
+  // batch under way is delivered and those waiting are skipped.
   static constexpr std::size_t kReplayQueue = 8;
   std::deque<ReplayBatch> replay_next_;
   // An end that waits for the replays under way: their frames were taken
   // before it, so subscribers get them first.
   std::optional<std::string> end_reason_;
   void tell_ended(const std::string& reason);
-  // Streams of `batch` count its frame as skipped.
+  // Streams of `batch` count its frame, and those skipped before it, as skipped.
   static void skip(const ReplayBatch& batch);
   RateHold hold_;
   std::uint64_t over_rate_ = 0;
