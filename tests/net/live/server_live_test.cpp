@@ -328,12 +328,16 @@ TEST(LivePublish, AViewEditedMidStreamFollowsOnTheNextFrame) {
   EXPECT_EQ(edited->skeleton.joint(edited->skeleton.roots()[0]).name, root);
   publish_frames(*pub, id, *source, n / 2, n, pace());
   ASSERT_TRUE(pub->unpublish(id).ok());
-  ASSERT_TRUE(w.end.wait().has_value());
+  const auto end = w.end.wait();
+  ASSERT_TRUE(end.has_value());
   std::lock_guard lock(w.mutex);
   EXPECT_EQ(w.bad, 0u) << w.first_problem;
   // The frames after the edit came in the re-rooted skeleton.
   EXPECT_EQ(w.skeleton.joint(w.skeleton.roots()[0]).name, root);
-  EXPECT_GE(w.indices.size(), n * 9 / 10);
+  // Each frame arrived or was counted: dropped (TCP), or skipped while the
+  // re-rooted view's replays were behind (a busy or sanitized build).
+  EXPECT_EQ(w.indices.size() + end->frames_dropped + end->frames_skipped, n);
+  EXPECT_GE(w.indices.size(), n / 2);
 }
 
 TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {
