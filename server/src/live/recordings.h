@@ -16,10 +16,12 @@
 // that cannot take its first step is refused. Both are counted and logged.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <future>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>

@@ -17,10 +17,9 @@ constexpr auto kCloseGrace = std::chrono::seconds(2);
 // A read buffer grown past this by a large request is not kept.
 constexpr std::size_t kKeptReadBuffer = 256 * 1024;
 
-}  // namespace
-
-namespace {
+// Replies converted on the conversion thread (WsConnection::converted_aside).
 std::atomic<std::uint64_t> g_converted_aside{0};
+
 }  // namespace
 
 std::uint64_t WsConnection::converted_aside() { return g_converted_aside.load(std::memory_order_relaxed); }
@@ -180,6 +179,7 @@ void WsConnection::flush() {
       // The JSON is made on the conversion thread; meanwhile the write slot
       // is held (nothing overtakes this reply) and its bytes are counted.
       writing_ = true;
+      write_started_ = Clock::now();  // the watchdog and congestion checks time the conversion as a write
       in_flight_bytes_ = reply->size();
       account();
       net::post(*convert_, [self = shared_from_this(), reply = std::move(reply)] {
