@@ -14,6 +14,7 @@
 #include "gmr/client/client.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/skeleton/skeleton.h"
+#include "live_test_util.h"
 #include "net_test_util.h"
 #include "test_data.h"
 
@@ -22,23 +23,6 @@ namespace {
 
 using client::Client;
 
-const std::string kPublishToken = "publish-5b0c2e8d41f7a9c3e6d2b8f0a4c1e7d9";
-const std::string kControlToken = "control-8e3a91c7d2f04b6e5a1c9d7f3b2e8a60";
-
-server::ServerConfig publish_config() {
-  server::ServerConfig cfg;
-  auto c = server::Credentials::parse("publish " + kPublishToken + "\ncontrol " + kControlToken + "\n", "auth");
-  EXPECT_TRUE(c.ok());
-  cfg.credentials = std::make_shared<const server::Credentials>(std::move(c).value());
-  cfg.anonymous = server::Role::kRead;
-  return cfg;
-}
-
-std::unique_ptr<Client> connect_as(TestServer& s, const std::string& token) {
-  client::ClientOptions o;
-  o.auth_token = token;
-  return s.connect(o);
-}
 std::unique_ptr<Client> publisher(TestServer& s) { return connect_as(s, kPublishToken); }
 
 // A chain of `n` joints, each with three rotation channels (the first also
@@ -59,7 +43,7 @@ Skeleton chain(int n) {
 }
 
 TEST(LiveLimits, FramesFasterThanTheDeclaredRateAreDroppedAndCounted) {
-  TestServer s(publish_config());
+  TestServer s(live_config());
   auto pub = publisher(s);
   auto sub = connect_as(s, kControlToken);  // stats need the control role
   ASSERT_TRUE(pub && sub);
@@ -107,7 +91,7 @@ TEST(LiveLimits, FramesFasterThanTheDeclaredRateAreDroppedAndCounted) {
 }
 
 TEST(LiveLimits, APublicationCommitsItsDeclaredRateAgainstTheSendBudget) {
-  server::ServerConfig cfg = publish_config();
+  server::ServerConfig cfg = live_config();
   cfg.send_budget = 100;
   TestServer s(cfg);
   auto pub = publisher(s);
@@ -143,7 +127,7 @@ TEST(LiveLimits, APublicationCommitsItsDeclaredRateAgainstTheSendBudget) {
 }
 
 TEST(LiveLimits, LiveSkeletonsCountInTheMemoryBudget) {
-  server::ServerConfig cfg = publish_config();
+  server::ServerConfig cfg = live_config();
   cfg.max_live_joints = 4096;
   cfg.max_view_bytes_per_connection = 4u << 20;
   cfg.max_view_bytes = 9u << 19;  // 4.5 MiB
@@ -205,7 +189,7 @@ TEST(LiveLimits, LiveSkeletonsCountInTheMemoryBudget) {
 // file holds exactly the frames published up to its cut.
 TEST(LiveLimits, RecordingsStreamToDiskWithinTheRecordBudget) {
   TempDir dir;
-  server::ServerConfig cfg = publish_config();
+  server::ServerConfig cfg = live_config();
   cfg.record_dir = dir.path.string();
   cfg.max_record_total_bytes = 3u << 20;
   cfg.max_record_dir_bytes = 7u << 19;  // 3.5 MiB
@@ -230,7 +214,9 @@ TEST(LiveLimits, RecordingsStreamToDiskWithinTheRecordBudget) {
       values[0] = static_cast<double>(f);
       values[5] = -static_cast<double>(f) / 7.0;
       ASSERT_TRUE(pub->publish_frame(p.id, values).ok());
-      if (f % 100 == 99) ASSERT_TRUE(pub->list_motions().ok());  // the client's write queue is bounded
+      if (f % 100 == 99) {
+        ASSERT_TRUE(pub->list_motions().ok());  // the client's write queue is bounded
+      }
     }
   }
   ASSERT_TRUE(pub->list_motions().ok());  // the server has taken every frame
@@ -290,7 +276,7 @@ TEST(LiveLimits, RecordingsStreamToDiskWithinTheRecordBudget) {
 // views lag by at most the replay under way: what they do not get of each
 // frame is counted as skipped, never lost silently.
 TEST(LiveLimits, EditReplaysRunOffTheControlLoop) {
-  TestServer s(publish_config());
+  TestServer s(live_config());
   auto pub = publisher(s);
   // 32 views per connection at most: two connections show the 64 views.
   std::unique_ptr<Client> editors[2] = {connect_as(s, kControlToken), connect_as(s, kControlToken)};
@@ -368,7 +354,9 @@ TEST(LiveLimits, EditReplaysRunOffTheControlLoop) {
   // The control loop stays free for the library client. The bound is loose
   // (a busy machine may slow it), but far above what replays on the control
   // loop left it (13 of 60 fps); sanitized builds only report it.
-  if (!kSlowBuild) EXPECT_GE(static_cast<double>(walk_during) / seconds, 30.0);
+  if (!kSlowBuild) {
+    EXPECT_GE(static_cast<double>(walk_during) / seconds, 30.0);
+  }
 }
 
 }  // namespace

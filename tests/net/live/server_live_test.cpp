@@ -28,6 +28,7 @@
 #include "gmr/server/auth.h"
 #include "gmr/view/view.h"
 #include "gmr/wire/convert.h"
+#include "live_test_util.h"
 #include "net_test_util.h"
 #include "test_data.h"
 
@@ -36,18 +37,6 @@ namespace {
 
 using client::Client;
 using client::ReceivedFrame;
-
-const std::string kPublishToken = "publish-token-0123456789abcdef";
-const std::string kControlToken = "control-token-0123456789abcdef";
-
-server::ServerConfig live_config() {
-  server::ServerConfig cfg;
-  auto c = server::Credentials::parse("publish " + kPublishToken + "\ncontrol " + kControlToken + "\n", "auth");
-  EXPECT_TRUE(c.ok());
-  cfg.credentials = std::make_shared<const server::Credentials>(std::move(c).value());
-  cfg.anonymous = server::Role::kRead;
-  return cfg;
-}
 
 // The real motion the tests publish: CMU 02_01 with the corpus, else the
 // built-in walk.
@@ -58,12 +47,6 @@ std::shared_ptr<const Motion> source_motion() {
     if (e.name == name) return e.motion;
   }
   return nullptr;
-}
-
-std::unique_ptr<Client> connect_as(TestServer& s, const std::string& token) {
-  client::ClientOptions o;
-  o.auth_token = token;
-  return s.connect(o);
 }
 
 // Positions `gmr positions` gives frame f of `source` with `spec`, by joint name.

@@ -35,6 +35,20 @@ std::uint64_t resident_bytes() {
   return 0;
 }
 
+// Pushes as much of `bytes` down each socket of `fds` as the kernel takes,
+// for two seconds; `sent[i]`: how much of it socket i took.
+void push_for_two_seconds(const std::vector<int>& fds, const std::string& bytes, std::vector<std::size_t>& sent) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  while (std::chrono::steady_clock::now() < until) {
+    for (std::size_t i = 0; i < fds.size(); ++i) {
+      if (sent[i] == bytes.size()) continue;
+      const ssize_t n = ::send(fds[i], bytes.data() + sent[i], bytes.size() - sent[i], MSG_NOSIGNAL | MSG_DONTWAIT);
+      if (n > 0) sent[i] += static_cast<std::size_t>(n);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+}
+
 struct Refusals {
   int views = 0;  // RESOURCE_EXHAUSTED edits
 };
@@ -328,20 +342,7 @@ TEST(Memory, BodiesInFlightAreReservedWithinTheBudgetBeforeTheyAreRead) {
     (void)::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
     fds.push_back(fd);
   }
-  // Push as much of each message as the kernel takes, for two seconds.
-  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-  std::uint64_t peak = 0;
-  while (std::chrono::steady_clock::now() < until) {
-    for (int i = 0; i < kSenders; ++i) {
-      auto& at = sent[static_cast<std::size_t>(i)];
-      if (at == all_but_one.size()) continue;
-      const ssize_t n = ::send(fds[static_cast<std::size_t>(i)], all_but_one.data() + at, all_but_one.size() - at,
-                               MSG_NOSIGNAL | MSG_DONTWAIT);
-      if (n > 0) at += static_cast<std::size_t>(n);
-    }
-    peak = std::max(peak, s.server.stats().max_buffered_bytes);
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
+  push_for_two_seconds(fds, all_but_one, sent);
   std::size_t whole = 0, total = 0;
   for (auto n : sent) {
     whole += n == all_but_one.size();
@@ -376,10 +377,11 @@ TEST(Memory, WebSocketMessagesInFlightAreCountedAsTheyArrive) {
   const std::uint16_t port = s.server.http_port();
   const std::uint64_t length = wire::kDefaultMaxMessageBytes - 1;
   // A masked binary frame (mask key 0: the payload goes as it is), FIN set.
-  std::string frame = {static_cast<char>(0x82), static_cast<char>(0x80 | 127)};
-  for (int i = 7; i >= 0; --i) frame += static_cast<char>((length >> (8 * i)) & 0xff);
-  frame += std::string(4, '\0');
-  const std::string all_but_one = frame + std::string(length - 1, 'x');
+  std::string all_but_one(2 + 8 + 4 + (length - 1), 'x');
+  all_but_one[0] = static_cast<char>(0x82);
+  all_but_one[1] = static_cast<char>(0x80 | 127);
+  for (int i = 0; i < 8; ++i) all_but_one[2 + i] = static_cast<char>((length >> (8 * (7 - i))) & 0xff);
+  for (int i = 0; i < 4; ++i) all_but_one[10 + i] = '\0';
   constexpr int kSenders = 24;
   std::vector<int> fds;
   std::vector<std::size_t> sent(kSenders, 0);
@@ -406,17 +408,7 @@ TEST(Memory, WebSocketMessagesInFlightAreCountedAsTheyArrive) {
     fds.push_back(fd);
   }
   const std::uint64_t rss_before = resident_bytes();
-  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-  while (std::chrono::steady_clock::now() < until) {
-    for (int i = 0; i < kSenders; ++i) {
-      auto& at = sent[static_cast<std::size_t>(i)];
-      if (at == all_but_one.size()) continue;
-      const ssize_t n = ::send(fds[static_cast<std::size_t>(i)], all_but_one.data() + at, all_but_one.size() - at,
-                               MSG_NOSIGNAL | MSG_DONTWAIT);
-      if (n > 0) at += static_cast<std::size_t>(n);
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
+  push_for_two_seconds(fds, all_but_one, sent);
   std::size_t total = 0;
   for (auto n : sent) total += n;
   auto c = s.connect();
@@ -434,7 +426,9 @@ TEST(Memory, WebSocketMessagesInFlightAreCountedAsTheyArrive) {
   // The budget, and a piece (64 KiB, grown by the buffer's doubling) per connection past it.
   EXPECT_LE(st.max_buffered_bytes, cfg.max_buffered_bytes + kSenders * (128u << 10));
   // Sanitized builds keep freed memory in quarantine: the figure is reported there only.
-  if (!kSlowBuild) EXPECT_LT(grew, 48u << 20) << "messages in flight held outside the budget";
+  if (!kSlowBuild) {
+    EXPECT_LT(grew, 48u << 20) << "messages in flight held outside the budget";
+  }
   for (int fd : fds) ::close(fd);
 }
 
