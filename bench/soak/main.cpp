@@ -5,6 +5,9 @@
 //
 //   gmr-soak --port P --server-pid PID [--clients 1000] [--seconds 600]
 //            [--rate 30] [--churn 10] [--hostile 5] [--sample 10] [--csv FILE]
+//            [--token T] [--round-two 2 --http-port H --publish-token P --read-token R
+//             [--nats-port N --nats-user U --nats-password W]]
+//   gmr-soak --write-library DIR     (the round-two library, then exit)
 //
 // Steady clients: `clients` connections, each with one view (half of them
 // re-rooted or seen from a joint) and one looping subscription (a quarter
@@ -16,7 +19,10 @@
 // that do not parse, forged UDP registrations. Each sample prints the
 // server's RSS and open descriptors and the steady clients' frames and
 // latency since the previous sample; the summary compares the first and last
-// minutes.
+// minutes. Round two (round_two.h): `--round-two` more attacks a second, of
+// twelve kinds, on a thread of their own, while /healthz and /readyz are
+// probed every second; the summary says what each attack met and the
+// server's own counters of refusals.
 #include <arpa/inet.h>
 #include <dirent.h>
 #include <netinet/in.h>
@@ -31,9 +37,11 @@
 #include <cstdio>
 #include <deque>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <random>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -43,10 +51,13 @@
 #include "gmr/stream/v1/stream.pb.h"
 #include "gmr/wire/framing.h"
 #include "gmr/wire/udp.h"
+#include "round_two.h"
+#include "sockets.h"
 
 namespace {
 
 namespace pb = ::gmr::stream::v1;
+using namespace gmr::soak;
 using Clock = std::chrono::steady_clock;
 
 // ---------------------------------------------------------------- the server process
@@ -164,44 +175,6 @@ Slot start_client(const gmr::client::ClientOptions& base, double rate, std::mt19
 
 // ---------------------------------------------------------------- hostile clients
 
-int raw_connect(const std::string& host, std::uint16_t port, int receive_buffer = 0) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return -1;
-  if (receive_buffer > 0) ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &receive_buffer, sizeof receive_buffer);
-  timeval tv{1, 0};
-  ::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(port);
-  ::inet_pton(AF_INET, host.c_str(), &addr.sin_addr);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
-
-void send_all(int fd, const std::string& bytes) {
-  std::size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::send(fd, bytes.data() + done, bytes.size() - done, MSG_NOSIGNAL);
-    if (n <= 0) return;
-    done += static_cast<std::size_t>(n);
-  }
-}
-
-void send_request(int fd, std::uint64_t id, pb::ClientMessage m) {
-  m.set_request_id(id);
-  send_all(fd, gmr::wire::frame_message(m).value());
-}
-
-// Reads and discards what is waiting (at most `bytes`), so a reply gets through.
-void drain(int fd, std::size_t bytes) {
-  std::string buf(bytes, '\0');
-  (void)::recv(fd, buf.data(), buf.size(), 0);
-}
-
 // Connections the hostile side holds open until their deadline.
 struct Held {
   int fd;
@@ -251,12 +224,9 @@ class Hostile {
         return "declared length";
       }
       case 4: {  // subscribes at 2 kHz and never reads
-        const int fd = raw_connect(host_, port_, 4096);
+        const int fd = raw_connect(host_, port_, {}, 4096);
         if (fd >= 0) {
-          pb::ClientMessage hello;
-          hello.mutable_hello()->set_protocol_version(gmr::wire::kProtocolVersion);
-          hello.mutable_hello()->set_client_name("soak: never reads");
-          send_request(fd, 1, hello);
+          send_request(fd, 1, hello_message("soak: never reads"));
           pb::ClientMessage view;
           view.mutable_create_view()->set_motion("walk");
           send_request(fd, 2, view);
@@ -366,7 +336,7 @@ int main(int argc, char** argv) {
   double seconds = 600, rate = 30, churn = 10, hostile_rate = 5, sample_every = 10;
   std::string csv;
   gmr::cli::add_connect_options(app, connect_options);
-  app.add_option("--server-pid", server_pid, "The gmr-server's process id (for RSS and descriptors)")->required();
+  app.add_option("--server-pid", server_pid, "The gmr-server's process id (for RSS and descriptors)");
   app.add_option("--clients", clients, "Steady clients")->capture_default_str()->check(CLI::Range(1, 20000));
   app.add_option("--seconds", seconds, "Length of the run")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--rate", rate, "Frames per second per steady client")->capture_default_str();
@@ -374,8 +344,34 @@ int main(int argc, char** argv) {
   app.add_option("--hostile", hostile_rate, "Hostile actions per second")->capture_default_str();
   app.add_option("--sample", sample_every, "Seconds between samples")->capture_default_str();
   app.add_option("--csv", csv, "Write the samples here too");
+  gmr::soak::RoundTwoSettings two;
+  double round_two_rate = 0;
+  std::string library_dir;
+  app.add_option("--round-two", round_two_rate, "Round-two attacks per second (0: none)")->capture_default_str();
+  app.add_option("--http-port", two.http_port, "The server's HTTP port (round two, and /healthz probes)");
+  app.add_option("--publish-token", two.publish_token, "A 'publish' token (round two's publishers)");
+  app.add_option("--read-token", two.read_token, "A 'read' token (round two's JSON block asker)");
+  app.add_option("--nats-port", two.nats_port, "The NATS server the gmr-server relays through (round two)");
+  app.add_option("--nats-user", two.nats_user, "Its user (the rogue relay has the credentials, not the secret)");
+  app.add_option("--nats-password", two.nats_password, "Its password");
+  app.add_option("--write-library", library_dir, "Write round two's library (demo motions + chain.bvh) here and exit");
   CLI11_PARSE(app, argc, argv);
+  if (!library_dir.empty()) {
+    std::string error;
+    if (!gmr::soak::write_library(library_dir, &error)) {
+      std::fprintf(stderr, "gmr-soak: %s\n", error.c_str());
+      return 1;
+    }
+    return 0;
+  }
+  if (server_pid <= 0) {
+    std::fprintf(stderr, "gmr-soak: --server-pid is required\n");
+    return 1;
+  }
   connect_options.timeout = std::chrono::seconds(10);
+  two.host = connect_options.host;
+  two.port = connect_options.port;
+  two.control_token = connect_options.auth_token;
 
   std::mt19937_64 rng(20261123);
   Figures figures;
@@ -412,6 +408,42 @@ int main(int argc, char** argv) {
       std::this_thread::sleep_until(next);
     }
     h.release(true);
+  });
+  // Round two on a thread of its own, and the health probes a Kubernetes
+  // kubelet would make, once a second.
+  std::mutex tallies_mutex;
+  std::map<std::string, gmr::soak::Tally> tallies;
+  std::thread round_two_thread([&] {
+    if (round_two_rate <= 0) return;
+    std::mt19937_64 rrng(11);
+    gmr::soak::RoundTwo attacks(two);
+    const auto period = std::chrono::duration<double>(1.0 / round_two_rate);
+    auto next = Clock::now();
+    while (running) {
+      attacks.act(rrng);
+      ++figures.hostile;
+      next += std::chrono::duration_cast<Clock::duration>(period);
+      while (running && Clock::now() < next) {
+        attacks.tick();
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      }
+      std::lock_guard lock(tallies_mutex);
+      tallies = attacks.tallies();
+    }
+    attacks.tick(true);
+    std::lock_guard lock(tallies_mutex);
+    tallies = attacks.tallies();
+  });
+  std::atomic<std::uint64_t> probes{0}, probes_failed{0};
+  std::thread probe_thread([&] {
+    if (two.http_port == 0) return;
+    while (running) {
+      for (const char* path : {"/healthz", "/readyz"}) {
+        ++probes;
+        if (gmr::soak::http_status(connect_options.host, two.http_port, path) != 200) ++probes_failed;
+      }
+      std::this_thread::sleep_for(std::chrono::seconds(1));
+    }
   });
 
   std::printf("%7s %9s %6s %10s %8s %8s %8s %8s %10s %8s %8s %8s\n", "t(s)", "RSS(MB)", "fds", "frames/s", "gaps/s",
@@ -489,8 +521,13 @@ int main(int argc, char** argv) {
     }
     std::this_thread::sleep_until(std::min(next_churn, next_sample));
   }
+  // The server's own counters of what it refused, before everyone leaves.
+  const std::string metrics =
+      two.http_port != 0 ? gmr::soak::http_get(connect_options.host, two.http_port, "/metrics") : std::string{};
   running = false;
   hostile_thread.join();
+  round_two_thread.join();
+  probe_thread.join();
   slots.clear();
   std::this_thread::sleep_for(std::chrono::seconds(2));
   const double rss_after = static_cast<double>(process_kb(server_pid, "VmRSS:")) / 1024.0;
@@ -528,6 +565,38 @@ int main(int argc, char** argv) {
               static_cast<unsigned long long>(figures.connect_failures.load()),
               static_cast<unsigned long long>(figures.hostile.load()));
   for (const auto& f : figures.failures) std::printf("  failure: %s\n", f.c_str());
+  if (two.http_port != 0) {
+    std::printf("health probes: %llu, %llu not answered 200\n", static_cast<unsigned long long>(probes.load()),
+                static_cast<unsigned long long>(probes_failed.load()));
+  }
+  for (const auto& [attack, tally] : tallies) {
+    std::printf("round two, %s: %llu times;", attack.c_str(), static_cast<unsigned long long>(tally.acts));
+    for (const auto& [outcome, n] : tally.outcomes) {
+      std::printf(" %s %llu;", outcome.c_str(), static_cast<unsigned long long>(n));
+    }
+    std::printf("\n");
+  }
+  // The refusal counters and gauges the report quotes.
+  std::istringstream lines(metrics);
+  for (std::string line; std::getline(lines, line);) {
+    static const char* kShown[] = {"gmr_connections_refused_total",
+                                   "gmr_hellos_refused_total",
+                                   "gmr_live_frames_over_rate_total",
+                                   "gmr_relay_messages_refused_total",
+                                   "gmr_recordings_cut_total",
+                                   "gmr_recordings_refused_total",
+                                   "gmr_log_lines_suppressed_total",
+                                   "gmr_publications_refused_total",
+                                   "gmr_subscriptions_refused_total",
+                                   "gmr_buffered_bytes",
+                                   "gmr_record_bytes",
+                                   "gmr_http_responses_total",
+                                   "gmr_request_errors_total",
+                                   "gmr_connections "};
+    for (const char* shown : kShown) {
+      if (line.rfind(shown, 0) == 0) std::printf("  %s\n", line.c_str());
+    }
+  }
   std::printf("all closed: server RSS %.1f MB (%.1f MB at start), %d descriptors\n", rss_after, rss_start, fds_after);
-  return figures.connect_failures.load() == 0 ? 0 : 2;
+  return figures.connect_failures.load() == 0 && probes_failed.load() == 0 ? 0 : 2;
 }
