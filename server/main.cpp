@@ -21,6 +21,7 @@
 
 #include "gmr/core/file_util.h"
 #include "gmr/server/library.h"
+#include "gmr/server/library_watch.h"
 #include "gmr/server/server.h"
 
 namespace {
@@ -54,7 +55,10 @@ int main(int argc, char** argv) {
   long long write_ms = cfg.write_timeout.count();
   long long congested_ms = cfg.congested_after.count();
   long long handshake_ms = cfg.handshake_timeout.count();
-  app.add_option("--library", library_dir, "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library)");
+  app.add_option("--library", library_dir,
+                 "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library); watched while running: "
+                 "files added, replaced or removed are picked up, and SIGHUP reads it again (docs/protocol.md, "
+                 "\"Library reload\")");
   app.add_option("--port", cfg.port, "TCP port (0: any free port)")->capture_default_str();
   app.add_option("--udp-port", cfg.udp_port,
                  "UDP port (default: the TCP port number, or any free port with --port 0; 0: any free port)");
@@ -345,10 +349,24 @@ int main(int argc, char** argv) {
         if (e.metres_per_unit == 0.0) e.metres_per_unit = library_unit;
       }
     }
+    const std::vector<LibraryEntry> served = library;
     server.set_library(std::move(library));
+    // The folder is watched from now on: files added, replaced or removed
+    // are served, read again or dropped while running (docs/protocol.md,
+    // "Library reload"); SIGHUP reads it again too.
+    std::unique_ptr<gmr::server::LibraryWatcher> watcher;
+    if (!library_dir.empty()) {
+      gmr::server::LibraryWatcher::Options watch;
+      watch.dir = library_dir;
+      watch.threads = threads;
+      watch.limits = motion_limits;
+      watch.file_options = library_files;
+      watch.default_metres_per_unit = library_unit;
+      watcher = std::make_unique<gmr::server::LibraryWatcher>(server, watch, served);
+    }
     // The main thread waits for a signal; the server runs on its own thread.
     // SIGHUP reads the auth file again (a file that does not parse leaves
-    // the tokens in use as they are).
+    // the tokens in use as they are) and the library folder.
     boost::asio::io_context signals_io;
     boost::asio::signal_set signals(signals_io, SIGINT, SIGTERM, SIGHUP);
     std::function<void(const boost::system::error_code&, int)> on_signal = [&](const boost::system::error_code& ec,
@@ -357,6 +375,10 @@ int main(int argc, char** argv) {
       if (sig != SIGHUP) {
         spdlog::info("signal {}: stopping", sig);
         return;
+      }
+      if (watcher) {
+        spdlog::info("SIGHUP: reading {} again", library_dir);
+        watcher->reload();
       }
       if (auth_file.empty()) {
         spdlog::info("SIGHUP: no --auth-file to read again");

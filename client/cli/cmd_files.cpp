@@ -227,7 +227,9 @@ void add_file_commands(CLI::App& app) {
   }
   {
     auto o = std::make_shared<ConvertOptions>();
-    CLI::App* cmd = app.add_subcommand("convert", "Convert a motion file by extension (.bvh <-> .gmr); atomic write");
+    CLI::App* cmd = app.add_subcommand("convert",
+                                       "Convert between motion formats by extension (.bvh, .gmr, .gmrb, .amc+.asf; "
+                                       "markers .c3d/.trc to .trc, or to a motion with --model); atomic write");
     cmd->add_option("IN", o->in, "Input motion file (.bvh, .gmr, .amc) or marker file (.c3d, .trc)")->required();
     cmd->add_option("OUT", o->out, "Output motion file (.bvh, .gmr, .gmrb, .amc); .trc for marker input")->required();
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc input (default: the single .asf beside it)");

@@ -278,7 +278,10 @@ void run_stream(const StreamOptions& o) {
   const auto sub = take(c->subscribe(v.id, so, on_frame, on_end));
   if (o.summary) {
     std::fprintf(stderr, "streaming %s over %s at %.2f Hz (subscription %u, view %u)\n", o.motion.c_str(),
-                 o.udp ? "UDP" : "TCP", sub.rate_hz, sub.id, v.id);
+                 o.multicast ? "multicast"
+                 : o.udp     ? "UDP"
+                             : "TCP",
+                 sub.rate_hz, sub.id, v.id);
   }
   std::unique_lock lock(st->mutex);
   for (;;) {
@@ -318,6 +321,10 @@ void run_stream(const StreamOptions& o) {
         static_cast<unsigned long long>(frames), shown(reason).c_str(), static_cast<unsigned long long>(gaps),
         static_cast<unsigned long long>(dropped), static_cast<unsigned long long>(skipped),
         static_cast<unsigned long long>(gaps > server_side ? gaps - server_side : 0), avg, max);
+  }
+  if (!o.summary && !reason.empty() && reason != "end of motion" && reason != "max_frames reached") {
+    // The server ended it for its own reason (a live source ended, the library changed): say so.
+    std::fprintf(stderr, "gmr stream: the subscription ended: %s\n", shown(reason).c_str());
   }
   if (!std::cout) throw CommandError("cannot write to standard output");
   // Frames the client found malformed (values that do not decode or do not
@@ -506,7 +513,8 @@ void run_publish(const PublishCommand& o) {
   const std::uint32_t id = publication.id;
   std::fprintf(stderr, "publishing %s as live '%s': %zu joints, %zu channels, %.2f Hz%s\n", o.file.c_str(),
                po.name.c_str(), m.skeleton.size(), m.stride(), 1.0 / frame_time, o.loop ? ", looping" : "");
-  const std::uint64_t total = o.count != 0 ? o.count : o.loop ? 0 : m.frame_count;
+  // Without --loop the file is published once: --count can only stop it early.
+  const std::uint64_t total = o.loop ? o.count : o.count != 0 ? std::min(o.count, m.frame_count) : m.frame_count;
   const auto period =
       std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(frame_time));
   const auto start = std::chrono::steady_clock::now();
@@ -534,6 +542,38 @@ struct DiscoverOptions {
   std::uint16_t port = 7501;
   double seconds = 2.0;
 };
+
+// What to tell a user who heard no beacon: where this machine routes the
+// group (the interface listeners join it on), and that a server bound to
+// loopback sends on the loopback interface, which is heard only where the
+// group is routed on loopback too (docs/live.md, "What to bind").
+std::string why_none_heard(in_addr group, const std::string& name) {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_addr = group;
+  to.sin_port = htons(9);
+  std::string route;
+  if (fd >= 0 && ::connect(fd, reinterpret_cast<sockaddr*>(&to), sizeof to) == 0) {
+    sockaddr_in self{};
+    socklen_t len = sizeof self;
+    char address[INET_ADDRSTRLEN] = {};
+    if (::getsockname(fd, reinterpret_cast<sockaddr*>(&self), &len) == 0) {
+      ::inet_ntop(AF_INET, &self.sin_addr, address, sizeof address);
+    }
+    route = self.sin_addr.s_addr == htonl(INADDR_ANY)
+                ? "this machine routes " + name + " on an interface with no address of its own (loopback)"
+                : "this machine routes " + name + " through " + address + "'s interface";
+  } else {
+    route = "this machine has no route for " + name + " (" + std::strerror(errno) +
+            "): add one, e.g. ip route add 224.0.0.0/4 dev eth0";
+  }
+  if (fd >= 0) ::close(fd);
+  return "heard nothing: " + route +
+         ". A server sends beacons from the interface of its --bind address: one bound to 127.0.0.1 (the default) "
+         "is heard only where the group is routed on loopback; start it with --bind <a LAN address> or 0.0.0.0, "
+         "and --discovery-group (docs/live.md, \"What to bind\").";
+}
 
 // Listens to the discovery group for beacons (docs/protocol.md, "Discovery")
 // and prints each server heard once, in the order heard.
@@ -595,6 +635,7 @@ void run_discover(const DiscoverOptions& o) {
   }
   std::fprintf(stderr, "%zu server%s heard on %s:%u in %.1f s\n", seen.size(), seen.size() == 1 ? "" : "s",
                o.group.c_str(), o.port, o.seconds);
+  if (seen.empty()) std::fprintf(stderr, "%s\n", why_none_heard(group, o.group).c_str());
 }
 
 }  // namespace
@@ -667,7 +708,9 @@ void add_net_commands(CLI::App& app) {
     cmd->add_option("--rate", o->rate, "Frames per second (default: the file's own; 120 for a CSV)")
         ->check(CLI::PositiveNumber);
     cmd->add_flag("--loop", o->loop, "Start over at the end, until stopped (or --count)");
-    cmd->add_option("--count", o->count, "Publish this many frames, then end");
+    cmd->add_option("--count", o->count,
+                    "Publish at most this many frames, then end (without --loop, at most the file's frames: it is "
+                    "published once)");
     cmd->add_flag("--record", o->record, "Ask the server to record the source (into its --record-dir) as .gmrb");
     add_connect_options(*cmd, o->server);
     cmd->footer(

@@ -246,8 +246,8 @@ Result<std::vector<MotionInfo>> Client::list_motions() {
   if (!r.ok()) return r.error();
   std::vector<MotionInfo> out;
   for (const auto& i : r->motions().motions()) {
-    out.push_back(
-        MotionInfo{i.name(), i.joint_count(), i.frame_count(), i.frame_time(), i.source(), i.metres_per_unit()});
+    out.push_back(MotionInfo{i.name(), i.joint_count(), i.frame_count(), i.frame_time(), i.source(),
+                             i.metres_per_unit(), i.version()});
   }
   return out;
 }

@@ -1,5 +1,7 @@
 #include "catalog.h"
 
+#include <spdlog/spdlog.h>
+
 #include <utility>
 
 namespace gmr::server {
@@ -11,6 +13,51 @@ void Catalog::set_library(std::vector<LibraryEntry> library) {
   by_name_.clear();
   for (std::size_t i = 0; i < library_.size(); ++i) by_name_.emplace(library_[i].name, i);
   compiled_forms_.clear();
+}
+
+void Catalog::reload(std::vector<LibraryEntry> library, StreamRegistry& streams) {
+  LibraryChanges changes;
+  std::map<std::string, std::pair<std::uint32_t, std::weak_ptr<const CompiledForm>>, std::less<>> before;
+  for (std::size_t i = 0; i < library_.size(); ++i) {
+    before[library_[i].name] = {library_[i].version,
+                                i < compiled_forms_.size() ? compiled_forms_[i] : std::weak_ptr<const CompiledForm>()};
+  }
+  std::vector<std::weak_ptr<const CompiledForm>> forms(library.size());
+  for (std::size_t i = 0; i < library.size(); ++i) {
+    const auto it = before.find(library[i].name);
+    if (it == before.end()) {
+      ++changes.added;
+      continue;
+    }
+    if (it->second.first == library[i].version) {
+      forms[i] = it->second.second;
+    } else {
+      ++changes.changed;
+    }
+    before.erase(it);
+  }
+  changes.removed = before.size();
+  set_library(std::move(library));
+  compiled_forms_ = std::move(forms);
+  const std::size_t ended = streams.end_where([this](const ViewContent& c) { return stale(c); });
+  ++reloads_;
+  changes_.added += changes.added;
+  changes_.changed += changes.changed;
+  changes_.removed += changes.removed;
+  spdlog::info("library reloaded: {} motions, {} added, {} changed, {} removed; {} streams ended", library_.size(),
+               changes.added, changes.changed, changes.removed, ended);
+}
+
+std::string Catalog::stale(const ViewContent& content) const {
+  if (content.library_name.empty()) return {};
+  const auto it = by_name_.find(content.library_name);
+  if (it == by_name_.end()) {
+    return "motion '" + content.library_name + "' was removed from the library";
+  }
+  const std::uint32_t now = library_[it->second].version;
+  if (now == content.library_version) return {};
+  return "motion '" + content.library_name + "' changed on disk (version " + std::to_string(content.library_version) +
+         " -> " + std::to_string(now) + "): create a new view to see it";
 }
 
 Catalog::Found Catalog::find(std::string_view name) const {

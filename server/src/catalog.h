@@ -17,6 +17,7 @@
 #include "gmr/server/view.h"
 #include "live/live_directory.h"
 #include "live/live_source.h"
+#include "streams/stream_registry.h"
 
 namespace gmr::server {
 
@@ -26,6 +27,17 @@ class Catalog final : public LiveDirectory {
 
   // Replaces the library (a server made without one gets it later).
   void set_library(std::vector<LibraryEntry> library);
+  // Replaces the library with a reloaded one (reload_library): entries with
+  // the same name and version are the same motion (their shared float forms
+  // stay); the streams of views of a motion that changed or left end with
+  // the reason (stale), and the changes are counted and logged.
+  void reload(std::vector<LibraryEntry> library, StreamRegistry& streams);
+  std::uint64_t reloads() const { return reloads_; }
+  const LibraryChanges& library_changes() const { return changes_; }
+  // Why `content`, a view's, no longer shows what the library serves under
+  // its name (its motion changed on disk or was removed); empty when it does,
+  // and for live views.
+  std::string stale(const ViewContent& content) const;
   const std::vector<LibraryEntry>& library() const { return library_; }
 
   // What a name is: a library motion (`entry`, at `index`), a live source
@@ -74,6 +86,8 @@ class Catalog final : public LiveDirectory {
  private:
   std::vector<LibraryEntry> library_;
   std::map<std::string, std::size_t, std::less<>> by_name_;
+  std::uint64_t reloads_ = 0;
+  LibraryChanges changes_;  // summed over reloads
   std::vector<std::weak_ptr<const CompiledForm>> compiled_forms_;
   // Live sources (docs/protocol.md, "Live sources"), by name; a source
   // leaves when its publication ends.

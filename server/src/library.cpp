@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <map>
 #include <mutex>
 #include <new>
 #include <system_error>
@@ -25,7 +26,34 @@ struct Job {
   std::string name;
   std::string source;  // the path relative to the library folder: clients never see the server's own paths
   fs::path model;      // a marker file's skeleton model (see marker_model_for)
+  std::string stamp;   // of the files it reads (LibraryEntry::stamp)
+  const LibraryEntry* previous = nullptr;  // reload: the entry it had
 };
+
+std::string file_stamp(const fs::path& p) {
+  std::error_code ec, ec2;
+  const auto size = fs::file_size(p, ec);
+  const auto time = fs::last_write_time(p, ec2);
+  if (ec || ec2) return "?";
+  return std::to_string(size) + "@" + std::to_string(time.time_since_epoch().count());
+}
+
+// The stamp of what a job reads: its file, an .amc's skeleton candidates
+// (every .asf of its folder), a marker file's model.
+std::string stamp_of(const Job& job) {
+  std::string s = file_stamp(job.path);
+  if (lower_extension(job.path) == ".amc") {
+    std::error_code ec;
+    std::vector<fs::path> asfs;
+    for (const auto& e : fs::directory_iterator(job.path.parent_path(), ec)) {
+      if (lower_extension(e.path()) == ".asf") asfs.push_back(e.path());
+    }
+    std::sort(asfs.begin(), asfs.end());
+    for (const auto& a : asfs) s += "|" + a.filename().string() + ":" + file_stamp(a);
+  }
+  if (!job.model.empty()) s += "|" + file_stamp(job.model);
+  return s;
+}
 
 // A marker file (.c3d, .trc) is served when a skeleton model sits beside it:
 // X.model for X.c3d, else markers.model for every marker file of the folder.
@@ -80,7 +108,14 @@ Result<LibraryEntry> load_one(const Job& job) {
   if (pre->frame_count == 0) return Error{job.path.string(), 0, 0, "the motion has no frames"};
   if (!(pre->frame_time > 0.0)) return Error{job.path.string(), 0, 0, "the motion has no frame time"};
   if (auto s = check_motion_limits(*pre, job.limits); !s.ok()) return Error{job.path.string(), 0, 0, s.error().message};
-  return LibraryEntry{job.name, job.source, std::make_shared<const Motion>(std::move(pre).value()), metres_per_unit};
+  LibraryEntry e;
+  e.name = job.name;
+  e.source = job.source;
+  e.motion = std::make_shared<const Motion>(std::move(pre).value());
+  e.metres_per_unit = metres_per_unit;
+  e.version = job.previous != nullptr ? job.previous->version + 1 : 1;
+  e.stamp = job.stamp;
+  return e;
 }
 
 }  // namespace
@@ -106,8 +141,18 @@ Status check_motion_limits(const Motion& m, const MotionLimits& limits) {
   return Ok{};
 }
 
-Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const LoadProgress& progress,
-                                 const MotionLimits& limits, const LoadOptions& file_options) {
+namespace {
+
+// load_library, and reload_library when `previous` is given.
+Result<LibraryLoad> load(const fs::path& dir, unsigned threads, const LoadProgress& progress,
+                         const MotionLimits& limits, const LoadOptions& file_options,
+                         const std::vector<LibraryEntry>* previous, const std::vector<fs::path>& being_written) {
+  std::map<std::string, const LibraryEntry*, std::less<>> before;
+  if (previous != nullptr) {
+    for (const auto& e : *previous) before.emplace(e.source, &e);
+  }
+  std::vector<fs::path> writing;
+  for (const auto& p : being_written) writing.push_back(p.lexically_normal());
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return Error{dir.string(), 0, 0, "not a readable folder"};
 
@@ -126,15 +171,35 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
     // symbolic link and name its target). An .amc's skeleton is found by
     // load_motion: the .asf of its folder, or of its subject among several.
     const fs::path relative = f.lexically_relative(dir);
-    Job job{f, limits, file_options, fs::path(relative).replace_extension().generic_string(), relative.generic_string(),
-            {}};
-    if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") {
-      jobs.push_back(std::move(job));
-    } else if ((ext == ".c3d" || ext == ".trc") && !(job.model = marker_model_for(f)).empty()) {
-      jobs.push_back(std::move(job));
-    } else {
+    Job job;
+    job.path = f;
+    job.limits = limits;
+    job.options = file_options;
+    job.name = fs::path(relative).replace_extension().generic_string();
+    job.source = relative.generic_string();
+    if (!(ext == ".bvh" || ext == ".gmr" || ext == ".gmrb" || ext == ".amc") &&
+        !((ext == ".c3d" || ext == ".trc") && !(job.model = marker_model_for(f)).empty())) {
       ++out.skipped;
+      continue;
     }
+    if (previous != nullptr) {
+      const auto it = before.find(job.source);
+      job.previous = it == before.end() ? nullptr : it->second;
+      if (std::find(writing.begin(), writing.end(), f.lexically_normal()) != writing.end()) {
+        ++out.kept_back;  // half a file is never served: as it was until it is closed
+        if (job.previous != nullptr) out.entries.push_back(*job.previous);
+        continue;
+      }
+      job.stamp = stamp_of(job);
+      if (job.previous != nullptr && job.previous->stamp == job.stamp) {
+        ++out.reused;
+        out.entries.push_back(*job.previous);
+        continue;
+      }
+    } else {
+      job.stamp = stamp_of(job);
+    }
+    jobs.push_back(std::move(job));
   }
 
   if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
@@ -164,6 +229,10 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
       out.entries.push_back(std::move(*results[i]).value());
     } else {
       out.rejected.push_back({jobs[i].path, results[i]->error().to_string()});
+      if (jobs[i].previous != nullptr) {  // the last version that loaded stays
+        ++out.kept_back;
+        out.entries.push_back(*jobs[i].previous);
+      }
     }
   }
   std::sort(out.entries.begin(), out.entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
@@ -171,11 +240,28 @@ Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const Lo
   return out;
 }
 
+}  // namespace
+
+Result<LibraryLoad> load_library(const fs::path& dir, unsigned threads, const LoadProgress& progress,
+                                 const MotionLimits& limits, const LoadOptions& file_options) {
+  return load(dir, threads, progress, limits, file_options, nullptr, {});
+}
+
+Result<LibraryLoad> reload_library(const fs::path& dir, const std::vector<LibraryEntry>& previous,
+                                   const std::vector<fs::path>& being_written, unsigned threads,
+                                   const MotionLimits& limits, const LoadOptions& file_options) {
+  return load(dir, threads, {}, limits, file_options, &previous, being_written);
+}
+
 std::vector<LibraryEntry> builtin_library() {
   std::vector<LibraryEntry> out;
   for (auto& m : demo_library()) {
     // The demo skeletons are built in centimetres (gmr/demo/demo_library.h).
-    out.push_back({m.name, "builtin", std::make_shared<const Motion>(std::move(m.motion)), 0.01});
+    LibraryEntry& e = out.emplace_back();
+    e.name = m.name;
+    e.source = "builtin";
+    e.motion = std::make_shared<const Motion>(std::move(m.motion));
+    e.metres_per_unit = 0.01;
   }
   return out;
 }

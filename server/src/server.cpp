@@ -22,7 +22,8 @@ Server::Impl::Impl(ServerConfig config, std::vector<LibraryEntry> entries, bool 
 }
 
 void Server::Impl::install_library(std::vector<LibraryEntry> entries) {
-  if (ready || stopping) return;
+  if (stopping) return;
+  if (ready) return catalog.reload(std::move(entries), streams);  // streams of what changed or left end
   catalog.set_library(std::move(entries));
   ready = true;
   spdlog::info("ready: {} motions", catalog.library().size());
@@ -91,7 +92,8 @@ void Server::Impl::accept_loop() {
       const auto peer = socket.remote_endpoint(peer_ec);
       const std::string address = peer_ec ? std::string("?") : peer.address().to_string();
       if (std::string why = admission.admit(address); !why.empty()) {
-        refuse(std::move(socket), why);
+        admission.refused(why, true);
+        refuse_socket(std::move(socket), error_message(0, pb::ERROR_CODE_RESOURCE_EXHAUSTED, "refused: " + why));
       } else {
         accept_connection(std::move(socket), address);
       }
@@ -120,11 +122,6 @@ void Server::Impl::accept_connection(tcp::socket socket, const std::string& addr
   entry->lane = lane;
   entry->counted_on_lane = true;
   c->start(std::move(handler), [this](std::uint64_t closed) { connection_closed(closed); });
-}
-
-void Server::Impl::refuse(tcp::socket socket, const std::string& why) {
-  admission.refused(why, true);
-  refuse_socket(std::move(socket), error_message(0, pb::ERROR_CODE_RESOURCE_EXHAUSTED, "refused: " + why));
 }
 
 void Server::Impl::begin_stop() {
@@ -222,6 +219,8 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.live_frames_received = catalog.live_frames_received();
   s.live_frames_refused = catalog.live_frames_refused();
   s.live_frames_over_rate = catalog.live_frames_over_rate();
+  s.library_reloads = catalog.reloads();
+  s.library_changes = catalog.library_changes();
   s.relay_announces_refused = replicas.announces_refused();
   return s;
 }

@@ -96,7 +96,6 @@ struct Server::Impl {
 
   HttpServices http_services();
   void accept_loop();
-  void refuse(tcp::socket socket, const std::string& why);
   // Registers an accepted client connection (TCP or WebSocket) with its
   // request handler; returns the handler, which the caller starts the
   // connection with.
@@ -106,7 +105,8 @@ struct Server::Impl {
   // A WebSocket client the HTTP port admitted, on the control loop.
   void open_websocket(tcp::socket socket, http::request<http::string_body> upgrade, WsConnection::Format format,
                       const std::string& address);
-  // Installs the library (set_library), on the I/O thread.
+  // Installs the library (set_library), on the I/O thread; once there, a
+  // reloaded one replaces it (Catalog::reload).
   void install_library(std::vector<LibraryEntry> entries);
   void begin_stop();
   void connection_closed(std::uint64_t id);

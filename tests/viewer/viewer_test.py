@@ -13,6 +13,7 @@ CI=true that is a failure."""
 import argparse
 import json
 import pathlib
+import subprocess
 import sys
 import tempfile
 import time
@@ -204,6 +205,15 @@ def main():
             check(not errors, f"the page's console: {errors}")
         finally:
             browser.close()
+        # 7. The screenshot recipe docs/viewer.md gives (scripts/viewer-screenshot.py) draws the skeleton.
+        recipe = pathlib.Path(tempfile.gettempdir()) / "gmr_viewer_recipe.png"
+        script = pathlib.Path(__file__).resolve().parents[2] / "scripts" / "viewer-screenshot.py"
+        run = subprocess.run([sys.executable, str(script), f"http://127.0.0.1:{server.http_port}/", str(recipe),
+                              "--viewpoint", VIEWPOINT, "--seconds", "0.5"], capture_output=True, text=True,
+                             timeout=120)
+        check(run.returncode == 0, f"scripts/viewer-screenshot.py: {run.stdout}{run.stderr}")
+        check(recipe.stat().st_size > 10000, f"the recipe's screenshot is {recipe.stat().st_size} bytes")
+        print(f"screenshot recipe: {run.stdout.strip()}")
     print("viewer: OK")
 
 

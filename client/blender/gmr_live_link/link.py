@@ -67,7 +67,7 @@ class LiveLink:
             self.client.set_coordinates(self.view.id, viewpoint)
         self.sub = self.client.subscribe(self.view.id, loop=loop, rate_hz=rate_hz, speed=speed, udp=udp,
                                          local_transforms=True, float64=True, max_frames=max_frames,
-                                         conventions="blender")
+                                         conventions="blender", max_staleness_ms=100)  # live: fresh frames only
         self.build_armature(motion)
         return self.object
 

@@ -182,12 +182,17 @@ class Client:
                   speed: float = 1.0, rate_hz: float = 0.0, skip_repeats: bool = False, orientations: bool = False,
                   local_transforms: bool = False, joints: Sequence[str] = (), udp: bool = False,
                   float64: bool = False, shared: bool = False, max_frames: int = 0,
-                  conventions: ConventionsLike = None, max_staleness_ms: int = 100) -> Subscription:
+                  conventions: ConventionsLike = None, max_staleness_ms: int = 0) -> Subscription:
         """Starts streaming frames of a view (docs/protocol.md, "Streams").
 
-        Frames older than max_staleness_ms are never handed out: the server
-        drops those that waited in its queue, this client those that arrive
-        older (after a stall, the kernel's buffers hold them); 0: no bound."""
+        By default (max_staleness_ms=0) every frame that reaches this client
+        is handed out, however late the script reads it: a 30 Hz
+        subscription read after 0.5 s yields the 15 frames sent meanwhile.
+        A live consumer that wants only fresh frames (a game loop, the
+        Blender add-on) gives a bound, e.g. 100: frames older than it are
+        never handed out (the server drops those that waited in its queue,
+        this client those that arrive older) and are counted in
+        Subscription.frames_stale."""
         if udp:
             self.register_udp()
         m = pb.ClientMessage()

@@ -207,6 +207,15 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   f.add("gmr_live_frames_over_rate_total",
         "Frames published to live sources faster than their declared rate, dropped (a burst of a second passes)",
         T::Counter, static_cast<double>(s.live_frames_over_rate));
+  f.add("gmr_library_reloads_total", "Library reloads (files under --library changed, or SIGHUP)", T::Counter,
+        static_cast<double>(s.library_reloads));
+  const char* kChangeHelp = "Library motions a reload added, read again (changed on disk) or removed";
+  f.add("gmr_library_changes_total", kChangeHelp, T::Counter, static_cast<double>(s.library_changes.added),
+        {{"change", "added"}});
+  f.add("gmr_library_changes_total", kChangeHelp, T::Counter, static_cast<double>(s.library_changes.changed),
+        {{"change", "changed"}});
+  f.add("gmr_library_changes_total", kChangeHelp, T::Counter, static_cast<double>(s.library_changes.removed),
+        {{"change", "removed"}});
   f.add("gmr_relay_announces_refused_total",
         "Live sources other replicas announced and this one refused (invalid, or past --max-remote-sources)",
         T::Counter, static_cast<double>(s.relay_announces_refused));

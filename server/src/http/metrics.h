@@ -16,6 +16,7 @@
 #include <string_view>
 #include <vector>
 
+#include "gmr/server/library.h"
 #include "gmr/server/server.h"
 #include "requests/services.h"
 #include "transport/net.h"
@@ -41,6 +42,8 @@ struct MetricsSnapshot {
   std::size_t live_sources = 0;
   std::uint64_t live_frames_received = 0, live_frames_refused = 0, live_frames_over_rate = 0;
   std::uint64_t relay_announces_refused = 0;
+  std::uint64_t library_reloads = 0;
+  LibraryChanges library_changes;
 };
 
 class Metrics final : public RequestObserver {

@@ -225,7 +225,7 @@ void LiveSource::tell_ended(const std::string& reason) {
   auto streams = std::move(streams_);
   streams_.clear();
   for (const auto& w : streams) {
-    if (auto s = w.lock()) s->live_ended(reason);
+    if (auto s = w.lock()) s->end_targets(reason);
   }
 }
 

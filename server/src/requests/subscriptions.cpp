@@ -21,6 +21,9 @@ Refusal unknown_subscription(std::uint32_t id) {
 Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   const View* v = views_.find(r.view_id());
   if (!v) return unknown_view(r.view_id());
+  if (auto why = link_.services.catalog.stale(*v->content()); !why.empty()) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
+  }
   const Motion& m = v->motion();
   const ServerConfig& cfg = link_.services.cfg;
   if (subs_.size() >= cfg.max_subscriptions_per_connection) {

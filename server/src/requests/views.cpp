@@ -21,6 +21,7 @@ Reply Views::list_motions() const {
     m->set_frame_time(e.motion->frame_time);
     m->set_source(e.source);
     m->set_metres_per_unit(e.metres_per_unit);
+    m->set_version(e.version);
   }
   for (const auto& [name, source] : link_.services.catalog.live_sources()) {
     auto* m = list->add_motions();
@@ -65,7 +66,7 @@ Reply Views::create(const pb::CreateView& r) {
   const std::uint32_t id = next_view_++;
   auto v = found.live ? std::make_unique<View>(id, found.live->name(), found.live->latest(), found.live)
                       : std::make_unique<View>(id, found.entry->name, found.entry->motion,
-                                               link_.services.catalog.compiled_form(found.index));
+                                               link_.services.catalog.compiled_form(found.index), found.entry->version);
   pb::ServerMessage out;
   *out.mutable_view() = info(*v);
   views_.emplace(id, std::move(v));
@@ -117,6 +118,9 @@ Reply Views::set_coordinates(const pb::SetCoordinates& r) {
 Reply Views::query(const pb::QueryFrames& r) const {
   const View* v = find(r.view_id());
   if (!v) return unknown_view(r.view_id());
+  if (auto why = link_.services.catalog.stale(*v->content()); !why.empty()) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
+  }
   // A live view's one frame is its source's newest (the last it had, once
   // the source ended).
   std::shared_ptr<const Motion> newest = v->content()->motion;

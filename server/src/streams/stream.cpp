@@ -281,7 +281,7 @@ void Stream::live_skipped() {
   }
 }
 
-void Stream::live_ended(const std::string& reason) {
+void Stream::end_targets(const std::string& reason) {
   auto self = shared_from_this();  // ending targets may drop the last reference below
   const auto targets = std::move(targets_);
   targets_.clear();

@@ -128,8 +128,8 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void live_frame(std::shared_ptr<const ViewContent> content, std::uint64_t index);
   // A frame this stream's view could not be computed for: a gap for its subscribers.
   void live_skipped();
-  // The source ended: every target ends with `reason`.
-  void live_ended(const std::string& reason);
+  // The source ended, or the library motion changed: every target ends with `reason`.
+  void end_targets(const std::string& reason);
   // A copy of this stream (content, settings, position, sequence) that takes
   // `target` over from it, so the target sees no gap or restart. A live
   // stream's copy is live too, and is to be attached to the same source.

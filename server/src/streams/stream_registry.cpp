@@ -14,12 +14,12 @@ std::string StreamRegistry::share_key(const std::string& motion_name, const View
   }
   const Stream::Schedule& c = s.schedule;
   // The skeleton version goes in too: every frame carries its view's own.
-  std::string key = motion_name + "|" + std::to_string(content.skeleton_version) + "|" +
-                    std::to_string(std::hash<std::string>{}(structure)) + "|" + std::to_string(content.relative_to) +
-                    "|" + std::to_string(s.orientations) + std::to_string(s.local_transforms) +
-                    std::to_string(s.float64) + "|" + std::to_string(c.start) + ":" + std::to_string(c.end) + "|" +
-                    std::to_string(c.loop) + "|" + std::to_string(c.speed) + "|" + std::to_string(c.rate) + "|" +
-                    std::to_string(c.skip_repeats) + "|";
+  std::string key =
+      motion_name + "@" + std::to_string(content.library_version) + "|" + std::to_string(content.skeleton_version) +
+      "|" + std::to_string(std::hash<std::string>{}(structure)) + "|" + std::to_string(content.relative_to) + "|" +
+      std::to_string(s.orientations) + std::to_string(s.local_transforms) + std::to_string(s.float64) + "|" +
+      std::to_string(c.start) + ":" + std::to_string(c.end) + "|" + std::to_string(c.loop) + "|" +
+      std::to_string(c.speed) + "|" + std::to_string(c.rate) + "|" + std::to_string(c.skip_repeats) + "|";
   for (int j : s.joints) key += std::to_string(j) + ",";
   // The conventions, exactly (to_string's six decimals would let two unit
   // scales that differ past them share a stream).
@@ -75,6 +75,21 @@ std::size_t StreamRegistry::active() {
     if (auto s = w.lock(); s && !s->idle()) ++n;
   }
   return n;
+}
+
+std::size_t StreamRegistry::end_where(const std::function<std::string(const ViewContent&)>& why) {
+  prune();
+  std::size_t ended = 0;
+  for (auto& [id, w] : streams_) {
+    auto s = w.lock();
+    if (!s || s->idle()) continue;
+    if (const std::string reason = why(*s->content()); !reason.empty()) {
+      s->end_targets(reason);
+      s->stop();
+      ++ended;
+    }
+  }
+  return ended;
 }
 
 void StreamRegistry::stop_all() {

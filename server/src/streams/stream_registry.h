@@ -4,6 +4,7 @@
 // must change alone (pause, seek, a view edit) is split off onto a copy.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -37,6 +38,9 @@ class StreamRegistry {
   // Streams with at least one target.
   std::size_t active();
   // Stops every stream's timer (server shutdown).
+  // Ends every stream whose content `why` gives a reason for (its
+  // subscribers get SubscriptionEnded with it); returns how many.
+  std::size_t end_where(const std::function<std::string(const ViewContent&)>& why);
   void stop_all();
 
  private:

@@ -62,12 +62,14 @@ View::View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Moti
 }
 
 View::View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion,
-           std::shared_ptr<const CompiledForm> compiled)
+           std::shared_ptr<const CompiledForm> compiled, std::uint32_t library_version)
     : id_(id), motion_name_(std::move(motion_name)) {
   auto c = std::make_shared<ViewContent>();
   if (!compiled || compiled->motion() != motion) compiled = std::make_shared<const CompiledForm>(motion);
   c->motion = std::move(motion);
   c->compiled = std::move(compiled);
+  c->library_name = motion_name_;
+  c->library_version = library_version;
   content_ = std::move(c);
 }
 
@@ -117,6 +119,8 @@ std::shared_ptr<const ViewContent> next_content(const ViewContent& base, std::sh
   c->relative_to = relative_to;
   c->skeleton_version = base.skeleton_version + (same ? 0 : 1);
   c->live_steps = std::move(live_steps);
+  c->library_name = base.library_name;
+  c->library_version = base.library_version;
   return c;
 }
 

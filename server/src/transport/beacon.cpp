@@ -30,6 +30,9 @@ void Beacon::start(const net::ip::address& bound) {
   timer_ = std::make_unique<net::steady_timer>(io_);
   spdlog::info("discovery beacons to {}:{} every {} ms", cfg_.discovery_group, cfg_.discovery_port,
                cfg_.discovery_interval.count());
+  if (const auto why = multicast_unreachable(bound, group); !why.empty()) {
+    spdlog::warn("discovery beacons will reach no one: {}", why);
+  }
   send();
 }
 
@@ -43,7 +46,8 @@ void Beacon::send() {
   const std::string datagram = "GMRB" + describe_().SerializeAsString();
   boost::system::error_code ec;
   socket_->send_to(net::buffer(datagram), group_, 0, ec);
-  if (ec) spdlog::debug("discovery beacon not sent: {}", ec.message());
+  if (ec && !send_failed_) spdlog::warn("discovery beacon not sent (said once): {}", ec.message());
+  if (ec) send_failed_ = true;
   timer_->expires_after(cfg_.discovery_interval);
   timer_->async_wait([this](const boost::system::error_code& e) {
     if (!e) send();

@@ -31,6 +31,7 @@ class Beacon {
   std::unique_ptr<net::ip::udp::socket> socket_;
   std::unique_ptr<net::steady_timer> timer_;
   bool stopped_ = false;
+  bool send_failed_ = false;  // a failed send was logged
 };
 
 }  // namespace gmr::server

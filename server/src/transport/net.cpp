@@ -15,6 +15,25 @@ std::int64_t now_ns() {
       .count();
 }
 
+std::string multicast_unreachable(const net::ip::address& bound, const net::ip::address_v4& group) {
+  if (!bound.is_loopback()) return {};
+  // The source address the kernel picks for the group says where it routes it.
+  net::io_context io;
+  udp::socket probe(io);
+  boost::system::error_code ec;
+  probe.open(udp::v4(), ec);
+  if (!ec) probe.connect(udp::endpoint(group, 9), ec);
+  const auto source = ec ? net::ip::address() : probe.local_endpoint(ec).address();
+  // A source on loopback, or none (a route on `lo` without one, as in a
+  // network namespace): the group is routed on loopback, local listeners hear it.
+  if (!ec && (source.is_loopback() || source.is_unspecified())) return {};
+  return "bound to " + bound.to_string() + ", it goes out on the loopback interface, but this machine routes " +
+         group.to_string() +
+         (ec ? std::string(" nowhere (") + ec.message() + ")" : " through " + source.to_string() + "'s interface") +
+         ", where listeners join, so nobody hears it: give --bind a LAN address of this host, or 0.0.0.0 "
+         "(docs/live.md, \"What to bind\")";
+}
+
 std::string printable(std::string_view text, std::size_t max) {
   static constexpr char kHex[] = "0123456789abcdef";
   std::string out = "\"";

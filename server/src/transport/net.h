@@ -47,6 +47,13 @@ std::string printable(std::string_view text, std::size_t max = 64);
 // it is.
 std::string address_group(const std::string& address);
 
+// Why multicast to `group` sent from the interface of `bound` would reach no
+// listener, or empty when it can. Listeners (gmr discover, multicast
+// subscribers) join the group on the interface this machine routes it to; a
+// server bound to a loopback address sends on the loopback interface, so
+// when the route goes elsewhere (a LAN interface, or nowhere) nobody hears.
+std::string multicast_unreachable(const net::ip::address& bound, const net::ip::address_v4& group);
+
 // Rate limit for the log lines one client can cause: at most `burst` per
 // `period`; the others are counted, and the next line logged reports them.
 class LogLimiter {

@@ -70,6 +70,9 @@ std::shared_ptr<UdpPublisher::Registration> UdpPublisher::open_multicast(const s
     throw std::runtime_error("cannot send multicast to " + group + " from the UDP socket (" + local.to_string() +
                              "): " + ec.message());
   }
+  if (const auto why = multicast_unreachable(local, address); !why.empty()) {
+    spdlog::warn("multicast streams will reach no one: {}", why);
+  }
   auto r = std::make_shared<Registration>();
   r->endpoint = udp::endpoint(address, port);
   return r;

@@ -14,6 +14,7 @@
 #include <mutex>
 #include <thread>
 
+#include "gmr/io/gmr_file.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
 #include "gmr/kinematics/forward_kinematics.h"
@@ -274,6 +275,51 @@ TEST(CliNet, PublishPlaysAFileLiveAndRecordCapturesItsPositions) {
   }
   EXPECT_EQ(matched, 60u) << "recorded frame " << matched << " is none of the published frames after the one before";
   EXPECT_LE(skipped, 6u) << "published frames the recording skipped";
+}
+
+// Before: `gmr publish FILE --count N` looped past the end of the file
+// without --loop. Now a file is published once unless --loop says otherwise,
+// and the help says so.
+TEST(CliNet, PublishCountNeverLoopsWithoutLoop) {
+  TestServer s(publish_config());
+  TempDir dir;
+  const std::string file = (dir.path / "short.gmr").string();
+  const Motion m = *test_library().front().motion;
+  ASSERT_GT(m.frame_count, 10u);
+  ASSERT_TRUE(write_gmr(m, file).ok());
+  const std::string common =
+      " --rate 2000 --token " + std::string(kPublishToken) + " --port " + std::to_string(s.port());
+  const CommandRun once =
+      gmr("publish '" + file + "' --name once --count " + std::to_string(m.frame_count + 50) + common);
+  ASSERT_EQ(once.status, 0) << once.out;
+  EXPECT_NE(once.out.find("published " + std::to_string(m.frame_count) + " frames of 'once'"), std::string::npos)
+      << once.out;
+  const CommandRun looped =
+      gmr("publish '" + file + "' --name looped --loop --count " + std::to_string(m.frame_count + 50) + common);
+  ASSERT_EQ(looped.status, 0) << looped.out;
+  EXPECT_NE(looped.out.find("published " + std::to_string(m.frame_count + 50) + " frames of 'looped'"),
+            std::string::npos)
+      << looped.out;
+  const CommandRun help = gmr("publish --help");
+  EXPECT_NE(help.out.find("without --loop, at most the file's frames"), std::string::npos) << help.out;
+}
+
+// The help texts a newcomer reads say what the commands do today.
+TEST(CliNet, HelpTextsNameWhatTheCommandsDo) {
+  const CommandRun convert = gmr("convert --help");
+  for (const char* said : {".gmrb", ".amc", ".c3d", "--model"}) {
+    EXPECT_NE(convert.out.find(said), std::string::npos) << said << " not in:\n" << convert.out;
+  }
+  EXPECT_EQ(convert.out.find(".bvh <-> .gmr)"), std::string::npos) << convert.out;
+#ifdef GMR_SERVER_PATH
+  const CommandRun server = run_command(std::string(GMR_SERVER_PATH) + " --help");
+  ASSERT_EQ(server.status, 0) << server.out;
+  EXPECT_EQ(server.out.find("operations.md"), std::string::npos) << "a pointer to the wrong page:\n" << server.out;
+  const auto nats = server.out.find("--nats TEXT");
+  ASSERT_NE(nats, std::string::npos);
+  EXPECT_NE(server.out.find("docs/deployment.md", nats), std::string::npos);
+  EXPECT_NE(server.out.find("SIGHUP reads it again"), std::string::npos) << server.out;
+#endif
 }
 
 TEST(CliNet, PublishPlaysThePositionsCsvAsAnAllRootsSource) {

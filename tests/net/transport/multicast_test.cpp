@@ -11,7 +11,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <mutex>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 #include <sys/wait.h>
+
+#include <sstream>
 
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/view/view.h"
@@ -28,17 +32,19 @@ bool in_namespace() {
 
 // Runs this test binary's `test` again in a new network namespace; its
 // output, and whether it passed.
-void run_in_namespace(const std::string& test) {
+// `multicast_route`: 224.0.0.0/4 routed on the loopback interface (as a
+// LAN interface would carry it); without it the group is routed nowhere.
+void run_in_namespace(const std::string& test, bool multicast_route = true) {
   const bool ci = std::getenv("CI") != nullptr && std::string(std::getenv("CI")) == "true";
   if (std::system("unshare -n true >/dev/null 2>&1") != 0) {
     const std::string why = "cannot make a network namespace here (unshare -n needs root or CAP_SYS_ADMIN)";
     if (ci) FAIL() << why << ": CI must run the multicast test";
     GTEST_SKIP() << why;
   }
-  const std::string cmd =
-      "unshare -n sh -c 'ip link set lo up && ip route add 224.0.0.0/4 dev lo && "
-      "GMR_IN_NETNS=1 exec /proc/" +
-      std::to_string(::getpid()) + "/exe --gtest_filter=" + test + "' 2>&1";
+  const std::string cmd = std::string("unshare -n sh -c 'ip link set lo up && ") +
+                          (multicast_route ? "ip route add 224.0.0.0/4 dev lo && " : "") +
+                          "GMR_IN_NETNS=1 exec /proc/" + std::to_string(::getpid()) + "/exe --gtest_filter=" + test +
+                          "' 2>&1";
   FILE* p = ::popen(cmd.c_str(), "r");
   ASSERT_NE(p, nullptr);
   std::string out;
@@ -182,8 +188,71 @@ TEST(Multicast, GmrDiscoverListsTheServersThatSendBeacons) {
   }
   EXPECT_EQ(out.find("127.0.0.1:" + std::to_string(silent.port())), std::string::npos) << out;
   EXPECT_NE(out.find("2 servers heard on 239.255.74.2:17501"), std::string::npos) << out;
+
+  // Nobody on another port: gmr discover says where the group is routed and
+  // what a server must bind to be heard.
+  const std::string none = std::string(GMR_CLI_PATH) + " discover --port 17599 --seconds 0.3 2>&1";
+  p = ::popen(none.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  out.clear();
+  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.append(buf.data(), n);
+  ASSERT_EQ(::pclose(p), 0) << out;
+  EXPECT_NE(out.find("0 servers heard"), std::string::npos) << out;
+  EXPECT_NE(out.find("heard nothing: this machine routes 239.255.74.2 on an interface with no address of its own"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("--bind"), std::string::npos) << out;
+
+  // Before: `gmr stream --multicast --summary` said it streamed "over TCP".
+  const std::string stream = std::string(GMR_CLI_PATH) + " stream walk --multicast --summary --count 3 --port " +
+                             std::to_string(a.port()) + " 2>&1 >/dev/null";
+  p = ::popen(stream.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  out.clear();
+  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.append(buf.data(), n);
+  ASSERT_EQ(::pclose(p), 0) << out;
+  EXPECT_NE(out.find("streaming walk over multicast"), std::string::npos) << out;
 }
 #endif
+
+// Before: a server bound to 127.0.0.1 (the default) with --discovery-group
+// logged that beacons went out, and nobody heard them, with no word why.
+// Where the group is not routed on loopback, the server now says so at start,
+// for beacons and for the multicast group; where it is, it says nothing.
+std::string start_log(bool expect_warning) {
+  std::ostringstream log;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("capture", sink));
+  {
+    server::ServerConfig cfg;
+    cfg.discovery_group = "239.255.74.2";
+    cfg.discovery_port = 17503;
+    cfg.multicast_group = "239.255.74.1";
+    cfg.multicast_port = 17504;
+    TestServer s(cfg);
+    EXPECT_NE(s.port(), 0);
+  }
+  spdlog::set_default_logger(previous);
+  const std::string text = log.str();
+  for (const char* what : {"discovery beacons will reach no one: bound to 127.0.0.1",
+                           "multicast streams will reach no one: bound to 127.0.0.1"}) {
+    EXPECT_EQ(text.find(what) != std::string::npos, expect_warning) << what << " in:\n" << text;
+  }
+  return text;
+}
+
+TEST(Multicast, ALoopbackServerSaysWhenNobodyCanHearIt) {
+  if (!in_namespace()) return run_in_namespace("Multicast.ALoopbackServerSaysWhenNobodyCanHearIt", false);
+  const std::string text = start_log(true);
+  EXPECT_NE(text.find("routes 239.255.74.2 nowhere"), std::string::npos) << text;
+  EXPECT_NE(text.find("--bind"), std::string::npos) << text;
+}
+
+TEST(Multicast, ALoopbackServerIsQuietWhereLoopbackCarriesTheGroup) {
+  if (!in_namespace()) return run_in_namespace("Multicast.ALoopbackServerIsQuietWhereLoopbackCarriesTheGroup");
+  start_log(false);
+}
 
 TEST(Multicast, AServerWithoutAGroupRefusesMulticast) {
   TestServer s;

@@ -116,6 +116,7 @@ struct MotionInfo {
   double frame_time = 0.0;
   std::string source;            // the file it came from, or "builtin"
   double metres_per_unit = 0.0;  // the motion's unit in metres; 0: unknown
+  std::uint32_t version = 0;     // a library motion's: one more each time the server reloads it (0: not said)
 };
 
 // A view as the server last described it.

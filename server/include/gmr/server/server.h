@@ -87,7 +87,11 @@ class Server {
   std::uint16_t http_port() const;
 
   // The library of a server made without one; the server is then ready
-  // (/readyz). Call once, from any thread but the I/O thread.
+  // (/readyz). Called again (LibraryWatcher does it), the library is
+  // replaced: entries of the same name and version are the same motion, and
+  // the streams of a motion that changed (another version) or left end with
+  // the reason; views made of it then refuse subscriptions and queries
+  // (docs/protocol.md, "Library reload"). From any thread but the I/O thread.
   void set_library(std::vector<LibraryEntry> library);
 
   // Graceful stop: stops accepting, ends every stream, lets replies drain for

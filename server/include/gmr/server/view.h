@@ -68,6 +68,11 @@ struct ViewContent {
   // order, and `motion` is one frame (the newest when the view last changed).
   // Null for library motions.
   std::shared_ptr<const std::vector<LiveStep>> live_steps;
+  // The library motion it shows, and which version of it (LibraryEntry::
+  // version): a reload that changes or removes it ends its streams
+  // (Catalog::stale). Empty for live sources.
+  std::string library_name;
+  std::uint32_t library_version = 0;
 };
 
 // What an edit reports besides the view it makes.
@@ -117,8 +122,9 @@ class View {
  public:
   // `compiled`: the float form of `motion` to share (e.g. with other views of
   // the same library motion); null: the view makes its own, compiled on first use.
+  // `library_version`: which version of library motion `motion_name` it is.
   View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> motion,
-       std::shared_ptr<const CompiledForm> compiled = {});
+       std::shared_ptr<const CompiledForm> compiled = {}, std::uint32_t library_version = 1);
   // A view of live source `source` named `motion_name`, starting from its
   // newest frame `newest` (a one-frame motion).
   View(std::uint32_t id, std::string motion_name, std::shared_ptr<const Motion> newest,
