@@ -1,7 +1,17 @@
 #!/usr/bin/env bash
 # Installs every Debian package gmr needs to build, test and benchmark.
 # Works as root or through sudo; does nothing when everything is already there.
+#   scripts/install-deps.sh           everything (build, tests, benchmarks, interop)
+#   scripts/install-deps.sh --build   only what building gmr-server, gmr and gmr-load needs
+#                                     (the container image's build stage: docker/Dockerfile)
 set -euo pipefail
+
+build_packages=(
+  build-essential cmake ninja-build pkg-config
+  libeigen3-dev libhwy-dev libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
+  libboost-dev libboost-system-dev prometheus-cpp-dev libnats-dev libssl-dev
+  libprotobuf-dev protobuf-compiler
+)
 
 packages=(
   build-essential cmake ninja-build pkg-config
@@ -32,6 +42,12 @@ packages=(
   libassimp-dev             # the interop test: Assimp's BVH importer
 )
 
+build_only=false
+if [ "${1:-}" = --build ]; then
+  build_only=true
+  packages=("${build_packages[@]}")
+fi
+
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
@@ -48,6 +64,7 @@ fi
 # and tests/deploy/package-lock.json (the Kubernetes manifests' schema check).
 npm_packages() {
   local root dir
+  $build_only && return 0
   root="$(cd "$(dirname "$0")/.." && pwd)"
   dir="$root/tests/interop"
   if [ ! -f "$dir/node_modules/three/package.json" ]; then
