@@ -165,11 +165,9 @@ void run_positions(const PositionsOptions& given) {
   // The file's own unit, as gmr-server takes it, unless given.
   if (o.view.metres_per_unit == 0.0) o.view.metres_per_unit = file_metres_per_unit;
   const Motion m = transform_for_positions(std::move(loaded), o);
-  if (o.view.any() && !o.orientations.empty())
-    throw CommandError("--orientations cannot be combined with --roots, --strip-dummies or --relative-to");
   const OutputBasis basis = o.view.basis();
   if (o.view.any()) {
-    write_view_positions(m, o.view, requested, std::cout);
+    write_view_positions(m, o.view, requested, std::cout, o.orientations);
     std::cout.flush();
     if (!std::cout) throw CommandError("cannot write the positions to standard output");
     print_warnings(warnings);
@@ -256,8 +254,8 @@ void add_file_commands(CLI::App& app) {
     add_fps_option(*cmd, o->fps);
     add_positions_transform_options(*cmd, *o);
     cmd->add_option("--orientations", o->orientations,
-                    "Also print each joint's world orientation (its GMR bone frame): quat (qw,qx,qy,qz) or matrix "
-                    "(r00..r22, row by row)")
+                    "Also print each joint's orientation (its GMR bone frame, in the view's coordinates and "
+                    "conventions, with any view option): quat (qw,qx,qy,qz) or matrix (r00..r22, row by row)")
         ->check(CLI::IsMember({"quat", "matrix"}));
     cmd->callback([o] { run_positions(*o); });
   }

@@ -23,6 +23,7 @@
 #include "gmr/ops/split_tree.h"
 #include "gmr/ops/strip_dummies.h"
 #include "gmr/view/view.h"
+#include "gmr/view/viewpoint.h"
 
 namespace gmr::cli {
 namespace {
@@ -160,7 +161,8 @@ void add_view_options(CLI::App& cmd, ViewOptions& o) {
       ->check(CLI::PositiveNumber);
 }
 
-void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out) {
+void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out,
+                          const std::string& orientations) {
   ViewSpec spec;
   if (!o.roots.empty()) spec.roots = split_list(o.roots);
   spec.strip_dummies = o.strip_dummies;
@@ -169,13 +171,37 @@ void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange
   const FrameRange r = clamp_frame_range(requested, view.motion.frame_count);
   const Skeleton names = view_names(view);
   const OutputBasis basis = o.basis();
-  write_positions_csv_header(out);
   constexpr std::size_t kChunk = 1024;  // keeps memory flat for long motions
+  if (orientations.empty()) {
+    write_positions_csv_header(out);
+    for (std::size_t f = r.begin; f < r.end; f += kChunk) {
+      const std::size_t e = std::min(r.end, f + kChunk);
+      std::vector<Eigen::Vector3d> p = view_positions(view, f, e);
+      for (auto& x : p) x = basis.position(x);
+      write_positions_csv_rows(out, names, p, f);
+    }
+    return;
+  }
+  // Positions and orientations of the view's frame (view_frame, as the
+  // server computes them), rows in view.order.
+  const OrientationColumns columns =
+      orientations == "matrix" ? OrientationColumns::kMatrix : OrientationColumns::kQuaternion;
+  write_poses_csv_header(out, columns);
+  const std::size_t joints = view.motion.skeleton.size();
+  std::vector<Eigen::Vector3d> p(joints), rows_p;
+  std::vector<Eigen::Matrix3d> w(joints), rows_w;
   for (std::size_t f = r.begin; f < r.end; f += kChunk) {
     const std::size_t e = std::min(r.end, f + kChunk);
-    std::vector<Eigen::Vector3d> p = view_positions(view, f, e);
-    for (auto& x : p) x = basis.position(x);
-    write_positions_csv_rows(out, names, p, f);
+    rows_p.clear();
+    rows_w.clear();
+    for (std::size_t k = f; k < e; ++k) {
+      view_frame(view.motion, view.viewer, k, p, w, basis);
+      for (int j : view.order) {
+        rows_p.push_back(p[static_cast<std::size_t>(j)]);
+        rows_w.push_back(w[static_cast<std::size_t>(j)]);
+      }
+    }
+    write_poses_csv_rows(out, names, rows_p, rows_w, f, columns);
   }
 }
 

@@ -33,6 +33,10 @@ void add_view_options(CLI::App& cmd, ViewOptions& o);
 // positions`: rows in the file's joint order, dummies left out when stripped)
 // of frames `requested` of the view of `motion`. Throws CommandError for an
 // unknown joint or an impossible root set.
-void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out);
+// With `orientations` ("quat" or "matrix"; empty: none), each row also has
+// the joint's orientation in the view (its GMR bone frame in world or viewer
+// coordinates, in the conventions' axes), as `gmr positions --orientations`.
+void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out,
+                          const std::string& orientations = {});
 
 }  // namespace gmr::cli

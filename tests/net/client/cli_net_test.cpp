@@ -12,6 +12,7 @@
 #include <sys/wait.h>
 
 #include <mutex>
+#include <sstream>
 #include <thread>
 
 #include "gmr/io/gmr_file.h"
@@ -49,6 +50,64 @@ TEST(CliNet, QueryPrintsExactlyWhatPositionsPrints) {
     EXPECT_EQ(q.out, p.out);
     EXPECT_GT(q.out.size(), 1000u);
   }
+}
+
+// CSV rows as (frame,joint) and their numbers.
+std::vector<std::pair<std::string, std::vector<double>>> csv_rows(const std::string& text) {
+  std::vector<std::pair<std::string, std::vector<double>>> rows;
+  std::istringstream in(text);
+  std::string line;
+  std::getline(in, line);  // the header
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::string frame, joint, v;
+    std::getline(fields, frame, ',');
+    std::getline(fields, joint, ',');
+    std::vector<double> numbers;
+    while (std::getline(fields, v, ',')) numbers.push_back(std::stod(v));
+    rows.emplace_back(frame + "," + joint, std::move(numbers));
+  }
+  return rows;
+}
+
+// Before: `gmr positions --orientations` refused --roots, --strip-dummies and
+// --relative-to, and `gmr query` and `gmr stream` had no --orientations.
+// Now all three print them, for every view, and agree.
+TEST(CliNet, OrientationsPrintWithEveryViewAndFromTheServer) {
+  GMR_REQUIRE_DATA();
+  TestServer s;
+  const std::string port = " --port " + std::to_string(s.port());
+  const std::string file = cmu_file().string();
+  for (const std::string opts : {" --orientations quat", " --orientations quat --roots LeftHand",
+                                 " --orientations matrix --roots Hips,LeftForeArm --relative-to Head",
+                                 " --orientations quat --strip-dummies --relative-to LeftFoot",
+                                 " --orientations quat --relative-to Head --conventions unity"}) {
+    SCOPED_TRACE(opts);
+    const CommandRun q = gmr("query cmu/02_01 --frames 10:40" + opts + port);
+    const CommandRun p = gmr("positions '" + file + "' --frames 10:40" + opts);
+    ASSERT_EQ(q.status, 0) << q.out;
+    ASSERT_EQ(p.status, 0) << p.out;
+    ASSERT_EQ(q.out.substr(0, q.out.find('\n')), p.out.substr(0, p.out.find('\n')));  // the same columns
+    const auto qr = csv_rows(q.out), pr = csv_rows(p.out);
+    ASSERT_EQ(qr.size(), pr.size());
+    ASSERT_GE(qr.size(), 30u * 20u);
+    double worst = 0;
+    for (std::size_t i = 0; i < qr.size(); ++i) {
+      ASSERT_EQ(qr[i].first, pr[i].first);
+      ASSERT_EQ(qr[i].second.size(), pr[i].second.size());
+      ASSERT_GT(qr[i].second.size(), 3u);
+      for (std::size_t k = 3; k < qr[i].second.size(); ++k) {
+        worst = std::max(worst, std::abs(qr[i].second[k] - pr[i].second[k]));
+      }
+    }
+    EXPECT_LT(worst, 1e-9) << "orientation entries differ by " << worst;
+  }
+  // gmr stream prints the same rows as gmr query.
+  const CommandRun st = gmr("stream cmu/02_01 --frames 0:5 --speed 10 --orientations quat --roots LeftHand" + port);
+  const CommandRun q = gmr("query cmu/02_01 --frames 0:5 --orientations quat --roots LeftHand" + port);
+  ASSERT_EQ(st.status, 0) << st.out;
+  ASSERT_EQ(q.status, 0) << q.out;
+  EXPECT_EQ(st.out, q.out);
 }
 
 TEST(CliNet, StreamPrintsTheSameRowsAsPositions) {
