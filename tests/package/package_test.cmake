@@ -96,8 +96,14 @@ if(NOT run_output MATCHES "^gmr consumer: [a-z]+, [0-9]+ joints, [0-9]+ frames, 
 endif()
 
 if(CLIENT)
+  # The README's pkg-config line, as a user types it: a plain compiler call,
+  # no CMake, no LD_LIBRARY_PATH. Before, its program did not start from a
+  # non-system prefix (libgmr_client_c.so.0 not found); the .pc file now
+  # carries an rpath.
+  run("the README's pkg-config line" sh -c
+      "${C_COMPILER} ${CXX_FLAGS} '${CONSUMER_DIR}/c_main.c' -o '${WORK_DIR}/readme_c_consumer' $(PKG_CONFIG_PATH='${prefix}/${INSTALL_LIBDIR}/pkgconfig' pkg-config --cflags --libs gmr_client_c)")
   # The installed server on a free loopback port, the installed gmr command
-  # and the three client consumers against it.
+  # and the four client consumers against it.
   # No semicolons: CMake would split the script at them. The server writes to
   # a file, so it never holds execute_process's pipe.
   set(script "
@@ -110,7 +116,8 @@ if(CLIENT)
     done
     port=$(cat '${WORK_DIR}/port')
     '${prefix}/bin/gmr' ls --port $port >/dev/null && '${build}/gmr_client_consumer' $port &&
-      '${build}/gmr_c_consumer' $port && '${build}/gmr_c_pkgconfig_consumer' $port
+      '${build}/gmr_c_consumer' $port && '${build}/gmr_c_pkgconfig_consumer' $port &&
+      env -u LD_LIBRARY_PATH '${WORK_DIR}/readme_c_consumer' $port
     rc=$?
     kill -TERM $pid
     wait $pid || rc=1
