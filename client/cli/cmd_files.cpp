@@ -163,6 +163,7 @@ void run_positions(const PositionsOptions& given) {
     loaded = load(o.file, o.asf, o.fps, warnings);
   }
   // The file's own unit, as gmr-server takes it, unless given.
+  warn_if_unit_unknown(o.view, file_metres_per_unit);
   if (o.view.metres_per_unit == 0.0) o.view.metres_per_unit = file_metres_per_unit;
   const Motion m = transform_for_positions(std::move(loaded), o);
   const OutputBasis basis = o.view.basis();

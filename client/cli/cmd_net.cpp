@@ -76,6 +76,14 @@ client::ViewState make_view(client::Client& c, const std::string& motion, const 
   return v;
 }
 
+// The unit the server knows `motion` in (0: unknown), for the warning.
+double served_unit(client::Client& c, const std::string& motion) {
+  for (const auto& m : take(c.list_motions())) {
+    if (m.name == motion) return m.metres_per_unit;
+  }
+  return 0.0;
+}
+
 // ---- gmr ls
 void run_ls(const ServerOptions& s) {
   auto c = connect(s);
@@ -120,6 +128,7 @@ void run_query(const QueryOptions& o) {
   const FrameRange requested = parse_frame_range(o.frames);
   auto c = connect(o.server);
   const Skeleton source = take(c->skeleton(o.motion));
+  if (o.view.conventions != "native") warn_if_unit_unknown(o.view, served_unit(*c, o.motion));
   const client::ViewState v = make_view(*c, o.motion, o.view);
   const FrameRange r = clamp_frame_range(requested, v.frame_count);
   const bool with_orientations = !o.orientations.empty();
@@ -224,6 +233,7 @@ struct StreamOptions : PlayOptions {
 void run_stream(const StreamOptions& o) {
   auto c = connect(o.server);
   const Skeleton source = take(c->skeleton(o.motion));
+  if (o.view.conventions != "native") warn_if_unit_unknown(o.view, served_unit(*c, o.motion));
   const client::ViewState v = make_view(*c, o.motion, o.view);
   client::SubscribeOptions so = subscribe_options(o, v);
   so.float64 = !o.summary;  // CSV prints exact numbers

@@ -146,6 +146,15 @@ Conventions ViewOptions::engine() const {
 
 OutputBasis ViewOptions::basis() const { return take(output_basis(engine())); }
 
+void warn_if_unit_unknown(const ViewOptions& o, double motion_metres_per_unit) {
+  if (o.conventions == "native" || o.metres_per_unit != 0.0 || motion_metres_per_unit != 0.0) return;
+  std::fprintf(stderr,
+               "gmr: warning: the motion's unit is unknown (BVH and .gmr files declare none): --conventions %s "
+               "turns its axes but leaves its numbers in the motion's own units; give --metres-per-unit (0.01 for "
+               "centimetres, 0.0254 for inches) for positions in %s's unit\n",
+               o.conventions.c_str(), o.conventions.c_str());
+}
+
 void add_view_options(CLI::App& cmd, ViewOptions& o) {
   cmd.add_option("--roots", o.roots, "Joints to make the roots, A,B,C (all frames; positions do not change)");
   cmd.add_flag("--strip-dummies", o.strip_dummies, "Remove zero-length joints (e.g. CMU LHipJoint) before printing");

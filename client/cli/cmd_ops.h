@@ -25,6 +25,12 @@ struct ViewOptions {
   OutputBasis basis() const;  // throws CommandError for a bad combination
 };
 
+// With engine conventions on a motion whose unit nobody gave (not
+// --metres-per-unit, not the file or the server: `motion_metres_per_unit`
+// 0), warns on stderr that the axes turn but the numbers stay in the
+// motion's own units, instead of leaving it silent.
+void warn_if_unit_unknown(const ViewOptions& o, double motion_metres_per_unit);
+
 // Registers --roots, --strip-dummies, --relative-to, --conventions and
 // --metres-per-unit on `cmd`.
 void add_view_options(CLI::App& cmd, ViewOptions& o);

@@ -37,7 +37,10 @@ std::vector<server::LibraryEntry> test_library() {
     if (m.ok()) {
       auto pre = to_pre_rotation(*m);
       if (pre.ok()) {
-        lib.push_back({"cmu/02_01", cmu_file().string(), std::make_shared<const Motion>(std::move(pre).value())});
+        server::LibraryEntry& e = lib.emplace_back();
+        e.name = "cmu/02_01";
+        e.source = cmu_file().string();
+        e.motion = std::make_shared<const Motion>(std::move(pre).value());
       }
     }
   }

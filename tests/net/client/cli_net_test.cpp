@@ -78,10 +78,11 @@ TEST(CliNet, OrientationsPrintWithEveryViewAndFromTheServer) {
   TestServer s;
   const std::string port = " --port " + std::to_string(s.port());
   const std::string file = cmu_file().string();
-  for (const std::string opts : {" --orientations quat", " --orientations quat --roots LeftHand",
-                                 " --orientations matrix --roots Hips,LeftForeArm --relative-to Head",
-                                 " --orientations quat --strip-dummies --relative-to LeftFoot",
-                                 " --orientations quat --relative-to Head --conventions unity"}) {
+  for (const std::string opts :
+       {" --orientations quat", " --orientations quat --roots LeftHand",
+        " --orientations matrix --roots Hips,LeftForeArm --relative-to Head",
+        " --orientations quat --strip-dummies --relative-to LeftFoot",
+        " --orientations quat --relative-to Head --conventions unity --metres-per-unit 0.0254"}) {
     SCOPED_TRACE(opts);
     const CommandRun q = gmr("query cmu/02_01 --frames 10:40" + opts + port);
     const CommandRun p = gmr("positions '" + file + "' --frames 10:40" + opts);
@@ -108,6 +109,35 @@ TEST(CliNet, OrientationsPrintWithEveryViewAndFromTheServer) {
   ASSERT_EQ(st.status, 0) << st.out;
   ASSERT_EQ(q.status, 0) << q.out;
   EXPECT_EQ(st.out, q.out);
+}
+
+// Before: --conventions unity on a BVH kept the file's units silently (a
+// CMU file arrived in units of about 5.6 cm, not metres). Now the command
+// says so whenever nobody gave the unit.
+TEST(CliNet, ConventionsOnAMotionOfUnknownUnitSayTheNumbersKeepItsUnits) {
+  GMR_REQUIRE_DATA();
+  TestServer s;
+  const std::string port = " --port " + std::to_string(s.port());
+  const std::string file = cmu_file().string();
+  const std::string warning = "warning: the motion's unit is unknown";
+  for (const std::string& cmd : {"positions '" + file + "' --frames 0:1 --conventions unity",
+                                 "query cmu/02_01 --frames 0:1 --conventions unity" + port,
+                                 "stream cmu/02_01 --frames 0:1 --conventions godot" + port}) {
+    SCOPED_TRACE(cmd);
+    const CommandRun r = gmr(cmd);
+    ASSERT_EQ(r.status, 0) << r.out;
+    EXPECT_NE(r.out.find(warning), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("--metres-per-unit"), std::string::npos) << r.out;
+  }
+  for (const std::string& cmd :
+       {"positions '" + file + "' --frames 0:1 --conventions unity --metres-per-unit 0.056",
+        "positions '" + file + "' --frames 0:1", "query walk --frames 0:1 --conventions unity" + port,
+        "query cmu/02_01 --frames 0:1 --conventions unity --metres-per-unit 0.056" + port}) {
+    SCOPED_TRACE(cmd);
+    const CommandRun r = gmr(cmd);
+    ASSERT_EQ(r.status, 0) << r.out;
+    EXPECT_EQ(r.out.find(warning), std::string::npos) << r.out;
+  }
 }
 
 TEST(CliNet, StreamPrintsTheSameRowsAsPositions) {
@@ -164,7 +194,7 @@ TEST(CliNet, RecordWritesTheViewsPositionsAndOrientations) {
   const std::string port = " --port " + std::to_string(s.port());
   // A re-rooted view seen from a joint, in an engine's conventions, over TCP:
   // the recording's positions print exactly what the server's query prints.
-  const std::string view = " --roots LeftHand --relative-to Head --conventions unity";
+  const std::string view = " --roots LeftHand --relative-to Head --conventions unity --metres-per-unit 0.0254";
   const std::string rec = (dir.path / "view.gmr").string();
   const CommandRun r = gmr("record cmu/02_01 -o '" + rec + "' --frames 10:90 --speed 20" + view + port);
   ASSERT_EQ(r.status, 0) << r.out;

@@ -65,7 +65,11 @@ struct EditServer {
   std::vector<server::LibraryEntry> library() {
     auto lib = test_library();
     motion = long_walk(long_frames());
-    lib.push_back({"long", "builtin", motion, 0.01});
+    server::LibraryEntry& e = lib.emplace_back();
+    e.name = "long";
+    e.source = "builtin";
+    e.motion = motion;
+    e.metres_per_unit = 0.01;
     return lib;
   }
   std::shared_ptr<const Motion> motion;
