@@ -277,6 +277,15 @@ TEST(LiveLimits, RecordingsStreamToDiskWithinTheRecordBudget) {
 // frame is counted as skipped, never lost silently.
 TEST(LiveLimits, EditReplaysRunOffTheControlLoop) {
   TestServer s(live_config());
+  // What the frame callbacks count is declared before the clients, so it
+  // outlives their I/O threads (the walk's frames keep coming to the end).
+  struct Counted {
+    std::atomic<std::uint64_t> frames{0};
+    Latch<client::SubscriptionEnd> end;
+  };
+  const int views = kSlowBuild ? 16 : 64;
+  std::vector<std::unique_ptr<Counted>> live(views);
+  std::atomic<std::uint64_t> walk_frames{0};
   auto pub = publisher(s);
   // 32 views per connection at most: two connections show the 64 views.
   std::unique_ptr<Client> editors[2] = {connect_as(s, kControlToken), connect_as(s, kControlToken)};
@@ -292,12 +301,6 @@ TEST(LiveLimits, EditReplaysRunOffTheControlLoop) {
   const auto publication = pub->publish(sk, po);
   ASSERT_TRUE(publication.ok()) << publication.error().to_string();
 
-  struct Counted {
-    std::atomic<std::uint64_t> frames{0};
-    Latch<client::SubscriptionEnd> end;
-  };
-  const int views = kSlowBuild ? 16 : 64;
-  std::vector<std::unique_ptr<Counted>> live(views);
   client::SubscribeOptions so;
   so.max_staleness = std::chrono::milliseconds(0);
   for (int v = 0; v < views; ++v) {
@@ -315,7 +318,6 @@ TEST(LiveLimits, EditReplaysRunOffTheControlLoop) {
   }
   auto walk = watcher->create_view("walk");
   ASSERT_TRUE(walk.ok());
-  std::atomic<std::uint64_t> walk_frames{0};
   client::SubscribeOptions wo;
   wo.rate_hz = 60;
   ASSERT_TRUE(watcher->subscribe(walk->id, wo, [&](const client::ReceivedFrame&) { ++walk_frames; }).ok());

@@ -105,11 +105,12 @@ TEST(ViewEdits, ALongEditRunsOffTheIoThreadAndTheConnectionsNextRequestsWaitInOr
   const Motion& m = *es.motion;
   ASSERT_GT(m.values.size(), server::ServerConfig{}.edit_inline_values);
 
-  // Another client streams the walk at 120 Hz and counts its frames.
+  // Another client streams the walk at 120 Hz and counts its frames (the
+  // count outlives the client, whose thread may deliver one more).
+  std::atomic<std::uint64_t> frames{0};
   auto other = es.s.connect();
   auto walk = other->create_view("walk");
   ASSERT_TRUE(walk.ok()) << walk.error().to_string();
-  std::atomic<std::uint64_t> frames{0};
   auto sub = other->subscribe(walk->id, {.loop = true}, [&](const client::ReceivedFrame&) { ++frames; });
   ASSERT_TRUE(sub.ok()) << sub.error().to_string();
 

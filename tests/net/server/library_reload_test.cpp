@@ -130,13 +130,14 @@ TEST(LibraryReload, FilesAddedReplacedWrittenTruncatedAndRemovedWhileStreaming) 
   options.settle = std::chrono::milliseconds(50);
   server::LibraryWatcher watcher(s.server, options, loaded->entries);
   ASSERT_EQ(watcher.watch_error(), "");
+  // What the callbacks count outlives the client (declared first).
+  Watched walking, waving, jumping, hopping;
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
   auto walk = c->create_view("walk");
   auto wave = c->create_view("wave");
   auto jump = c->create_view("jump");
   ASSERT_TRUE(walk.ok() && wave.ok() && jump.ok());
-  Watched walking, waving, jumping;
   watch(*c, walk->id, walking);
   watch(*c, wave->id, waving);
   watch(*c, jump->id, jumping);
@@ -207,7 +208,6 @@ TEST(LibraryReload, FilesAddedReplacedWrittenTruncatedAndRemovedWhileStreaming) 
   // last good version stays, and its streams go on.
   auto hop = c->create_view("hop");
   ASSERT_TRUE(hop.ok());
-  Watched hopping;
   watch(*c, hop->id, hopping);
   {
     const std::string bytes = read_bytes(dir.path / "hop.gmr");
