@@ -349,6 +349,7 @@ Result<QueryResult> Client::query(std::uint32_t view, std::uint32_t begin, std::
   }
   QueryResult out;
   out.skeleton_version = b->skeleton_version;
+  out.metres_per_unit = r->frames().metres_per_unit();
   out.begin = b->begin;
   out.end = b->end;
   out.joints = std::move(b->joints);

@@ -103,6 +103,7 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
     if (!sk.ok()) return make_error("the server sent an invalid skeleton: " + sk.error().message);
     info.skeleton = std::move(sk).value();
     info.rest = wire::rest_from_proto(sr.skeleton());
+    info.metres_per_unit = sr.skeleton().metres_per_unit();
     if (const std::string why = Impl::bad_joints(sr.joints(), info.skeleton.size()); !why.empty()) {
       (void)unsubscribe(info.id);
       return make_error(ErrorKind::kInvalidData, "the server's subscription names " + why);

@@ -293,6 +293,7 @@ class DemoLibrary(unittest.TestCase):
         c = gmr_client.Client(port=self.server.port)
         v = c.create_view("walk")
         sub = c.subscribe(v.id, rate_hz=30, max_frames=15)
+        self.assertEqual(sub.metres_per_unit, 0.01)  # the demo's centimetres, said by the server
         time.sleep(0.5)
         frames = list(sub)
         # A busy machine may make the server skip a late tick (counted as

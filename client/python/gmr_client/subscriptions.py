@@ -61,6 +61,9 @@ class Subscription:
         self.skeleton = skeleton
         self._values = _values_per_frame(self.joints, self.skeleton)
         self.relative_to = reply.relative_to
+        # The unit of the frames' positions in metres (the conventions' when
+        # the motion's unit is known); 0.0: unknown, the motion's own units.
+        self.metres_per_unit = reply.skeleton.metres_per_unit if reply.HasField("skeleton") else 0.0
         self.ended = None  # dict(reason, frames_sent, frames_dropped, frames_skipped) once ended
         self.skeleton_changes = 0
         self.frames_overflowed = 0  # frames this client queued but nobody read in time

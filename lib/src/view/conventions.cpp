@@ -43,6 +43,7 @@ bool positive_finite(double v) { return std::isfinite(v) && v > 0.0; }
 
 Result<OutputBasis> output_basis(const Conventions& c) {
   OutputBasis out;
+  if (c.source_metres_per_unit > 0.0) out.metres_per_unit = c.source_metres_per_unit;
   if (c.preset == ConventionPreset::kNative) return out;
   const Target t = target_of(c);
   if (t.up == 0 || t.forward == 0 || std::abs(t.up) > 3 || std::abs(t.forward) > 3) {
@@ -61,6 +62,7 @@ Result<OutputBasis> output_basis(const Conventions& c) {
   out.b.col(1) = up;
   out.b.col(2) = forward;
   out.scale = c.source_metres_per_unit > 0.0 ? c.source_metres_per_unit / t.metres_per_unit : 1.0;
+  out.metres_per_unit = c.source_metres_per_unit > 0.0 ? t.metres_per_unit : 0.0;
   out.identity = out.b == Eigen::Matrix3d::Identity() && out.scale == 1.0;
   out.mirror = out.b.determinant() < 0.0;
   return out;

@@ -21,6 +21,7 @@ void to_proto(const Skeleton& skeleton, pb::Skeleton& out) {
 
 void to_proto(const Motion& motion, const OutputBasis& basis, pb::Skeleton& out) {
   to_proto(motion.skeleton, out);
+  out.set_metres_per_unit(basis.metres_per_unit);
   const RestPose rest = engine_rest_pose(motion, basis);
   for (int i = 0; i < out.joints_size(); ++i) {
     const auto u = static_cast<std::size_t>(i);

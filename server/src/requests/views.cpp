@@ -155,6 +155,7 @@ Reply Views::query(const pb::QueryFrames& r) const {
   auto* b = out.mutable_frames();
   b->set_view_id(v->id());
   b->set_skeleton_version(v->content()->skeleton_version);
+  b->set_metres_per_unit(basis->metres_per_unit);
   b->set_begin(static_cast<std::uint32_t>(begin));
   b->set_end(static_cast<std::uint32_t>(end));
   for (int j : *joints) b->add_joints(static_cast<std::uint32_t>(j));
@@ -225,7 +226,9 @@ pb::ViewInfo Views::info(const View& v) const {
   info.set_view_id(v.id());
   info.set_motion(v.motion_name());
   info.set_skeleton_version(v.content()->skeleton_version);
-  wire::to_proto(v.motion(), OutputBasis{}, *info.mutable_skeleton());
+  OutputBasis native;  // the motion's own axes and unit
+  native.metres_per_unit = link_.services.catalog.metres_per_unit(v);
+  wire::to_proto(v.motion(), native, *info.mutable_skeleton());
   if (v.content()->relative_to >= 0) info.set_relative_to(v.motion().skeleton.joint(v.content()->relative_to).name);
   info.set_frame_count(v.motion().frame_count);
   info.set_frame_time(v.motion().frame_time);

@@ -713,6 +713,36 @@ TEST(Streaming, ConventionsPerQueryAndPerSubscription) {
 // joints' outgoing bones have different frames), in Blender's conventions, on
 // the double and the float path; the rest pose is the offsets in metres and
 // Blender's axes; a subscription that asks for none gets none.
+// Before: nothing said which unit positions came in; --conventions unity on
+// a BVH silently kept the file's units. Now every skeleton and frame block
+// states it (metres_per_unit; 0: unknown, the motion's own units).
+TEST(Streaming, RepliesStateTheUnitOfTheirPositions) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto walk = c->create_view("walk");  // the demo: centimetres
+  ASSERT_TRUE(walk.ok());
+  Conventions unity, unreal;
+  unity.preset = ConventionPreset::kUnity;
+  unreal.preset = ConventionPreset::kUnreal;
+  EXPECT_EQ(c->query(walk->id, 0, 1).value().metres_per_unit, 0.01);
+  EXPECT_EQ(c->query(walk->id, 0, 1, false, {}, unity).value().metres_per_unit, 1.0);
+  EXPECT_EQ(c->query(walk->id, 0, 1, false, {}, unreal).value().metres_per_unit, 0.01);
+  client::SubscribeOptions o;
+  o.max_frames = 1;
+  o.conventions = unity;
+  auto sub = c->subscribe(walk->id, o, [](const client::ReceivedFrame&) {});
+  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  EXPECT_EQ(sub->metres_per_unit, 1.0);
+  if (!have_data()) return;
+  auto cmu = c->create_view("cmu/02_01");  // a BVH: no unit
+  ASSERT_TRUE(cmu.ok());
+  EXPECT_EQ(c->query(cmu->id, 0, 1).value().metres_per_unit, 0.0);
+  EXPECT_EQ(c->query(cmu->id, 0, 1, false, {}, unity).value().metres_per_unit, 0.0);
+  unity.source_metres_per_unit = 0.056;  // the client's word on it
+  EXPECT_EQ(c->query(cmu->id, 0, 1, false, {}, unity).value().metres_per_unit, 1.0);
+}
+
 TEST(Streaming, LocalTransformsAndRestPoseInTheSubscribersConventions) {
   TestServer s;
   Sink f64_sink, f32_sink, plain_sink;

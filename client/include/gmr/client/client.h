@@ -141,6 +141,7 @@ struct QueryResult {
   std::vector<Eigen::Quaterniond> orientations;     // when asked
   std::vector<Eigen::Quaterniond> local_rotations;  // when asked: relative to the parent's frame
   std::vector<Eigen::Vector3d> local_translations;
+  double metres_per_unit = 0.0;  // the positions' unit in metres; 0: unknown (the motion's own)
 };
 
 struct QueryOptions {
@@ -196,6 +197,9 @@ struct SubscriptionInfo {
   RestPose rest;                // in the subscription's conventions
   std::string relative_to;      // empty: world coordinates
   std::string multicast_group;  // multicast subscriptions: "group:port" the frames come from
+  // The unit of the frames' positions in metres (the conventions' when the
+  // motion's unit is known); 0: unknown, the motion's own units.
+  double metres_per_unit = 0.0;
 };
 
 // The server ended a subscription (end of motion, max_frames, a view change

@@ -53,6 +53,10 @@ struct OutputBasis {
   double scale = 1.0;
   bool identity = true;  // b = I and scale = 1: nothing to do
   bool mirror = false;   // det b = -1 (a left-handed target)
+  // The unit of the positions it gives, in metres: the target's when the
+  // motion's unit is known, the motion's own with native conventions, 0 when
+  // it is unknown (the numbers stay in the motion's units, whatever they are).
+  double metres_per_unit = 0.0;
 
   Eigen::Vector3d position(const Eigen::Vector3d& p) const { return identity ? p : Eigen::Vector3d(scale * (b * p)); }
   Eigen::Matrix3d orientation(const Eigen::Matrix3d& w) const {
