@@ -125,9 +125,23 @@ TEST_F(CliFiles, PositionsWithOrientations) {
   }
   EXPECT_EQ(rows, 3u * 38u);
   EXPECT_FALSE(std::getline(qin, ql));
-  const Outcome both = gmr("positions " + file + " --orientations quat --relative-to Head");
-  EXPECT_EQ(both.status, 1);
-  EXPECT_THAT(both.err, HasSubstr("--orientations cannot be combined"));
+  // With a view option too (before: refused). Seen from the Head, the Head
+  // is at the origin with no rotation, in every frame.
+  const Outcome both = gmr("positions " + file + " --frames 0:3 --orientations quat --relative-to Head");
+  ASSERT_EQ(both.status, 0) << both.err;
+  std::istringstream seen(both.out);
+  std::size_t heads = 0;
+  for (std::string line; std::getline(seen, line);) {
+    if (line.find(",Head,") == std::string::npos) continue;
+    std::vector<double> v;
+    std::istringstream cells(line.substr(line.find(",Head,") + 6));
+    for (std::string cell; std::getline(cells, cell, ',');) v.push_back(std::stod(cell));
+    ASSERT_EQ(v.size(), 7u) << line;
+    for (int k : {0, 1, 2, 4, 5, 6}) EXPECT_NEAR(v[static_cast<std::size_t>(k)], 0.0, 1e-9) << line;
+    EXPECT_NEAR(v[3], 1.0, 1e-12) << line;
+    ++heads;
+  }
+  EXPECT_EQ(heads, 3u);
 }
 
 TEST_F(CliFiles, MalformedFileGivesOneLineWithTheLocation) {
