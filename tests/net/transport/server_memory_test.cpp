@@ -210,7 +210,11 @@ TEST(Memory, AFloatStreamOfChannelLessFramesComputesOneFrame) {
   m->skeleton = Skeleton::create(std::move(roots)).value();
   m->frame_count = std::size_t{1} << 24;
   m->frame_time = 0.01;
-  TestServer s({}, {{"huge", "huge.bvh", m}});
+  server::LibraryEntry entry;
+  entry.name = "huge";
+  entry.source = "huge.bvh";
+  entry.motion = m;
+  TestServer s({}, {entry});
   const std::uint64_t before = resident_bytes();
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
@@ -293,7 +297,11 @@ TEST(Memory, AnEditThatWouldExplodeIsRefusedBeforeItIsComputed) {
   m->skeleton = Skeleton::create(std::move(chain)).value();
   m->frame_count = std::size_t{1} << 20;
   m->frame_time = 0.01;
-  TestServer s({}, {{"chain", "chain.bvh", m}});
+  server::LibraryEntry entry;
+  entry.name = "chain";
+  entry.source = "chain.bvh";
+  entry.motion = m;
+  TestServer s({}, {entry});
   const std::uint64_t before = resident_bytes();
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
