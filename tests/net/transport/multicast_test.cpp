@@ -167,13 +167,9 @@ TEST(Multicast, GmrDiscoverListsTheServersThatSendBeacons) {
   cfg.multicast_group.clear();
   TestServer b(cfg);
   TestServer silent;  // no --discovery-group: never listed
-  const std::string cmd = std::string(GMR_CLI_PATH) + " discover --port 17501 --seconds 1 2>&1";
-  FILE* p = ::popen(cmd.c_str(), "r");
-  ASSERT_NE(p, nullptr);
-  std::string out;
-  std::array<char, 4096> buf{};
-  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.append(buf.data(), n);
-  ASSERT_EQ(::pclose(p), 0) << out;
+  const CommandRun heard = run_command(std::string(GMR_CLI_PATH) + " discover --port 17501 --seconds 1");
+  const std::string& out = heard.out;
+  ASSERT_EQ(heard.status, 0) << out;
   std::fprintf(stderr, "%s", out.c_str());
   for (const auto* s : {&a, &b}) {
     const std::string where = "127.0.0.1:" + std::to_string(s->port());
@@ -191,27 +187,19 @@ TEST(Multicast, GmrDiscoverListsTheServersThatSendBeacons) {
 
   // Nobody on another port: gmr discover says where the group is routed and
   // what a server must bind to be heard.
-  const std::string none = std::string(GMR_CLI_PATH) + " discover --port 17599 --seconds 0.3 2>&1";
-  p = ::popen(none.c_str(), "r");
-  ASSERT_NE(p, nullptr);
-  out.clear();
-  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.append(buf.data(), n);
-  ASSERT_EQ(::pclose(p), 0) << out;
-  EXPECT_NE(out.find("0 servers heard"), std::string::npos) << out;
-  EXPECT_NE(out.find("heard nothing: this machine routes 239.255.74.2 on an interface with no address of its own"),
+  const CommandRun none = run_command(std::string(GMR_CLI_PATH) + " discover --port 17599 --seconds 0.3");
+  ASSERT_EQ(none.status, 0) << none.out;
+  EXPECT_NE(none.out.find("0 servers heard"), std::string::npos) << none.out;
+  EXPECT_NE(none.out.find("heard nothing: this machine routes 239.255.74.2 on an interface with no address of its own"),
             std::string::npos)
-      << out;
-  EXPECT_NE(out.find("--bind"), std::string::npos) << out;
+      << none.out;
+  EXPECT_NE(none.out.find("--bind"), std::string::npos) << none.out;
 
   // Before: `gmr stream --multicast --summary` said it streamed "over TCP".
-  const std::string stream = std::string(GMR_CLI_PATH) + " stream walk --multicast --summary --count 3 --port " +
-                             std::to_string(a.port()) + " 2>&1 >/dev/null";
-  p = ::popen(stream.c_str(), "r");
-  ASSERT_NE(p, nullptr);
-  out.clear();
-  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.append(buf.data(), n);
-  ASSERT_EQ(::pclose(p), 0) << out;
-  EXPECT_NE(out.find("streaming walk over multicast"), std::string::npos) << out;
+  const CommandRun stream = run_command(
+      std::string(GMR_CLI_PATH) + " stream walk --multicast --summary --count 3 --port " + std::to_string(a.port()));
+  ASSERT_EQ(stream.status, 0) << stream.out;
+  EXPECT_NE(stream.out.find("streaming walk over multicast"), std::string::npos) << stream.out;
 }
 #endif
 
