@@ -36,13 +36,12 @@ default_ulimits = ["nofile=1024:1024", "nproc=1000:1000"]
 runtime = "runc"
 EOF
 export CONTAINERS_CONF="$work/containers.conf"
-podman=(podman)
 container=""
 compose_up=false
 made_library=false
 cleanup() {
   $made_library && rmdir docker/library 2>/dev/null || true
-  [ -n "$container" ] && "${podman[@]}" rm -f "$container" >/dev/null 2>&1 || true
+  [ -n "$container" ] && podman rm -f "$container" >/dev/null 2>&1 || true
   $compose_up && (cd docker && podman-compose -f compose.yaml down >/dev/null 2>&1) || true
   rm -rf "$work"
 }
@@ -50,32 +49,32 @@ trap cleanup EXIT
 step() { echo; echo "== $*"; }
 
 base=localhost/debian:bookworm
-if ! "${podman[@]}" image exists "$base"; then
+if ! podman image exists "$base"; then
   step "a Debian 12 base with mmdebstrap (minbase)"
   start=$(date +%s)
   $sudo mmdebstrap --variant=minbase bookworm "$work/base.tar" >"$work/mmdebstrap.log" 2>&1 ||
     { cat "$work/mmdebstrap.log" >&2; exit 1; }
-  "${podman[@]}" import "$work/base.tar" "$base" >/dev/null
+  podman import "$work/base.tar" "$base" >/dev/null
   echo "base: $(du -h "$work/base.tar" | cut -f1) in $(( $(date +%s) - start )) s"
 fi
 
 step "podman build -f docker/Dockerfile -t gmr-server"
 start=$(date +%s)
-"${podman[@]}" build --ignorefile docker/Dockerfile.dockerignore -f docker/Dockerfile \
+podman build --ignorefile docker/Dockerfile.dockerignore -f docker/Dockerfile \
   --build-arg BASE="$base" --build-arg RUNTIME_BASE="$base" -t localhost/gmr-server:latest . >"$work/build.log" 2>&1 ||
   { tail -40 "$work/build.log" >&2; exit 1; }
 echo "built in $(( $(date +%s) - start )) s"
-size=$("${podman[@]}" image inspect localhost/gmr-server:latest --format '{{.Size}}')
+size=$(podman image inspect localhost/gmr-server:latest --format '{{.Size}}')
 echo "image size: $(( size / 1000000 )) MB ($size bytes)"
 echo "runtime libraries, by ldd inside the image:"
-"${podman[@]}" run --rm --entrypoint sh localhost/gmr-server:latest -c \
+podman run --rm --entrypoint sh localhost/gmr-server:latest -c \
   'ldd /usr/local/bin/gmr-server | awk "{print \$1}" | sort | tr "\n" " "; echo; \
    ldd /usr/local/bin/gmr-server /usr/local/bin/gmr /usr/local/bin/gmr-load | grep -c "not found" || true'
 
 step "gmr-server in the image, streamed from the host"
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
 http=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
-container=$("${podman[@]}" run -d -p "127.0.0.1:$port:7400/tcp" -p "127.0.0.1:$http:7480/tcp" \
+container=$(podman run -d -p "127.0.0.1:$port:7400/tcp" -p "127.0.0.1:$http:7480/tcp" \
   localhost/gmr-server:latest)
 for _ in $(seq 100); do
   curl -fsS "http://127.0.0.1:$http/readyz" >/dev/null 2>&1 && break
@@ -88,16 +87,16 @@ echo "gmr stream walk --count 60: $(( $(wc -l <"$work/stream.csv") - 1 )) rows (
 "$gmr" stream walk --port "$port" --count 120 --summary | tail -1
 "$gmr" query walk --port "$port" --frames 0:1 | head -3
 echo "server log:"
-"${podman[@]}" logs "$container" 2>&1 | sed 's/^/  /' | head -12
-"${podman[@]}" stop -t 10 "$container" >/dev/null
-echo "stopped: exit status $("${podman[@]}" inspect "$container" --format '{{.State.ExitCode}}')"
-"${podman[@]}" rm "$container" >/dev/null
+podman logs "$container" 2>&1 | sed 's/^/  /' | head -12
+podman stop -t 10 "$container" >/dev/null
+echo "stopped: exit status $(podman inspect "$container" --format '{{.State.ExitCode}}')"
+podman rm "$container" >/dev/null
 container=""
 
 step "docker/compose.yaml: the server service with podman-compose"
 # The Compose file mounts ./library (empty: the built-in demo is served).
 [ -d docker/library ] || { mkdir docker/library; made_library=true; }
-"${podman[@]}" tag localhost/gmr-server:latest gmr-server >/dev/null 2>&1 || true
+podman tag localhost/gmr-server:latest gmr-server >/dev/null 2>&1 || true
 (cd docker && podman-compose -f compose.yaml down >/dev/null 2>&1) || true
 compose_up=true
 (cd docker && podman-compose -f compose.yaml up -d --no-build server >"$work/compose.log" 2>&1) ||

@@ -96,6 +96,15 @@ struct RoundTwo::Recorder {
   std::uint64_t frames = 0;
 };
 
+Result<std::unique_ptr<client::Client>> RoundTwo::connect(const std::string& token, const char* name) const {
+  client::ClientOptions o;
+  o.host = s_.host;
+  o.port = s_.port;
+  o.auth_token = token;
+  o.client_name = name;
+  return client::Client::connect(o);
+}
+
 RoundTwo::RoundTwo(RoundTwoSettings settings) : s_(std::move(settings)) {}
 
 RoundTwo::~RoundTwo() { tick(true); }
@@ -267,12 +276,7 @@ void RoundTwo::bodies_in_flight(bool websocket) {
 // A token holder's SetRoots of all 30 joints of the channel-less 2^20-frame
 // chain: refused before it is computed.
 void RoundTwo::exploding_edit(std::mt19937_64&) {
-  client::ClientOptions o;
-  o.host = s_.host;
-  o.port = s_.port;
-  o.auth_token = s_.control_token;
-  o.client_name = "soak: exploding edit";
-  auto c = client::Client::connect(o);
+  auto c = connect(s_.control_token, "soak: exploding edit");
   if (!c.ok()) return count("exploding edit", "connect failed: " + c.error().to_string());
   auto v = (*c)->create_view(s_.chain_motion);
   if (!v.ok()) return count("exploding edit", "no chain view: " + v.error().to_string());
@@ -289,12 +293,7 @@ void RoundTwo::exploding_edit(std::mt19937_64&) {
 
 void RoundTwo::recording(std::mt19937_64& rng) {
   if (recorder_) return count("recording", "one still running");
-  client::ClientOptions o;
-  o.host = s_.host;
-  o.port = s_.port;
-  o.auth_token = s_.publish_token;
-  o.client_name = "soak: recording";
-  auto c = client::Client::connect(o);
+  auto c = connect(s_.publish_token, "soak: recording");
   if (!c.ok()) return count("recording", "connect failed");
   const Skeleton skeleton = chain_skeleton(1024);
   client::PublishOptions po;
@@ -371,12 +370,7 @@ void RoundTwo::rogue_relay(std::mt19937_64& rng) {
 // name with a zero-width space and a joint name with an escape sequence.
 void RoundTwo::over_rate_and_bad_names(std::mt19937_64&) {
   const char* attack = "live over rate, bad names";
-  client::ClientOptions o;
-  o.host = s_.host;
-  o.port = s_.port;
-  o.auth_token = s_.publish_token;
-  o.client_name = "soak: over rate";
-  auto c = client::Client::connect(o);
+  auto c = connect(s_.publish_token, "soak: over rate");
   if (!c.ok()) return count(attack, "connect failed");
   client::PublishOptions po;
   po.name = "soak_fast";

@@ -65,6 +65,8 @@ class RoundTwo {
   struct Recorder;
 
   void count(const char* attack, const std::string& outcome, std::uint64_t n = 1);
+  // A gmr client of the server holding `token` (the soak's token holders).
+  Result<std::unique_ptr<client::Client>> connect(const std::string& token, const char* name) const;
   Held& hold(int fd, double seconds, const char* attack);
   // The attacks, in turn (round_two.cpp says what each does).
   void http_silent(std::mt19937_64& rng);

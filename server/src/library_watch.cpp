@@ -56,8 +56,7 @@ LibraryWatcher::LibraryWatcher(Server& server, Options options, std::vector<Libr
 
 LibraryWatcher::~LibraryWatcher() {
   stopping_ = true;
-  const std::uint64_t one = 1;
-  if (wake_ >= 0) (void)::write(wake_, &one, sizeof one);
+  reload();  // wakes the thread, which sees stopping_
   if (thread_.joinable()) thread_.join();
   if (inotify_ >= 0) ::close(inotify_);
   if (wake_ >= 0) ::close(wake_);
