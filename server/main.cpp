@@ -91,8 +91,8 @@ int main(int argc, char** argv) {
   double library_unit = 0.0;
   app.add_option("--metres-per-unit", library_unit,
                  "The unit of the library's files in metres (0.0254: inches), for clients' engine conventions, "
-                 "for files that declare none (an .amc takes its .asf's; default: unknown; the built-in demo is in "
-                 "centimetres)")
+                 "for files that declare none (an .amc takes its .asf's, a BVH or .gmr its X.units or folder.units "
+                 "sidecar's; default: unknown; the built-in demo is in centimetres)")
       ->check(CLI::PositiveNumber);
   app.add_option("--amc-fps", library_files.amc_fps,
                  "Frames per second of the library's .amc files, which do not say (default 120, the CMU captures')")
@@ -343,10 +343,19 @@ int main(int argc, char** argv) {
       spdlog::info("library: {} motions loaded, {} files rejected, {} other files skipped", loaded->entries.size(),
                    loaded->rejected.size(), loaded->skipped);
       library = std::move(loaded->entries);
-      // A file's own unit (an ASF declares one) comes first; --metres-per-unit
-      // covers the files that declare none.
+      // A file's own unit (an ASF or a sidecar declares one) comes first;
+      // --metres-per-unit covers the files that declare none.
+      std::size_t unknown = 0;
       for (auto& e : library) {
         if (e.metres_per_unit == 0.0) e.metres_per_unit = library_unit;
+        if (e.metres_per_unit == 0.0) ++unknown;
+      }
+      if (unknown > 0) {
+        spdlog::warn(
+            "library: {} of {} motions have no known unit (a BVH or .gmr declares none): engine conventions "
+            "leave their numbers in the file's units; declare it in X.units or folder.units beside them, or "
+            "give --metres-per-unit (docs/protocol.md, \"Units\")",
+            unknown, library.size());
       }
     }
     const std::vector<LibraryEntry> served = library;

@@ -159,7 +159,7 @@ void run_positions(const PositionsOptions& given) {
     if (!o.model.empty()) throw CommandError("--model applies to marker files (.c3d, .trc), not to " + o.file);
     LoadOptions lo;
     lo.asf = o.asf;
-    file_metres_per_unit = declared_metres_per_unit(o.file, lo);
+    file_metres_per_unit = take(motion_metres_per_unit(o.file, lo));
     loaded = load(o.file, o.asf, o.fps, warnings);
   }
   // The file's own unit, as gmr-server takes it, unless given.

@@ -553,7 +553,7 @@ void run_publish(const PublishCommand& o) {
   client::PublishOptions po;
   po.name = o.name.empty() ? std::filesystem::path(o.file).stem().string() : o.name;
   po.frame_time = frame_time;
-  po.metres_per_unit = declared_metres_per_unit(o.file, lo);
+  po.metres_per_unit = take(motion_metres_per_unit(o.file, lo));
   auto c = connect(o.server);
   po.record = o.record;
   const client::Publication publication = take(c->publish(m.skeleton, po));

@@ -151,7 +151,8 @@ void warn_if_unit_unknown(const ViewOptions& o, double motion_metres_per_unit) {
   std::fprintf(stderr,
                "gmr: warning: the motion's unit is unknown (BVH and .gmr files declare none): --conventions %s "
                "turns its axes but leaves its numbers in the motion's own units; give --metres-per-unit (0.01 for "
-               "centimetres, 0.0254 for inches) for positions in %s's unit\n",
+               "centimetres, 0.0254 for inches), or declare it in X.units or folder.units beside the file, for "
+               "positions in %s's unit\n",
                o.conventions.c_str(), o.conventions.c_str());
 }
 
@@ -166,7 +167,8 @@ void add_view_options(CLI::App& cmd, ViewOptions& o) {
       ->capture_default_str();
   cmd.add_option("--metres-per-unit", o.metres_per_unit,
                  "The motion's unit in metres (0.0254: inches), for --conventions to change units (default: the "
-                 "file's own, which only an .asf declares; else unknown, positions keep the motion's units)")
+                 "file's own, which an .asf declares, else a units sidecar's (X.units or folder.units beside a "
+                 "BVH or .gmr); else unknown, positions keep the motion's units)")
       ->check(CLI::PositiveNumber);
 }
 

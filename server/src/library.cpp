@@ -39,10 +39,15 @@ std::string file_stamp(const fs::path& p) {
 }
 
 // The stamp of what a job reads: its file, an .amc's skeleton candidates
-// (every .asf of its folder), a marker file's model.
+// (every .asf of its folder), a marker file's model, the unit sidecars of a
+// file without a unit (a missing one stamps "?", so adding one counts).
 std::string stamp_of(const Job& job) {
   std::string s = file_stamp(job.path);
-  if (lower_extension(job.path) == ".amc") {
+  const std::string ext = lower_extension(job.path);
+  if (ext == ".bvh" || ext == ".gmr" || ext == ".gmrb") {
+    for (const auto& sidecar : unit_sidecars(job.path)) s += "|" + file_stamp(sidecar);
+  }
+  if (ext == ".amc") {
     std::error_code ec;
     std::vector<fs::path> asfs;
     for (const auto& e : fs::directory_iterator(job.path.parent_path(), ec)) {
@@ -100,8 +105,12 @@ Result<LibraryEntry> load_one_guarded(const Job& job) {
 Result<LibraryEntry> load_one(const Job& job) {
   double metres_per_unit = 0;
   auto loaded = job.model.empty() ? load_motion(job.path, job.options) : load_markers_as_motion(job, metres_per_unit);
-  if (job.model.empty()) metres_per_unit = declared_metres_per_unit(job.path, job.options);
   if (!loaded.ok()) return loaded.error();
+  if (job.model.empty()) {
+    auto unit = motion_metres_per_unit(job.path, job.options);
+    if (!unit.ok()) return unit.error();
+    metres_per_unit = *unit;
+  }
   auto pre = to_pre_rotation(*loaded);
   if (!pre.ok()) return pre.error();
   if (auto s = pre->validate(); !s.ok()) return s.error();

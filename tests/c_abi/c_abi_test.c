@@ -73,6 +73,9 @@ int main(int argc, char** argv) {
 
   size_t joints = 0;
   CHECK(gmr_subscription_joint_count(sub, &joints) == GMR_OK && joints == 22, "%zu joints", joints);
+  double unit = -1;
+  CHECK(gmr_subscription_metres_per_unit(sub, &unit) == GMR_OK && unit == 1.0, "unit %g m (Unity's: metres)", unit);
+  CHECK(gmr_subscription_metres_per_unit(sub, NULL) == GMR_ERROR_INVALID_ARGUMENT, "a NULL unit pointer accepted");
   gmr_joint_info info[kMaxJoints];
   int roots = 0;
   for (size_t j = 0; j < joints; ++j) {

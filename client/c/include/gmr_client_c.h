@@ -144,6 +144,13 @@ GMR_C_API void gmr_unsubscribe(gmr_subscription* subscription);
 GMR_C_API gmr_status gmr_subscription_joint_count(gmr_subscription* subscription, size_t* count);
 GMR_C_API gmr_status gmr_subscription_joint(gmr_subscription* subscription, size_t index, gmr_joint_info* out);
 
+/* The unit, in metres, of the subscription's positions and translations
+ * (rest pose and local): the preset's when the motion's unit is known, the
+ * motion's own with GMR_PRESET_NATIVE, 0 when it is unknown (the numbers are
+ * in the motion's units whatever the preset: give source_metres_per_unit, or
+ * declare the unit beside the file; docs/protocol.md, "Units"). */
+GMR_C_API gmr_status gmr_subscription_metres_per_unit(gmr_subscription* subscription, double* metres_per_unit);
+
 /* The newest frame since the last poll, dropping older ones. Each non-NULL
  * array gets joint_count entries: positions 3 doubles per joint,
  * orientations and local_rotations 4 (x, y, z, w), local_translations 3;

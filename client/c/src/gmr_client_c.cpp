@@ -101,6 +101,7 @@ struct SubscriptionState {
   // version after it (already queued); both are dropped, counted as replaced.
   std::uint32_t version = 0;
   bool skeleton_changed = false;
+  double metres_per_unit = 0.0;  // of positions and translations (gmr_subscription_metres_per_unit)
   bool ended = false;
   std::string end_reason;
   // The times of the frame the last poll returned (gmr_last_frame_times).
@@ -330,6 +331,7 @@ gmr_status gmr_subscribe(gmr_client* client, uint32_t view_id, const gmr_subscri
       std::lock_guard lock(state->mutex);
       if (!state->skeleton_changed) state->adopt(info->skeleton, info->rest, info->joints, info->skeleton_version);
       state->skeleton_changed = false;
+      state->metres_per_unit = info->metres_per_unit;
     }
     sub->id = info->id;
     *out = sub.release();
@@ -360,6 +362,17 @@ gmr_status gmr_subscription_joint_count(gmr_subscription* s, size_t* count) {
     SubscriptionState& st = *s->state;
     std::lock_guard lock(st.mutex);
     *count = st.skeleton.size();
+    return GMR_OK;
+  });
+}
+
+gmr_status gmr_subscription_metres_per_unit(gmr_subscription* s, double* metres_per_unit) {
+  return guarded([&] {
+    if (s == nullptr || metres_per_unit == nullptr)
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_subscription_metres_per_unit: a NULL argument");
+    SubscriptionState& st = *s->state;
+    std::lock_guard lock(st.mutex);
+    *metres_per_unit = st.metres_per_unit;
     return GMR_OK;
   });
 }

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
+#include <string_view>
 #include <system_error>
 
 #include "gmr/acclaim/convert.h"
@@ -102,6 +104,80 @@ double declared_metres_per_unit(const std::filesystem::path& path, const LoadOpt
   if (!asf) return 0.0;
   const double length = asf->units.length;
   return std::isfinite(length) && length > 0.0 ? 0.0254 / length : 0.0;
+}
+
+std::array<std::filesystem::path, 2> unit_sidecars(const std::filesystem::path& path) {
+  std::filesystem::path own = path;
+  own.replace_extension(".units");
+  return {own, path.parent_path() / "folder.units"};
+}
+
+namespace {
+
+constexpr std::size_t kMaxUnitsFileBytes = 4096;
+
+// "0.0254", "in", "centimetres" -> metres per unit; 0 when it names no unit.
+double parse_unit(std::string_view word) {
+  static const std::pair<std::string_view, double> kNames[] = {
+      {"m", 1.0},      {"metre", 1.0},        {"metres", 1.0},        {"meter", 1.0},        {"meters", 1.0},
+      {"cm", 0.01},    {"centimetre", 0.01},  {"centimetres", 0.01},  {"centimeter", 0.01},  {"centimeters", 0.01},
+      {"mm", 0.001},   {"millimetre", 0.001}, {"millimetres", 0.001}, {"millimeter", 0.001}, {"millimeters", 0.001},
+      {"in", 0.0254},  {"inch", 0.0254},      {"inches", 0.0254},     {"ft", 0.3048},        {"foot", 0.3048},
+      {"feet", 0.3048}};
+  std::string lower(word);
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+  for (const auto& [name, metres] : kNames) {
+    if (lower == name) return metres;
+  }
+  double v = 0;
+  const auto r = std::from_chars(word.data(), word.data() + word.size(), v);
+  if (r.ec != std::errc() || r.ptr != word.data() + word.size()) return 0.0;
+  return std::isfinite(v) && v > 0.0 && v <= 1000.0 ? v : 0.0;
+}
+
+Result<double> read_units_file(const std::filesystem::path& path) {
+  auto text = read_file(path);
+  if (!text.ok()) return text.error();
+  if (text->size() > kMaxUnitsFileBytes) {
+    return Error{path.string(), 0, 0,
+                 "a units file holds one unit; this one has " + std::to_string(text->size()) + " bytes"};
+  }
+  double found = 0.0;
+  int line_no = 0;
+  std::string_view rest(*text);
+  while (!rest.empty()) {
+    const std::size_t eol = rest.find('\n');
+    std::string_view line = rest.substr(0, eol);
+    rest = eol == std::string_view::npos ? std::string_view() : rest.substr(eol + 1);
+    ++line_no;
+    line = line.substr(0, line.find('#'));
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string_view::npos) continue;
+    line = line.substr(first, line.find_last_not_of(" \t\r") - first + 1);
+    std::string said(line.substr(0, 64));  // appended, not concatenated (GCC 12 misreads "'" + s as overlapping)
+    if (found != 0.0)
+      return Error{path.string(), line_no, 0, "a units file holds one unit; a second line says " + said};
+    found = parse_unit(line);
+    if (found == 0.0) {
+      said.append(" is not a unit: give metres per unit (0.0254) or m, cm, mm, in, ft");
+      return Error{path.string(), line_no, 0, said};
+    }
+  }
+  if (found == 0.0) return Error{path.string(), 0, 0, "the units file names no unit"};
+  return found;
+}
+
+}  // namespace
+
+Result<double> motion_metres_per_unit(const std::filesystem::path& path, const LoadOptions& options) {
+  if (const double own = declared_metres_per_unit(path, options); own > 0.0) return own;
+  const std::string ext = lower_extension(path);
+  if (ext != ".bvh" && ext != ".gmr" && ext != ".gmrb") return 0.0;
+  for (const auto& sidecar : unit_sidecars(path)) {
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(sidecar, ec)) return read_units_file(sidecar);
+  }
+  return 0.0;
 }
 
 // ---- saving ------------------------------------------------------------

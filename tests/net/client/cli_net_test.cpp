@@ -15,6 +15,7 @@
 #include <sstream>
 #include <thread>
 
+#include "gmr/core/file_util.h"
 #include "gmr/io/gmr_file.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
@@ -138,6 +139,27 @@ TEST(CliNet, ConventionsOnAMotionOfUnknownUnitSayTheNumbersKeepItsUnits) {
     ASSERT_EQ(r.status, 0) << r.out;
     EXPECT_EQ(r.out.find(warning), std::string::npos) << r.out;
   }
+}
+
+// A units sidecar beside a BVH gives it the unit --metres-per-unit would:
+// the same rows, no warning; a broken one is an error naming it and the line.
+TEST(CliNet, AUnitsSidecarGivesABvhItsUnit) {
+  GMR_REQUIRE_DATA();
+  TempDir dir;
+  std::filesystem::create_symlink(cmu_file(), dir.path / "02_01.bvh");
+  const std::string file = (dir.path / "02_01.bvh").string();
+  const std::string view = " --frames 0:3 --conventions unity --roots LeftFoot";
+  const CommandRun given = gmr("positions '" + file + "'" + view + " --metres-per-unit 0.0254");
+  ASSERT_EQ(given.status, 0) << given.out;
+  ASSERT_TRUE(write_file_atomic(dir.path / "folder.units", "# CMU's BVH conversions\ninches\n").ok());
+  const CommandRun declared = gmr("positions '" + file + "'" + view);
+  ASSERT_EQ(declared.status, 0) << declared.out;
+  EXPECT_EQ(declared.out, given.out);
+  EXPECT_EQ(declared.out.find("warning"), std::string::npos) << declared.out;
+  ASSERT_TRUE(write_file_atomic(dir.path / "02_01.units", "\n0.0254 0.0254\n").ok());
+  const CommandRun broken = gmr("positions '" + file + "'" + view);
+  EXPECT_NE(broken.status, 0);
+  EXPECT_NE(broken.out.find("02_01.units:2: 0.0254 0.0254 is not a unit"), std::string::npos) << broken.out;
 }
 
 TEST(CliNet, StreamPrintsTheSameRowsAsPositions) {

@@ -13,9 +13,11 @@
 
 #include <atomic>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <thread>
 
+#include "gmr/core/file_util.h"
 #include "gmr/demo/demo_library.h"
 #include "gmr/io/gmr_file.h"
 #include "gmr/server/library.h"
@@ -273,6 +275,40 @@ TEST(LibraryReload, OnlyChangedFilesAreReadAgain) {
   EXPECT_EQ(versions.count("turn"), 0u);
   EXPECT_EQ(versions.at("walk"), 2u);
   EXPECT_EQ(versions.at("wave"), 1u);
+}
+
+// A units sidecar gives a BVH or .gmr its unit at load; adding, changing or
+// breaking one counts as a change of the motions it covers (their stamps
+// include it): a new unit is a new version, a broken one is rejected with its
+// line and the motion keeps its last version.
+TEST(LibraryReload, AUnitsSidecarSetsTheUnitAndItsChangesReload) {
+  TempDir dir;
+  for (auto& m : demo_library()) ASSERT_TRUE(write_gmr(m.motion, dir.path / (m.name + ".gmr")).ok());
+  auto units = [](const server::LibraryLoad& l) {
+    std::map<std::string, std::pair<double, std::uint32_t>> u;
+    for (const auto& e : l.entries) u[e.name] = {e.metres_per_unit, e.version};
+    return u;
+  };
+  auto first = server::load_library(dir.path);
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(units(*first).at("walk"), (std::pair<double, std::uint32_t>{0.0, 1}));
+  ASSERT_TRUE(write_file_atomic(dir.path / "folder.units", "cm\n").ok());
+  ASSERT_TRUE(write_file_atomic(dir.path / "walk.units", "in\n").ok());
+  auto second = server::reload_library(dir.path, first->entries, {});
+  ASSERT_TRUE(second.ok());
+  EXPECT_EQ(second->reused, 0u) << "every motion of the folder is covered by folder.units";
+  EXPECT_EQ(units(*second).at("walk"), (std::pair<double, std::uint32_t>{0.0254, 2}));
+  EXPECT_EQ(units(*second).at("wave"), (std::pair<double, std::uint32_t>{0.01, 2}));
+  ASSERT_TRUE(write_file_atomic(dir.path / "walk.units", "inchs\n").ok());
+  auto third = server::reload_library(dir.path, second->entries, {});
+  ASSERT_TRUE(third.ok());
+  EXPECT_EQ(third->kept_back, 1u);
+  EXPECT_EQ(units(*third).at("walk"), (std::pair<double, std::uint32_t>{0.0254, 2})) << "kept as it was";
+  EXPECT_EQ(units(*third).at("wave"), (std::pair<double, std::uint32_t>{0.01, 2}));
+  ASSERT_EQ(third->rejected.size(), 1u);
+  EXPECT_EQ(third->rejected[0].path, dir.path / "walk.gmr");
+  EXPECT_NE(third->rejected[0].reason.find("walk.units:1:"), std::string::npos) << third->rejected[0].reason;
+  EXPECT_NE(third->rejected[0].reason.find("inchs is not a unit"), std::string::npos) << third->rejected[0].reason;
 }
 
 }  // namespace

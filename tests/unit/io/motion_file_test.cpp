@@ -6,6 +6,8 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <tuple>
+#include <vector>
 
 #include "gmr/core/file_util.h"
 #include "gmr/kinematics/forward_kinematics.h"
@@ -100,6 +102,49 @@ TEST(DeclaredUnit, AsfLengthIsInchesOverLength) {
   EXPECT_DOUBLE_EQ(declared_metres_per_unit(d.path / "t.amc"), 0.0254 / 0.5);
   if (!test::have_data() && !test::in_ci()) return;
   EXPECT_DOUBLE_EQ(declared_metres_per_unit(test::data_file("asfamc/07/07_05-walk.amc")), 0.0254 / 0.45);
+}
+
+// A file without a unit gets it from X.units beside it, else from
+// folder.units; the file's own declaration (an ASF's) wins; a sidecar that
+// says no unit, or two, is an error naming it and the line.
+TEST(DeclaredUnit, SidecarsDeclareTheUnitOfFilesWithoutOne) {
+  TempDir d;
+  for (const char* name : {"a.bvh", "b.bvh", "c.gmr"}) ASSERT_TRUE(write_file_atomic(d.path / name, kBvh).ok());
+  auto unit = [&](const char* name) {
+    auto u = motion_metres_per_unit(d.path / name);
+    EXPECT_TRUE(u.ok()) << u.error().to_string();
+    return u.ok() ? *u : -1.0;
+  };
+  EXPECT_EQ(unit("a.bvh"), 0.0) << "no sidecar: unknown";
+  ASSERT_TRUE(write_file_atomic(d.path / "folder.units", "# the lab's BVH exports\ncm\n").ok());
+  EXPECT_DOUBLE_EQ(unit("a.bvh"), 0.01);
+  EXPECT_DOUBLE_EQ(unit("c.gmr"), 0.01);
+  ASSERT_TRUE(write_file_atomic(d.path / "a.units", "  0.0254   # inches, as a number\n\n").ok());
+  EXPECT_DOUBLE_EQ(unit("a.bvh"), 0.0254) << "the file's own sidecar before the folder's";
+  EXPECT_DOUBLE_EQ(unit("b.bvh"), 0.01);
+  for (const auto& [text, metres] : std::vector<std::pair<std::string, double>>{
+           {"Inches", 0.0254}, {"mm\r\n", 0.001}, {"feet", 0.3048}, {"metres", 1.0}, {"1e-3", 0.001}}) {
+    ASSERT_TRUE(write_file_atomic(d.path / "b.units", text).ok());
+    EXPECT_DOUBLE_EQ(unit("b.bvh"), metres) << text;
+  }
+  for (const auto& [text, line, says] :
+       std::vector<std::tuple<std::string, int, std::string>>{{"inchs\n", 1, "inchs is not a unit"},
+                                                              {"# nothing\n", 0, "names no unit"},
+                                                              {"cm\nmm\n", 2, "a second line says mm"},
+                                                              {"-1\n", 1, "-1 is not a unit"},
+                                                              {"nan\n", 1, "nan is not a unit"},
+                                                              {std::string(5000, 'x'), 0, "holds one unit"}}) {
+    ASSERT_TRUE(write_file_atomic(d.path / "b.units", text).ok());
+    auto u = motion_metres_per_unit(d.path / "b.bvh");
+    ASSERT_FALSE(u.ok()) << text;
+    EXPECT_EQ(u.error().file, (d.path / "b.units").string());
+    EXPECT_EQ(u.error().line, line) << text;
+    EXPECT_THAT(u.error().message, HasSubstr(says));
+  }
+  // An Acclaim motion declares its own unit; sidecars are not read for it.
+  ASSERT_TRUE(write_file_atomic(d.path / "t.amc", ":FULLY-SPECIFIED\n").ok());
+  ASSERT_TRUE(write_file_atomic(d.path / "t.units", "m\n").ok());
+  EXPECT_EQ(unit("t.amc"), 0.0) << "an .amc without its .asf is unknown, not the sidecar's";
 }
 
 TEST(SaveMotion, UnknownExtension) {

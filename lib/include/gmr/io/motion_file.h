@@ -9,6 +9,7 @@
 // Extensions are matched case-insensitively; any other is an error.
 #pragma once
 
+#include <array>
 #include <filesystem>
 
 #include "gmr/core/error.h"
@@ -40,6 +41,18 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
 // 0.0254 / length of its .asf (found as load_motion finds it). BVH, GMR and
 // GMRB carry no unit. Never fails: an unreadable skeleton declares nothing.
 double declared_metres_per_unit(const std::filesystem::path& path, const LoadOptions& options = {});
+
+// Where the unit of a motion file that carries none (.bvh, .gmr, .gmrb) may be
+// declared beside it: X.units for X.bvh, else folder.units for every such file
+// of its folder (docs/protocol.md, "Units"). Both paths, present or not.
+std::array<std::filesystem::path, 2> unit_sidecars(const std::filesystem::path& path);
+
+// The unit of a motion file in metres per unit: what the file declares
+// (declared_metres_per_unit), else what its nearest sidecar says, else 0
+// (unknown). A sidecar holds one unit: a number of metres per unit (0.0254) or
+// a name (m, cm, mm, in, ft and their long forms); '#' starts a comment. An
+// unreadable or malformed sidecar is an error naming it and the line.
+Result<double> motion_metres_per_unit(const std::filesystem::path& path, const LoadOptions& options = {});
 
 // Saves by extension, converting between conventions as needed (.bvh wants
 // post-rotation, and gets the form every common reader reads alike:
