@@ -40,6 +40,8 @@ packages=(
   blender                   # the interop test: Blender's own BVH importer reads what gmr writes
   nodejs npm                # the interop test: three.js's BVHLoader (npm, tests/interop/package.json)
   libassimp-dev             # the interop test: Assimp's BVH importer
+  godot3-server             # the Godot add-on's test: client/godot in a real (headless) Godot 3
+  mono-mcs mono-runtime     # the C# package's test: client/csharp compiled with mcs, run under Mono
 )
 
 build_only=false

@@ -34,7 +34,9 @@ def have_data() -> bool:
 
 
 class Server:
-    """gmr-server on 127.0.0.1 with any free port, stopped on exit."""
+    """gmr-server on 127.0.0.1 with any free port, stopped on exit. `http`: False
+    (no HTTP port), True (any free one) or a port number (a server started
+    again where an earlier one listened)."""
 
     def __init__(self, bin_dir, *args, library=None, http=False):
         self.bin_dir = pathlib.Path(bin_dir)
@@ -43,7 +45,8 @@ class Server:
         http_port_file = pathlib.Path(self._tmp.name) / "http_port"
         cmd = [str(self.bin_dir / "gmr-server"), "--port", "0", "--port-file", str(port_file), "--log-level", "warn"]
         # HTTP (the viewer, /metrics) on any free port, or none.
-        cmd += ["--http-port", "0", "--http-port-file", str(http_port_file)] if http else ["--http-port", "-1"]
+        http_port = 0 if http is True else int(http)
+        cmd += ["--http-port", str(http_port), "--http-port-file", str(http_port_file)] if http else ["--http-port", "-1"]
         if library is not None:
             cmd += ["--library", str(library)]
         cmd += list(args)
