@@ -134,8 +134,9 @@ struct PositionsOptions {
   double fps = 0.0;  // .amc input: frames per second (0: 120)
   std::string frames = ":";
   std::string orientations;  // "", "quat" or "matrix"
-  std::string model;         // marker input: the skeleton model (built-in name or file)
-  ViewOptions view;          // --roots, --strip-dummies, --relative-to (cmd_ops.cpp)
+  bool local_transforms = false;
+  std::string model;  // marker input: the skeleton model (built-in name or file)
+  ViewOptions view;   // --roots, --strip-dummies, --relative-to (cmd_ops.cpp)
 };
 
 void add_positions_transform_options(CLI::App& cmd, PositionsOptions& o) { add_view_options(cmd, o.view); }
@@ -167,8 +168,8 @@ void run_positions(const PositionsOptions& given) {
   if (o.view.metres_per_unit == 0.0) o.view.metres_per_unit = file_metres_per_unit;
   const Motion m = transform_for_positions(std::move(loaded), o);
   const OutputBasis basis = o.view.basis();
-  if (o.view.any()) {
-    write_view_positions(m, o.view, requested, std::cout, o.orientations);
+  if (o.view.any() || o.local_transforms) {
+    write_view_positions(m, o.view, requested, std::cout, pose_columns(o.orientations, o.local_transforms));
     std::cout.flush();
     if (!std::cout) throw CommandError("cannot write the positions to standard output");
     print_warnings(warnings);
@@ -254,10 +255,7 @@ void add_file_commands(CLI::App& app) {
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
     add_fps_option(*cmd, o->fps);
     add_positions_transform_options(*cmd, *o);
-    cmd->add_option("--orientations", o->orientations,
-                    "Also print each joint's orientation (its GMR bone frame, in the view's coordinates and "
-                    "conventions, with any view option): quat (qw,qx,qy,qz) or matrix (r00..r22, row by row)")
-        ->check(CLI::IsMember({"quat", "matrix"}));
+    add_pose_options(*cmd, o->orientations, o->local_transforms);
     cmd->callback([o] { run_positions(*o); });
   }
 }

@@ -122,6 +122,7 @@ struct QueryOptions {
   std::string frames = ":";
   ViewOptions view;
   std::string orientations;  // "", "quat" or "matrix"
+  bool local_transforms = false;
 };
 
 void run_query(const QueryOptions& o) {
@@ -131,46 +132,48 @@ void run_query(const QueryOptions& o) {
   if (o.view.conventions != "native") warn_if_unit_unknown(o.view, served_unit(*c, o.motion));
   const client::ViewState v = make_view(*c, o.motion, o.view);
   const FrameRange r = clamp_frame_range(requested, v.frame_count);
-  const bool with_orientations = !o.orientations.empty();
-  const OrientationColumns columns =
-      o.orientations == "matrix" ? OrientationColumns::kMatrix : OrientationColumns::kQuaternion;
-  if (with_orientations) {
-    write_poses_csv_header(std::cout, columns);
-  } else {
-    write_positions_csv_header(std::cout);
-  }
+  const PoseColumns columns = pose_columns(o.orientations, o.local_transforms);
+  const bool with_orientations = columns.orientations.has_value();
+  write_pose_header(std::cout, columns);
   // Chunks keep each reply well under the server's message limit.
-  const std::size_t per_frame = v.skeleton.size() * (with_orientations ? 7 : 3) * 9 + 16;
+  const std::size_t per_frame =
+      v.skeleton.size() * (3 + (with_orientations ? 4 : 0) + (o.local_transforms ? 7 : 0)) * 9 + 16;
   const std::size_t chunk = std::max<std::size_t>(1, c->hello().max_message_bytes / 2 / per_frame);
+  client::QueryOptions qo;
+  qo.orientations = with_orientations;
+  qo.local_transforms = o.local_transforms;
+  qo.conventions = o.view.engine();
   RowOrder order;
   bool have_order = false;
   for (std::size_t f = r.begin; f < r.end; f += chunk) {
     const std::size_t e = std::min(r.end, f + chunk);
-    const auto q = take(c->query(v.id, static_cast<std::uint32_t>(f), static_cast<std::uint32_t>(e), with_orientations,
-                                 {}, o.view.engine()));
+    const auto q = take(c->query(v.id, static_cast<std::uint32_t>(f), static_cast<std::uint32_t>(e), qo));
     if (!have_order) {
       order = row_order(source, v.skeleton, q.joints);
       have_order = true;
     }
     const std::size_t n = q.joints.size();
-    if (q.positions.size() != (e - f) * n || (with_orientations && q.orientations.size() != (e - f) * n)) {
+    if (q.positions.size() != (e - f) * n || (with_orientations && q.orientations.size() != (e - f) * n) ||
+        (o.local_transforms &&
+         (q.local_rotations.size() != (e - f) * n || q.local_translations.size() != (e - f) * n))) {
       throw CommandError("the server's frames " + std::to_string(f) + "-" + std::to_string(e) + " do not carry " +
                          std::to_string(n) + " joints each");
     }
-    std::vector<Eigen::Vector3d> rows;
+    std::vector<Eigen::Vector3d> rows, shifts;
     std::vector<Eigen::Matrix3d> turns;
+    std::vector<Eigen::Quaterniond> locals;
     rows.reserve((e - f) * order.from.size());
     for (std::size_t k = 0; k < e - f; ++k) {
       for (std::size_t from : order.from) {
         rows.push_back(q.positions[k * n + from]);
         if (with_orientations) turns.push_back(q.orientations[k * n + from].toRotationMatrix());
+        if (o.local_transforms) {
+          locals.push_back(q.local_rotations[k * n + from]);
+          shifts.push_back(q.local_translations[k * n + from]);
+        }
       }
     }
-    if (with_orientations) {
-      write_poses_csv_rows(std::cout, order.names, rows, turns, f, columns);
-    } else {
-      write_positions_csv_rows(std::cout, order.names, rows, f);
-    }
+    write_pose_rows(std::cout, order.names, {rows, turns, locals, shifts}, f, columns);
   }
   std::cout.flush();
   if (!std::cout) throw CommandError("cannot write the positions to standard output");
@@ -228,6 +231,7 @@ client::SubscribeOptions subscribe_options(const PlayOptions& o, const client::V
 struct StreamOptions : PlayOptions {
   bool summary = false;
   std::string orientations;  // "", "quat" or "matrix"
+  bool local_transforms = false;
 };
 
 void run_stream(const StreamOptions& o) {
@@ -238,8 +242,8 @@ void run_stream(const StreamOptions& o) {
   client::SubscribeOptions so = subscribe_options(o, v);
   so.float64 = !o.summary;  // CSV prints exact numbers
   so.orientations = !o.orientations.empty();
-  const OrientationColumns columns =
-      o.orientations == "matrix" ? OrientationColumns::kMatrix : OrientationColumns::kQuaternion;
+  so.local_transforms = o.local_transforms;
+  const PoseColumns columns = pose_columns(o.orientations, o.local_transforms);
 
   struct State {
     std::mutex mutex;
@@ -258,11 +262,7 @@ void run_stream(const StreamOptions& o) {
   std::atomic<bool> have_order{false};
   std::size_t values = 0;  // per frame: one per joint subscribed
   std::mutex out_mutex;
-  if (!o.summary && so.orientations) {
-    write_poses_csv_header(std::cout, columns);
-  } else if (!o.summary) {
-    write_positions_csv_header(std::cout);
-  }
+  if (!o.summary) write_pose_header(std::cout, columns);
   const auto started = std::chrono::steady_clock::now();
 
   auto on_frame = [&, st](const client::ReceivedFrame& f) {
@@ -279,7 +279,8 @@ void run_stream(const StreamOptions& o) {
       st->window_latency_sum += latency;
       st->window_latency_max = std::max(st->window_latency_max, latency);
     }
-    if (f.positions.size() != values || (so.orientations && f.orientations.size() != values)) {
+    if (f.positions.size() != values || (so.orientations && f.orientations.size() != values) ||
+        (so.local_transforms && (f.local_rotations.size() != values || f.local_translations.size() != values))) {
       // The client checks frames against the joints the server named; these
       // are the joints this command asked for.
       std::lock_guard lock(st->mutex);
@@ -287,18 +288,19 @@ void run_stream(const StreamOptions& o) {
       return;
     }
     if (!o.summary && have_order) {
-      std::vector<Eigen::Vector3d> rows;
+      std::vector<Eigen::Vector3d> rows, shifts;
       std::vector<Eigen::Matrix3d> turns;
+      std::vector<Eigen::Quaterniond> locals;
       for (std::size_t from : order.from) {
         rows.push_back(f.positions[from]);
         if (so.orientations) turns.push_back(f.orientations[from].toRotationMatrix());
+        if (so.local_transforms) {
+          locals.push_back(f.local_rotations[from]);
+          shifts.push_back(f.local_translations[from]);
+        }
       }
       std::lock_guard lock(out_mutex);
-      if (so.orientations) {
-        write_poses_csv_rows(std::cout, order.names, rows, turns, f.frame_index, columns);
-      } else {
-        write_positions_csv_rows(std::cout, order.names, rows, f.frame_index);
-      }
+      write_pose_rows(std::cout, order.names, {rows, turns, locals, shifts}, f.frame_index, columns);
     }
   };
   auto on_end = [st](const client::SubscriptionEnd& e) {
@@ -711,10 +713,7 @@ void add_net_commands(CLI::App& app) {
     cmd->add_option("--frames", o->frames, "Half-open frame range A:B (either side may be empty)")
         ->capture_default_str();
     add_view_options(*cmd, o->view);
-    cmd->add_option("--orientations", o->orientations,
-                    "Also print each joint's orientation, as gmr positions --orientations: quat (qw,qx,qy,qz) or "
-                    "matrix (r00..r22)")
-        ->check(CLI::IsMember({"quat", "matrix"}));
+    add_pose_options(*cmd, o->orientations, o->local_transforms);
     add_connect_options(*cmd, o->server);
     cmd->callback([o] { run_query(*o); });
   }
@@ -723,10 +722,7 @@ void add_net_commands(CLI::App& app) {
     CLI::App* cmd = app.add_subcommand("stream", "Subscribe to a served motion and print the frames as they arrive");
     add_play_options(*cmd, *o);
     cmd->add_flag("--summary", o->summary, "Print a live summary twice a second instead of CSV rows");
-    cmd->add_option("--orientations", o->orientations,
-                    "Also print each joint's orientation, as gmr positions --orientations: quat (qw,qx,qy,qz) or "
-                    "matrix (r00..r22)")
-        ->check(CLI::IsMember({"quat", "matrix"}));
+    add_pose_options(*cmd, o->orientations, o->local_transforms);
     cmd->callback([o] { run_stream(*o); });
   }
   {

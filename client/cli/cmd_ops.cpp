@@ -22,6 +22,7 @@
 #include "gmr/ops/shift_root.h"
 #include "gmr/ops/split_tree.h"
 #include "gmr/ops/strip_dummies.h"
+#include "gmr/view/engine_pose.h"
 #include "gmr/view/view.h"
 #include "gmr/view/viewpoint.h"
 
@@ -172,8 +173,27 @@ void add_view_options(CLI::App& cmd, ViewOptions& o) {
       ->check(CLI::PositiveNumber);
 }
 
+PoseColumns pose_columns(const std::string& orientations, bool local_transforms) {
+  PoseColumns c;
+  if (orientations == "quat") c.orientations = OrientationColumns::kQuaternion;
+  if (orientations == "matrix") c.orientations = OrientationColumns::kMatrix;
+  c.local_transforms = local_transforms;
+  return c;
+}
+
+void add_pose_options(CLI::App& cmd, std::string& orientations, bool& local_transforms) {
+  cmd.add_option("--orientations", orientations,
+                 "Also print each joint's orientation (its GMR bone frame, in the view's coordinates and "
+                 "conventions, with any view option): quat (qw,qx,qy,qz) or matrix (r00..r22, row by row)")
+      ->check(CLI::IsMember({"quat", "matrix"}));
+  cmd.add_flag("--local-transforms", local_transforms,
+               "Also print each joint's local transform as an engine bone takes it (rotation lqw,lqx,lqy,lqz and "
+               "translation ltx,lty,ltz relative to its parent's frame, in the view's conventions; "
+               "docs/protocol.md, \"Local transforms and rest pose\")");
+}
+
 void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out,
-                          const std::string& orientations) {
+                          const PoseColumns& columns) {
   ViewSpec spec;
   if (!o.roots.empty()) spec.roots = split_list(o.roots);
   spec.strip_dummies = o.strip_dummies;
@@ -183,8 +203,8 @@ void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange
   const Skeleton names = view_names(view);
   const OutputBasis basis = o.basis();
   constexpr std::size_t kChunk = 1024;  // keeps memory flat for long motions
-  if (orientations.empty()) {
-    write_positions_csv_header(out);
+  write_pose_header(out, columns);
+  if (!columns.orientations && !columns.local_transforms) {
     for (std::size_t f = r.begin; f < r.end; f += kChunk) {
       const std::size_t e = std::min(r.end, f + kChunk);
       std::vector<Eigen::Vector3d> p = view_positions(view, f, e);
@@ -193,26 +213,33 @@ void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange
     }
     return;
   }
-  // Positions and orientations of the view's frame (view_frame, as the
-  // server computes them), rows in view.order.
-  const OrientationColumns columns =
-      orientations == "matrix" ? OrientationColumns::kMatrix : OrientationColumns::kQuaternion;
-  write_poses_csv_header(out, columns);
+  // Positions, orientations and locals of the view's frame (view_frame and
+  // engine_locals, as the server computes them), rows in view.order.
   const std::size_t joints = view.motion.skeleton.size();
-  std::vector<Eigen::Vector3d> p(joints), rows_p;
+  const std::vector<int> sources = columns.local_transforms ? own_frame_sources(view.motion) : std::vector<int>{};
+  std::vector<Eigen::Vector3d> p(joints), rows_p, lt(view.order.size()), rows_t;
   std::vector<Eigen::Matrix3d> w(joints), rows_w;
+  std::vector<Eigen::Quaterniond> lq(view.order.size()), rows_q;
   for (std::size_t f = r.begin; f < r.end; f += kChunk) {
     const std::size_t e = std::min(r.end, f + kChunk);
     rows_p.clear();
     rows_w.clear();
+    rows_q.clear();
+    rows_t.clear();
     for (std::size_t k = f; k < e; ++k) {
       view_frame(view.motion, view.viewer, k, p, w, basis);
-      for (int j : view.order) {
-        rows_p.push_back(p[static_cast<std::size_t>(j)]);
-        rows_w.push_back(w[static_cast<std::size_t>(j)]);
+      if (columns.local_transforms) engine_locals(view.motion.skeleton, sources, p, w, view.order, lq, lt);
+      for (std::size_t i = 0; i < view.order.size(); ++i) {
+        const auto j = static_cast<std::size_t>(view.order[i]);
+        rows_p.push_back(p[j]);
+        rows_w.push_back(w[j]);
+        if (columns.local_transforms) {
+          rows_q.push_back(lq[i]);
+          rows_t.push_back(lt[i]);
+        }
       }
     }
-    write_poses_csv_rows(out, names, rows_p, rows_w, f, columns);
+    write_pose_rows(out, names, {rows_p, rows_w, rows_q, rows_t}, f, columns);
   }
 }
 

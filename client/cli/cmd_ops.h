@@ -7,6 +7,7 @@
 #include <string>
 
 #include "cli_util.h"
+#include "gmr/io/positions_csv.h"
 #include "gmr/motion/motion.h"
 #include "gmr/view/conventions.h"
 
@@ -42,7 +43,12 @@ void add_view_options(CLI::App& cmd, ViewOptions& o);
 // With `orientations` ("quat" or "matrix"; empty: none), each row also has
 // the joint's orientation in the view (its GMR bone frame in world or viewer
 // coordinates, in the conventions' axes), as `gmr positions --orientations`.
+// What `--orientations` (quat, matrix) and `--local-transforms` add to each
+// row of gmr positions, query and stream; the two options, on any of them.
+PoseColumns pose_columns(const std::string& orientations, bool local_transforms);
+void add_pose_options(CLI::App& cmd, std::string& orientations, bool& local_transforms);
+
 void write_view_positions(const Motion& motion, const ViewOptions& o, FrameRange requested, std::ostream& out,
-                          const std::string& orientations = {});
+                          const PoseColumns& columns = {});
 
 }  // namespace gmr::cli

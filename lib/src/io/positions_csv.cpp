@@ -53,21 +53,16 @@ void append_orientation(std::string& buf, const Eigen::Matrix3d& w, OrientationC
 
 }  // namespace
 
-void write_positions_csv_header(std::ostream& out) { out << "frame,joint,x,y,z\n"; }
-
-void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
-                              std::size_t first_frame) {
-  write_poses_csv_rows(out, skeleton, positions, {}, first_frame, OrientationColumns::kQuaternion);
+void write_pose_header(std::ostream& out, const PoseColumns& columns) {
+  out << "frame,joint,x,y,z";
+  if (columns.orientations == OrientationColumns::kQuaternion) out << ",qw,qx,qy,qz";
+  if (columns.orientations == OrientationColumns::kMatrix) out << ",r00,r01,r02,r10,r11,r12,r20,r21,r22";
+  if (columns.local_transforms) out << ",lqw,lqx,lqy,lqz,ltx,lty,ltz";
+  out << '\n';
 }
 
-void write_poses_csv_header(std::ostream& out, OrientationColumns columns) {
-  out << (columns == OrientationColumns::kQuaternion ? "frame,joint,x,y,z,qw,qx,qy,qz\n"
-                                                     : "frame,joint,x,y,z,r00,r01,r02,r10,r11,r12,r20,r21,r22\n");
-}
-
-void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
-                          std::span<const Eigen::Matrix3d> orientations, std::size_t first_frame,
-                          OrientationColumns columns) {
+void write_pose_rows(std::ostream& out, const Skeleton& skeleton, const PoseRows& rows, std::size_t first_frame,
+                     const PoseColumns& columns) {
   const std::size_t joints = skeleton.size();
   if (joints == 0) return;
   std::vector<std::string> names;
@@ -75,7 +70,7 @@ void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span
   for (const Joint& j : skeleton.joints()) names.push_back(csv_field(j.name));
   std::string buf;
   buf.reserve(1 << 16);
-  const std::size_t frames = positions.size() / joints;
+  const std::size_t frames = rows.positions.size() / joints;
   for (std::size_t f = 0; f < frames; ++f) {
     const std::string frame = std::to_string(first_frame + f);
     for (std::size_t j = 0; j < joints; ++j) {
@@ -85,9 +80,21 @@ void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span
       buf += names[j];
       for (int i = 0; i < 3; ++i) {
         buf += ',';
-        append_number(buf, positions[k][i]);
+        append_number(buf, rows.positions[k][i]);
       }
-      if (!orientations.empty()) append_orientation(buf, orientations[k], columns);
+      if (columns.orientations) append_orientation(buf, rows.orientations[k], *columns.orientations);
+      if (columns.local_transforms) {
+        Eigen::Quaterniond q = rows.local_rotations[k].normalized();
+        if (q.w() < 0) q.coeffs() = -q.coeffs();
+        for (double v : {q.w(), q.x(), q.y(), q.z()}) {
+          buf += ',';
+          append_number(buf, v);
+        }
+        for (int i = 0; i < 3; ++i) {
+          buf += ',';
+          append_number(buf, rows.local_translations[k][i]);
+        }
+      }
       buf += '\n';
     }
     if (buf.size() > (1 << 16) - 1024) {
@@ -96,6 +103,25 @@ void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span
     }
   }
   out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+}
+
+void write_positions_csv_header(std::ostream& out) { write_pose_header(out, {}); }
+
+void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
+                              std::size_t first_frame) {
+  write_pose_rows(out, skeleton, PoseRows{.positions = positions}, first_frame, {});
+}
+
+void write_poses_csv_header(std::ostream& out, OrientationColumns columns) {
+  write_pose_header(out, PoseColumns{.orientations = columns});
+}
+
+void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
+                          std::span<const Eigen::Matrix3d> orientations, std::size_t first_frame,
+                          OrientationColumns columns) {
+  PoseColumns c;
+  if (!orientations.empty()) c.orientations = columns;
+  write_pose_rows(out, skeleton, PoseRows{.positions = positions, .orientations = orientations}, first_frame, c);
 }
 
 namespace {

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <sys/wait.h>
 
+#include <map>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -21,6 +22,7 @@
 #include "gmr/io/positions_csv.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/ops/convert.h"
+#include "gmr/view/view.h"
 #include "net_test_util.h"
 #include "test_data.h"
 
@@ -109,6 +111,86 @@ TEST(CliNet, OrientationsPrintWithEveryViewAndFromTheServer) {
   const CommandRun q = gmr("query cmu/02_01 --frames 0:5 --orientations quat --roots LeftHand" + port);
   ASSERT_EQ(st.status, 0) << st.out;
   ASSERT_EQ(q.status, 0) << q.out;
+  EXPECT_EQ(st.out, q.out);
+}
+
+// `--local-transforms` prints each joint's engine-bone local transform:
+// positions, query and stream agree, and for every frame the locals compose
+// (O_j = O_p Q_j, P_j = P_p + O_p T_j, in the view's hierarchy) to the
+// printed positions.
+TEST(CliNet, LocalTransformsPrintAndComposeToThePositions) {
+  GMR_REQUIRE_DATA();
+  TestServer s;
+  const std::string port = " --port " + std::to_string(s.port());
+  const std::string file = cmu_file().string();
+  const auto motion = load_motion(cmu_file());
+  ASSERT_TRUE(motion.ok()) << motion.error().to_string();
+  for (const auto& [opts, spec] : std::vector<std::pair<std::string, ViewSpec>>{
+           {" --roots LeftHand --conventions unity --metres-per-unit 0.0254", ViewSpec{.roots = {"LeftHand"}}},
+           {" --roots Hips,LeftForeArm --relative-to Head --orientations quat",
+            ViewSpec{.roots = {"Hips", "LeftForeArm"}, .relative_to = "Head"}},
+           {" --strip-dummies --conventions godot --metres-per-unit 0.0254", ViewSpec{.strip_dummies = true}}}) {
+    SCOPED_TRACE(opts);
+    const CommandRun p = gmr("positions '" + file + "' --frames 10:40 --local-transforms" + opts);
+    const CommandRun q = gmr("query cmu/02_01 --frames 10:40 --local-transforms" + opts + port);
+    ASSERT_EQ(p.status, 0) << p.out;
+    ASSERT_EQ(q.status, 0) << q.out;
+    const std::string header = p.out.substr(0, p.out.find('\n'));
+    EXPECT_EQ(header, q.out.substr(0, q.out.find('\n')));
+    EXPECT_NE(header.find(",lqw,lqx,lqy,lqz,ltx,lty,ltz"), std::string::npos) << header;
+    const auto pr = csv_rows(p.out), qr = csv_rows(q.out);
+    ASSERT_EQ(pr.size(), qr.size());
+    const auto view = apply_view(*motion, spec);
+    ASSERT_TRUE(view.ok()) << view.error().to_string();
+    const Skeleton names = view_names(*view);
+    const std::size_t n = names.size();
+    ASSERT_EQ(pr.size(), 30 * n);
+    double worst_query = 0, worst_compose = 0;
+    for (std::size_t f = 0; f < 30; ++f) {
+      std::map<std::string, std::pair<Eigen::Matrix3d, Eigen::Vector3d>> frame;  // by name: O_j, P_j
+      for (std::size_t i = 0; i < n; ++i) {
+        const auto& row = pr[f * n + i].second;
+        ASSERT_EQ(row.size(), qr[f * n + i].second.size());
+        for (std::size_t k = 0; k < row.size(); ++k) {
+          worst_query = std::max(worst_query, std::abs(row[k] - qr[f * n + i].second[k]));
+        }
+        const std::size_t l = row.size() - 7;  // the local columns come last
+        const Eigen::Quaterniond local(row[l], row[l + 1], row[l + 2], row[l + 3]);
+        const Eigen::Vector3d t(row[l + 4], row[l + 5], row[l + 6]);
+        const std::string name = pr[f * n + i].first.substr(pr[f * n + i].first.find(',') + 1);
+        ASSERT_GE(names.find(name), 0) << name;
+        frame[name] = {local.toRotationMatrix(), t};
+      }
+      // Rows come in the source's joint order; compose in the view's
+      // hierarchy, whose joints come parents first.
+      const Skeleton& tree = view->motion.skeleton;
+      ASSERT_EQ(tree.size(), n);
+      std::map<std::string, Eigen::Vector3d> composed;
+      std::vector<Eigen::Matrix3d> o(n);
+      std::vector<Eigen::Vector3d> at(n);
+      for (int j = 0; j < static_cast<int>(n); ++j) {
+        const auto k = static_cast<std::size_t>(j);
+        const auto& [q, t] = frame.at(tree.joint(j).name);
+        const int parent = tree.joint(j).parent;
+        ASSERT_LT(parent, j);
+        const auto pk = static_cast<std::size_t>(parent);
+        o[k] = parent < 0 ? q : Eigen::Matrix3d(o[pk] * q);
+        at[k] = parent < 0 ? t : Eigen::Vector3d(at[pk] + o[pk] * t);
+        composed[tree.joint(j).name] = at[k];
+      }
+      for (std::size_t i = 0; i < n; ++i) {
+        const auto& row = pr[f * n + i].second;
+        const Eigen::Vector3d printed(row[0], row[1], row[2]);
+        const std::string name = pr[f * n + i].first.substr(pr[f * n + i].first.find(',') + 1);
+        worst_compose = std::max(worst_compose, (composed.at(name) - printed).norm());
+      }
+    }
+    EXPECT_LT(worst_query, 1e-9) << "gmr query and gmr positions differ by " << worst_query;
+    EXPECT_LT(worst_compose, 1e-9) << "the locals compose to positions " << worst_compose << " off";
+  }
+  const CommandRun st = gmr("stream cmu/02_01 --frames 0:5 --speed 10 --local-transforms --roots LeftHand" + port);
+  const CommandRun q = gmr("query cmu/02_01 --frames 0:5 --local-transforms --roots LeftHand" + port);
+  ASSERT_EQ(st.status, 0) << st.out;
   EXPECT_EQ(st.out, q.out);
 }
 

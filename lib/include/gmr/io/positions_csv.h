@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <filesystem>
+#include <optional>
 #include <ostream>
 #include <span>
 #include <string>
@@ -33,6 +34,27 @@ void write_poses_csv_header(std::ostream& out, OrientationColumns columns);
 void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
                           std::span<const Eigen::Matrix3d> orientations, std::size_t first_frame,
                           OrientationColumns columns);
+// `--local-transforms`: each row also holds the joint's engine-bone local
+// transform (gmr/view/engine_pose.h) in the rows' conventions, after any
+// orientation columns: lqw,lqx,lqy,lqz (lqw >= 0) and ltx,lty,ltz, the
+// rotation and translation relative to the parent joint's frame (a root's:
+// to the output frame).
+struct PoseColumns {
+  std::optional<OrientationColumns> orientations;  // none: no orientation columns
+  bool local_transforms = false;
+};
+// One chunk of rows, frame-major, skeleton.size() per frame; the spans a
+// column set does not ask for may be empty.
+struct PoseRows {
+  std::span<const Eigen::Vector3d> positions;
+  std::span<const Eigen::Matrix3d> orientations;
+  std::span<const Eigen::Quaterniond> local_rotations;
+  std::span<const Eigen::Vector3d> local_translations;
+};
+void write_pose_header(std::ostream& out, const PoseColumns& columns);
+void write_pose_rows(std::ostream& out, const Skeleton& skeleton, const PoseRows& rows, std::size_t first_frame,
+                     const PoseColumns& columns);
+
 // A name as one CSV field: RFC 4180 quoting, only when it needs it (a ',',
 // '"' or line break); the joint column here and `gmr markers` use it.
 std::string csv_field(std::string_view name);
