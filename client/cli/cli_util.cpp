@@ -1,5 +1,7 @@
 #include "cli_util.h"
 
+#include "gmr/io/motion_file.h"
+
 #include <cctype>
 #include <charconv>
 #include <cstdio>
@@ -64,6 +66,13 @@ std::string tree_indent(int depth) {
   constexpr int kMaxIndentLevels = 32;
   if (depth <= kMaxIndentLevels) return std::string(2 * static_cast<std::size_t>(depth), ' ');
   return std::string(2 * kMaxIndentLevels, ' ') + "[depth " + std::to_string(depth) + "] ";
+}
+
+Motion load(const std::string& file, const std::string& asf, double fps, Warnings& warnings) {
+  LoadOptions options;
+  options.asf = asf;
+  options.amc_fps = fps;
+  return take(load_motion(file, options, &warnings));
 }
 
 }  // namespace gmr::cli

@@ -12,6 +12,7 @@
 #include "gmr/core/error.h"
 #include "gmr/core/file_util.h"
 #include "gmr/core/names.h"
+#include "gmr/motion/motion.h"
 
 namespace gmr::cli {
 
@@ -46,6 +47,10 @@ FrameRange clamp_frame_range(FrameRange r, std::size_t frame_count);
 // Prints a reader's warnings on stderr, one "gmr: warning: ..." line each
 // (after the command's output; a failing command prints only its error line).
 void print_warnings(const Warnings& warnings);
+
+// A motion file (gmr::load_motion) with an .amc's --asf and --fps; throws
+// CommandError on a bad file, appends the reader's warnings.
+Motion load(const std::string& file, const std::string& asf, double fps, Warnings& warnings);
 
 // The extension of `path` in lower case: gmr::lower_extension.
 using ::gmr::lower_extension;

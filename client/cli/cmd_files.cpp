@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "cli_util.h"
+#include "cmd_retarget.h"
 #include "cmd_markers.h"
 #include "cmd_ops.h"
 #include "commands.h"
@@ -22,13 +23,6 @@
 namespace gmr::cli {
 namespace {
 
-Motion load(const std::string& file, const std::string& asf, double fps, Warnings& warnings) {
-  LoadOptions options;
-  options.asf = asf;
-  options.amc_fps = fps;
-  return take(load_motion(file, options, &warnings));
-}
-
 std::string format_seconds(double s) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.6g", s);
@@ -42,6 +36,7 @@ struct InfoOptions {
   std::string asf;
   std::string model;  // marker input: a skeleton model to fit (built-in name or file)
   double fps = 0.0;   // .amc input: frames per second (0: 120)
+  bool humanoid = false;
 };
 
 void run_info(const InfoOptions& o) {
@@ -94,6 +89,7 @@ void run_info(const InfoOptions& o) {
     for (auto it = ch.rbegin(); it != ch.rend(); ++it) stack.push_back(*it);
   }
   std::fwrite(out.data(), 1, out.size(), stdout);
+  if (o.humanoid) print_humanoid(sk);
   print_warnings(warnings);
 }
 
@@ -223,6 +219,8 @@ void add_file_commands(CLI::App& app) {
     cmd->add_option("--model", o->model,
                     "Marker file: fit this skeleton model (built-in name such as cmu41, or a model file) and report "
                     "the residuals");
+    cmd->add_flag("--humanoid", o->humanoid,
+                  "Also print the humanoid roles the built-in namings find (for gmr retarget; docs/retarget.md)");
     cmd->callback([o] { run_info(*o); });
   }
   {

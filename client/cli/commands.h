@@ -5,11 +5,12 @@
 
 namespace gmr::cli {
 
-void add_file_commands(CLI::App& app);    // info, convert, positions   (cmd_files.cpp)
-void add_ops_commands(CLI::App& app);     // roots, shift, split, join, strip-dummies (cmd_ops.cpp)
-void add_net_commands(CLI::App& app);     // ls, skeleton, query, stream (cmd_net.cpp)
-void add_demo_commands(CLI::App& app);    // demo: write the built-in library (cmd_demo.cpp)
-void add_marker_commands(CLI::App& app);  // markers: CSV of a .c3d/.trc   (cmd_markers.cpp)
+void add_file_commands(CLI::App& app);      // info, convert, positions   (cmd_files.cpp)
+void add_ops_commands(CLI::App& app);       // roots, shift, split, join, strip-dummies (cmd_ops.cpp)
+void add_net_commands(CLI::App& app);       // ls, skeleton, query, stream (cmd_net.cpp)
+void add_demo_commands(CLI::App& app);      // demo: write the built-in library (cmd_demo.cpp)
+void add_marker_commands(CLI::App& app);    // markers: CSV of a .c3d/.trc   (cmd_markers.cpp)
+void add_retarget_commands(CLI::App& app);  // retarget: onto another rig (cmd_retarget.cpp)
 
 // --fps of the commands that read motions: the frame rate of an .amc input,
 // which the file does not hold (default 120, the CMU captures').

@@ -40,6 +40,7 @@ int main(int argc, char** argv) {
   gmr::cli::add_net_commands(app);
   gmr::cli::add_demo_commands(app);
   gmr::cli::add_marker_commands(app);
+  gmr::cli::add_retarget_commands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

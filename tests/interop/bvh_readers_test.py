@@ -7,6 +7,8 @@ For every BVH and ASF/AMC take of the corpus (../shared/data), gmr writes:
   shift     re-rooted at the head (gmr shift --to), one ROOT
   forest    split at an upper arm (gmr split --at): two ROOT blocks
   forest1   the same forest with --single-root: one ROOT
+  retarget  CMU 02_01 put on the Character Creator and Mixamo rigs (gmr retarget),
+            judged against gmr positions of that file
 Blender's own importer (Debian's blender, rotation modes Quaternion and, for
 the takes' own rotations, Native Euler) and three.js's BVHLoader (npm `three`,
 played with an AnimationMixer) read them, and every joint's world
@@ -207,6 +209,21 @@ def main():
             cases.append((key, "forest1", f"{out}.forest1.bvh"))
         except RuntimeError as e:
             failures.append(f"{take}: gmr failed: {e}")
+
+    # Retargeted takes (gmr retarget, docs/retarget.md): CMU 02_01 on the
+    # Character Creator and Mixamo rigs, judged against gmr's positions of the
+    # retargeted file itself (so the readers see the same limb directions).
+    walk = data / "asfamc" / "02" / "02_01.amc"
+    for rig in (["bvh/cmu_iclone/001_01.bvh", "bvh/mixamo/Beta_jump.bvh"] if args.only in str(walk) else []):
+        key = f"retarget_{Path(rig).stem}"
+        out = work / key
+        try:
+            run([gmr, "retarget", str(walk), f"{out}.retarget.bvh", "--target", str(data / rig)])
+            ref, _ = read_positions(run([gmr, "positions", f"{out}.retarget.bvh"]), from_text=True)
+            refs[key] = (ref, len(next(iter(ref.values()))), size_of(ref) * REL_TOL, walk)
+            cases.append((key, "retarget", f"{out}.retarget.bvh"))
+        except RuntimeError as e:
+            failures.append(f"{walk} onto {rig}: gmr failed: {e}")
 
     # gmr's names for each exported file's nodes, in file order (End Sites named as gmr reads them).
     layouts = {}

@@ -40,10 +40,10 @@ struct CorpusCount {
   std::size_t files;
 };
 constexpr CorpusCount kCorpus[] = {
-    {"bvh", ".bvh", 44},      {"bvh/parser_fixtures", ".bvh", 7},
-    {"malformed", ".bvh", 7}, {"asfamc", ".asf", 7},
-    {"asfamc", ".amc", 9},    {"c3d", ".c3d", 6},
-    {"trc", ".trc", 9},
+    {"bvh", ".bvh", 44},       {"bvh/parser_fixtures", ".bvh", 7},
+    {"bvh/bandai", ".bvh", 6}, {"malformed", ".bvh", 7},
+    {"asfamc", ".asf", 7},     {"asfamc", ".amc", 9},
+    {"c3d", ".c3d", 6},        {"trc", ".trc", 9},
 };
 
 }  // namespace

@@ -1,0 +1,59 @@
+// A motion put on another humanoid skeleton (docs/retarget.md): every target
+// bone whose two ends have roles takes the source bone's world direction,
+// twist follows the source's orientation changes from its rest pose, the hips
+// take their up and left-right axes from the source's, and the root travels
+// the source's path scaled by the ratio of hip heights. The output has the
+// target's skeleton exactly (names, hierarchy, offsets: bone lengths), with
+// rotation channels added where a driven joint had fewer than three.
+#pragma once
+
+#include <Eigen/Core>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "gmr/core/error.h"
+#include "gmr/motion/motion.h"
+#include "gmr/retarget/humanoid.h"
+
+namespace gmr {
+
+struct RetargetOptions {
+  // Role -> joint name maps (a --map JSON file); null: the built-in namings.
+  const std::map<std::string, std::string>* source_map = nullptr;
+  const std::map<std::string, std::string>* target_map = nullptr;
+};
+
+// What a retarget found and decided, for `gmr retarget` and the tests.
+struct RetargetPlan {
+  HumanoidMap source, target;
+  // Source world axes -> target world axes: both rigs' rest up (hips to head)
+  // and left (right to left hip) snapped to the nearest signed axes when
+  // within 30 degrees of one, so output directions are G times the source's.
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
+  double scale = 1.0;  // target hip height / source hip height (reference poses)
+  // The pose each rig is measured in: "rest pose" (every rotation zero) when
+  // that is a standing humanoid, else "first frame" (Character Creator rigs
+  // bake their bone axes into the rotations, so their rest pose is folded up;
+  // their files start with a T-pose).
+  std::string source_reference, target_reference;
+  // Target joints that get rotations, as "joint (role -> role)" lines.
+  std::vector<std::string> driven;
+};
+
+// Plans a retarget of `source` onto the rig `target` (a motion whose skeleton
+// is the target; its frames are used only for a reference pose, above).
+// Fails when either skeleton is not a humanoid the maps cover (naming the
+// missing roles), when a role's joint is not below the previous role's (a map
+// that crosses chains), or when neither the rest pose nor the first frame of
+// a rig stands like a humanoid (head above hips, feet below, hips apart).
+Result<RetargetPlan> plan_retarget(const Motion& source, const Motion& target, const RetargetOptions& options = {});
+
+// `source`'s frames on `target`'s skeleton (post-rotation, the source's frame
+// time). Joints that no role drives keep their reference-pose channels. A
+// pre-rotation rig is converted to post-rotation first; one whose conversion
+// would add joints is refused.
+Result<Motion> retarget(const Motion& source, const Motion& target, const RetargetOptions& options = {},
+                        RetargetPlan* plan_out = nullptr);
+
+}  // namespace gmr
