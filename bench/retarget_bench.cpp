@@ -28,8 +28,8 @@ void BM_RetargetTake(benchmark::State& state) {
     benchmark::DoNotOptimize(out->values.data());
   }
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(source.frame_count));
-  state.SetLabel(std::to_string(source.skeleton.size()) + " joints onto " + std::to_string(rig.skeleton.size()) +
-                 " (" + kRigs[state.range(0)] + ")");
+  state.SetLabel(std::to_string(source.skeleton.size()) + " joints onto " + std::to_string(rig.skeleton.size()) + " (" +
+                 kRigs[state.range(0)] + ")");
 }
 BENCHMARK(BM_RetargetTake)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 

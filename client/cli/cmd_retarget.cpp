@@ -88,8 +88,9 @@ void print_humanoid(const Skeleton& skeleton) {
 void add_retarget_commands(CLI::App& app) {
   auto o = std::make_shared<RetargetCommand>();
   CLI::App* cmd = app.add_subcommand(
-      "retarget", "Put a motion on another humanoid rig: OUT has the rig's skeleton (names, hierarchy, bone lengths) "
-                  "and the source's frames (docs/retarget.md); atomic write");
+      "retarget",
+      "Put a motion on another humanoid rig: OUT has the rig's skeleton (names, hierarchy, bone lengths) "
+      "and the source's frames (docs/retarget.md); atomic write");
   cmd->add_option("SOURCE", o->source, "The motion (.bvh, .gmr, .gmrb, .amc)")->required();
   cmd->add_option("OUT", o->out, "Output file by extension (.bvh, .gmr, .gmrb)")->required();
   cmd->add_option("--target", o->target, "The rig: a file whose skeleton is the target (.bvh, .gmr, .gmrb)")

@@ -15,8 +15,8 @@
 
 namespace gmr {
 namespace {
-using ::testing::HasSubstr;
 using test::shell_quote;
+using ::testing::HasSubstr;
 
 class CliRetarget : public test::CliTest {};
 
@@ -54,8 +54,8 @@ TEST_F(CliRetarget, PutsATakeOnARigAndSaysWhatItMapped) {
                                     "right_upper_leg": "Beta:RightUpLeg", "right_lower_leg": "Beta:RightLeg",
                                     "right_foot": "Beta:RightFoot"})")
                   .ok());
-  const auto mapped = gmr("retarget " + source + " " + path("mapped.bvh") + " --target " + rig + " --map " +
-                          path("map.json"));
+  const auto mapped =
+      gmr("retarget " + source + " " + path("mapped.bvh") + " --target " + rig + " --map " + path("map.json"));
   ASSERT_EQ(mapped.status, 0) << mapped.err;
   EXPECT_THAT(mapped.err, HasSubstr("(map naming"));
 }
@@ -65,13 +65,13 @@ TEST_F(CliRetarget, BadMapsAndRigsGiveOneLine) {
   const std::string source = shell_quote(test::data_file("asfamc/02/02_01.amc").string());
   const std::string rig = shell_quote(test::data_file("bvh/mixamo/Beta_jump.bvh").string());
   ASSERT_TRUE(write_file_atomic(dir_ / "broken.json", "{\"hips\": ").ok());
-  expect_one_line_error("retarget " + source + " " + path("o.bvh") + " --target " + rig + " --map " +
-                            path("broken.json"),
-                        "not a JSON object of role -> joint name");
+  expect_one_line_error(
+      "retarget " + source + " " + path("o.bvh") + " --target " + rig + " --map " + path("broken.json"),
+      "not a JSON object of role -> joint name");
   ASSERT_TRUE(write_file_atomic(dir_ / "absent.json", "{\"hips\": \"Pelvis\"}").ok());
-  expect_one_line_error("retarget " + source + " " + path("o.bvh") + " --target " + rig + " --map " +
-                            path("absent.json"),
-                        "gives role 'hips' to 'Pelvis', which the skeleton does not have");
+  expect_one_line_error(
+      "retarget " + source + " " + path("o.bvh") + " --target " + rig + " --map " + path("absent.json"),
+      "gives role 'hips' to 'Pelvis', which the skeleton does not have");
   const std::string crab = shell_quote(test::data_file("bvh/truebones/Crab-dance-long.bvh").string());
   expect_one_line_error("retarget " + source + " " + path("o.bvh") + " --target " + crab, "not a humanoid");
   expect_one_line_error("info " + crab + " --humanoid", "not a humanoid");

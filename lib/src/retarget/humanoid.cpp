@@ -7,11 +7,12 @@ namespace gmr {
 namespace {
 
 constexpr std::array<std::string_view, kRoleCount> kRoleNames = {
-    "hips",          "spine",           "chest",           "upper_chest",     "neck",           "head",
-    "head_end",      "left_shoulder",   "left_upper_arm",  "left_lower_arm",  "left_hand",      "left_hand_end",
-    "right_shoulder", "right_upper_arm", "right_lower_arm", "right_hand",     "right_hand_end", "left_upper_leg",
-    "left_lower_leg", "left_foot",      "left_toes",       "left_toes_end",   "right_upper_leg", "right_lower_leg",
-    "right_foot",    "right_toes",      "right_toes_end"};
+    "hips",       "spine",          "chest",           "upper_chest",     "neck",
+    "head",       "head_end",       "left_shoulder",   "left_upper_arm",  "left_lower_arm",
+    "left_hand",  "left_hand_end",  "right_shoulder",  "right_upper_arm", "right_lower_arm",
+    "right_hand", "right_hand_end", "left_upper_leg",  "left_lower_leg",  "left_foot",
+    "left_toes",  "left_toes_end",  "right_upper_leg", "right_lower_leg", "right_foot",
+    "right_toes", "right_toes_end"};
 
 // One naming: per role (in Role order) the joint names it may have, '|'
 // between alternatives, "" for none. Joints are compared without a "prefix:"
@@ -176,9 +177,13 @@ Result<HumanoidMap> map_humanoid(const Skeleton& skeleton, const std::map<std::s
     std::map<int, std::string> taken;  // joint -> role
     for (const auto& [role_text, joint_name] : *given) {
       const auto role = parse_role(role_text);
-      if (!role) return make_error("the map names an unknown role '" + role_text + "' (roles: hips, spine, ..., see docs/retarget.md)");
+      if (!role)
+        return make_error("the map names an unknown role '" + role_text +
+                          "' (roles: hips, spine, ..., see docs/retarget.md)");
       const int j = skeleton.find(joint_name);
-      if (j < 0) return make_error("the map gives role '" + role_text + "' to '" + joint_name + "', which the skeleton does not have");
+      if (j < 0)
+        return make_error("the map gives role '" + role_text + "' to '" + joint_name +
+                          "', which the skeleton does not have");
       if (const auto it = taken.find(j); it != taken.end()) {
         return make_error("the map gives joint '" + joint_name + "' two roles: " + it->second + " and " + role_text);
       }

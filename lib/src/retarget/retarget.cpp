@@ -298,8 +298,9 @@ Result<Motion> retarget(const Motion& source, const Motion& target_rig, const Re
   auto post = to_post_rotation(target_rig);
   if (!post.ok()) return post.error();
   if (post->skeleton.size() != target_rig.skeleton.size()) {
-    return make_error("the target rig is a pre-rotation motion whose joints' children turn apart: as post-rotation it "
-                      "would need joints it does not have; give the rig as BVH");
+    return make_error(
+        "the target rig is a pre-rotation motion whose joints' children turn apart: as post-rotation it "
+        "would need joints it does not have; give the rig as BVH");
   }
   auto planned = make_plan(source, *post, options);
   if (!planned.ok()) return planned.error();

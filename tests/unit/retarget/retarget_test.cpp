@@ -30,9 +30,7 @@ Motion load(const std::string& relative) {
   return m.ok() ? std::move(m).value() : Motion{};
 }
 
-double degrees_between(const Vec& a, const Vec& b) {
-  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
-}
+double degrees_between(const Vec& a, const Vec& b) { return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI; }
 
 double percentile(std::vector<double> v, double q) {
   std::sort(v.begin(), v.end());
@@ -65,7 +63,8 @@ double worst_limb_direction(const Motion& source, const Motion& out, const Retar
     compute_frame(source, f, ps);
     compute_frame(out, f, po);
     for (const auto& [a, b] : kLimbBones) {
-      const Vec s = plan.axes * (ps[static_cast<std::size_t>(plan.source[b])] - ps[static_cast<std::size_t>(plan.source[a])]);
+      const Vec s =
+          plan.axes * (ps[static_cast<std::size_t>(plan.source[b])] - ps[static_cast<std::size_t>(plan.source[a])]);
       const Vec o = po[static_cast<std::size_t>(plan.target[b])] - po[static_cast<std::size_t>(plan.target[a])];
       worst = std::max(worst, degrees_between(s, o));
     }
@@ -219,7 +218,8 @@ TEST(Retarget, BadMapsAndRigsAreRefusedNamingTheRoleOrBone) {
   ASSERT_TRUE(mapped.ok());
   std::map<std::string, std::string> map;
   for (std::size_t r = 0; r < kRoleCount; ++r) {
-    if (mapped->joint[r] >= 0) map[std::string(role_name(static_cast<Role>(r)))] = rig.skeleton.joint(mapped->joint[r]).name;
+    if (mapped->joint[r] >= 0)
+      map[std::string(role_name(static_cast<Role>(r)))] = rig.skeleton.joint(mapped->joint[r]).name;
   }
   auto refused = [&](std::map<std::string, std::string> m, const Motion& target) {
     RetargetOptions o;
