@@ -288,6 +288,19 @@ Result<ViewState> Client::shift_root(std::uint32_t view, const std::string& join
   return to_view(impl_->expect(m, pb::ServerMessage::kView));
 }
 
+Result<ViewState> Client::retarget(std::uint32_t view, const Skeleton& rig, const std::vector<double>& reference,
+                                   const std::map<std::string, std::string>& rig_map,
+                                   const std::map<std::string, std::string>& source_map) {
+  pb::ClientMessage m;
+  auto* r = m.mutable_retarget();
+  r->set_view_id(view);
+  wire::to_proto(rig, *r->mutable_target());
+  r->mutable_reference()->Add(reference.begin(), reference.end());
+  for (const auto& [role, joint] : rig_map) (*r->mutable_target_map())[role] = joint;
+  for (const auto& [role, joint] : source_map) (*r->mutable_source_map())[role] = joint;
+  return to_view(impl_->expect(m, pb::ServerMessage::kView));
+}
+
 Result<ViewState> Client::split(std::uint32_t view, const std::string& joint) {
   pb::ClientMessage m;
   m.mutable_split()->set_view_id(view);

@@ -5,7 +5,6 @@
 #include <array>
 #include <cmath>
 #include <optional>
-#include <tuple>
 
 #include "gmr/core/rotation.h"
 #include "gmr/kinematics/forward_kinematics.h"
@@ -125,11 +124,24 @@ bool below(const Skeleton& s, int ancestor, int j) {
   return false;
 }
 
-// The child of `a` on the way down to its descendant `b`.
+// The joint after `a` on the tree path from `a` to `b` (same tree, a != b):
+// a child of `a` when `b` is below it, else its parent (a re-rooted view
+// holds limbs upside down).
 int next_on_path(const Skeleton& s, int a, int b) {
+  if (!below(s, a, b)) return s.joint(a).parent;
   int k = b;
   while (s.joint(k).parent != a) k = s.joint(k).parent;
   return k;
+}
+
+// The joint whose W turns the edge between neighbours a and n: in pre-rotation
+// the edge's child end (W_j is the frame of the bone p(j) -> j), in
+// post-rotation its parent end (W_p turns the offsets of p's children). An
+// edge keeps its frame whichever end a view roots it at.
+int edge_frame(const Skeleton& s, Convention convention, int a, int n) {
+  const bool down = s.joint(n).parent == a;
+  const int child = down ? n : a, parent = down ? a : n;
+  return convention == Convention::kPreRotation ? child : parent;
 }
 
 // A bone of both rigs between two roles: the target's joint a_t turns so that
@@ -216,16 +228,19 @@ Result<Plan> make_plan(const Motion& source_motion, const Motion& target_motion,
 
   auto add_segment = [&](Role from, Role to) -> Status {
     Segment g{from, to, T[from], T[to], S[from], S[to], kNoParent, {}, {}, {}};
-    for (const auto& [rig, a, b, name] :
-         {std::tuple{&target, g.a_t, g.b_t, "target"}, std::tuple{&source, g.a_s, g.b_s, "source"}}) {
-      if (!below(*rig, a, b)) {
-        return make_error(std::string("the ") + name + "'s " + std::string(role_name(to)) + " joint '" +
-                          rig->joint(b).name + "' is not below its " + std::string(role_name(from)) + " joint '" +
-                          rig->joint(a).name + "'");
-      }
+    // The rig turns a_t to move b_t, so b_t must hang below it; the source
+    // only needs a path between them (a re-rooted view may hang a leg from
+    // its foot).
+    auto refuse = [&](const Skeleton& rig, int a, int b, const char* name, const char* relation) {
+      return make_error(std::string("the ") + name + "'s " + std::string(role_name(to)) + " joint '" +
+                        rig.joint(b).name + "' is not " + relation + " its " + std::string(role_name(from)) +
+                        " joint '" + rig.joint(a).name + "'");
+    };
+    if (g.a_t == g.b_t || !below(target, g.a_t, g.b_t)) return refuse(target, g.a_t, g.b_t, "target", "below");
+    if (g.a_s == g.b_s || source.root_of(g.a_s) != source.root_of(g.b_s)) {
+      return refuse(source, g.a_s, g.b_s, "source", "in the tree of");
     }
-    const int next = next_on_path(source, g.a_s, g.b_s);
-    g.frame_s = source_convention == Convention::kPreRotation ? next : g.a_s;
+    g.frame_s = edge_frame(source, source_convention, g.a_s, next_on_path(source, g.a_s, g.b_s));
     const Mat& frame_t = wt[static_cast<std::size_t>(g.a_t)];
     const Vec rest_t = frame_t.transpose() * (at(pt, g.b_t) - at(pt, g.a_t));
     const Vec rest_s = G * (at(ps, g.b_s) - at(ps, g.a_s));
@@ -292,9 +307,22 @@ Result<RetargetPlan> plan_retarget(const Motion& source, const Motion& target, c
   return plan->report;
 }
 
-Result<Motion> retarget(const Motion& source, const Motion& target_rig, const RetargetOptions& options,
-                        RetargetPlan* plan_out) {
-  if (auto s = source.validate(); !s.ok()) return s.error();
+// What a Retargeter keeps between calls: the plan and everything per joint
+// that does not change with the frame.
+struct Retargeter::State {
+  Plan plan;
+  Skeleton source_skeleton;
+  Convention source_convention = Convention::kPostRotation;
+  Skeleton target;  // the rig, post-rotation
+  Skeleton out;     // the rig with the channels driven joints need
+  std::vector<int> segment_of;
+  std::vector<bool> driven;
+  std::vector<double> reference;     // per output channel
+  std::vector<Mat> reference_local;  // per joint
+  Mat hips_rest;
+};
+
+Result<Retargeter> Retargeter::make(const Motion& source, const Motion& target_rig, const RetargetOptions& options) {
   auto post = to_post_rotation(target_rig);
   if (!post.ok()) return post.error();
   if (post->skeleton.size() != target_rig.skeleton.size()) {
@@ -304,77 +332,106 @@ Result<Motion> retarget(const Motion& source, const Motion& target_rig, const Re
   }
   auto planned = make_plan(source, *post, options);
   if (!planned.ok()) return planned.error();
-  const Plan& plan = *planned;
-  if (plan_out != nullptr) *plan_out = plan.report;
-  const Skeleton& target = post->skeleton;
-  const Mat& G = plan.report.axes;
+  auto st = std::make_shared<State>();
+  st->plan = std::move(planned).value();
+  st->source_skeleton = source.skeleton;
+  st->source_convention = source.convention;
+  st->target = post->skeleton;
+  const Plan& plan = st->plan;
+  const Skeleton& target = st->target;
   const std::size_t n = target.size();
-
-  std::vector<int> segment_of(n, -1);
-  std::vector<bool> driven(n, false);
+  st->segment_of.assign(n, -1);
+  st->driven.assign(n, false);
   for (std::size_t i = 0; i < plan.segments.size(); ++i) {
     const auto a = static_cast<std::size_t>(plan.segments[i].a_t);
-    if (segment_of[a] < 0) segment_of[a] = static_cast<int>(i);  // one bone per joint: the first role chain's
-    driven[a] = true;
+    if (st->segment_of[a] < 0) st->segment_of[a] = static_cast<int>(i);  // one bone per joint: the first chain's
+    st->driven[a] = true;
   }
-  driven[static_cast<std::size_t>(plan.hips_t)] = true;
-  auto skeleton = output_skeleton(target, driven);
+  st->driven[static_cast<std::size_t>(plan.hips_t)] = true;
+  auto skeleton = output_skeleton(target, st->driven);
   if (!skeleton.ok()) return skeleton.error();
-
-  Motion out;
-  out.skeleton = std::move(skeleton).value();
-  out.convention = Convention::kPostRotation;
-  out.frame_time = source.frame_time;
-  out.frame_count = source.frame_count;
-  out.values.resize(out.frame_count * out.stride());
+  st->out = std::move(skeleton).value();
   // The reference values, moved to the output's channel slots (added channels start at 0).
-  std::vector<double> reference(out.stride(), 0.0);
+  st->reference.assign(static_cast<std::size_t>(st->out.channel_count()), 0.0);
   for (int j = 0; j < static_cast<int>(n); ++j) {
     const Joint& from = target.joint(j);
-    const Joint& to = out.skeleton.joint(j);
+    const Joint& to = st->out.joint(j);
     for (std::size_t c = 0; c < from.channels.size(); ++c) {
       const auto k = std::find(to.channels.begin(), to.channels.end(), from.channels[c]) - to.channels.begin();
-      reference[static_cast<std::size_t>(out.skeleton.channel_offset(j) + k)] =
+      st->reference[static_cast<std::size_t>(st->out.channel_offset(j) + k)] =
           plan.target_ref.values[static_cast<std::size_t>(target.channel_offset(j)) + c];
     }
   }
   // Undriven joints keep their reference local rotation.
-  std::vector<Mat> reference_local(n);
+  st->reference_local.resize(n);
   for (int j = 0; j < static_cast<int>(n); ++j) {
     const int parent = target.joint(j).parent;
     const Mat& w = plan.target_ref.w[static_cast<std::size_t>(j)];
-    reference_local[static_cast<std::size_t>(j)] =
+    st->reference_local[static_cast<std::size_t>(j)] =
         parent == kNoParent ? w : Mat(plan.target_ref.w[static_cast<std::size_t>(parent)].transpose() * w);
   }
+  st->hips_rest = body_frame(plan.hips_up_rest, plan.hips_left_rest);
+  Retargeter r;
+  r.state_ = std::move(st);
+  return r;
+}
+
+const RetargetPlan& Retargeter::plan() const { return state_->plan.report; }
+
+bool Retargeter::fits(const Motion& source) const {
+  if (!state_) return false;
+  const Skeleton& a = state_->source_skeleton;
+  const Skeleton& b = source.skeleton;
+  if (source.convention != state_->source_convention || a.size() != b.size()) return false;
+  for (int j = 0; j < static_cast<int>(a.size()); ++j) {
+    const Joint &x = a.joint(j), &y = b.joint(j);
+    if (x.name != y.name || x.parent != y.parent || x.offset != y.offset || x.channels != y.channels) return false;
+  }
+  return true;
+}
+
+Result<Motion> Retargeter::apply(const Motion& source) const {
+  if (auto s = source.validate(); !s.ok()) return s.error();
+  if (!fits(source)) return make_error("retarget: the motion is not on the skeleton the retargeter was made for");
+  const State& st = *state_;
+  const Plan& plan = st.plan;
+  const Skeleton& target = st.target;
+  const Mat& G = plan.report.axes;
+  const std::size_t n = target.size();
+  Motion out;
+  out.skeleton = st.out;
+  out.convention = Convention::kPostRotation;
+  out.frame_time = source.frame_time;
+  out.frame_count = source.frame_count;
+  out.values.resize(out.frame_count * out.stride());
 
   std::vector<Vec> ps;
   std::vector<Mat> ws, wt(n);
   std::vector<Vec> hint(n, Vec::Zero());
   auto at = [&](int j) { return ps[static_cast<std::size_t>(j)]; };
-  const Mat hips_rest = body_frame(plan.hips_up_rest, plan.hips_left_rest);
   const HumanoidMap& S = plan.report.source;
   for (std::size_t f = 0; f < source.frame_count; ++f) {
     positions_and_frames(source, f, ps, ws);
     std::span<double> values = out.frame(f);
-    std::copy(reference.begin(), reference.end(), values.begin());
+    std::copy(st.reference.begin(), st.reference.end(), values.begin());
     for (int j = 0; j < static_cast<int>(n); ++j) {
       const auto k = static_cast<std::size_t>(j);
       const int parent = target.joint(j).parent;
       const Mat parent_w = parent == kNoParent ? Mat::Identity() : wt[static_cast<std::size_t>(parent)];
-      Mat w = parent_w * reference_local[k];
+      Mat w = parent_w * st.reference_local[k];
       if (j == plan.hips_t) {
         const Vec up = G * (at(plan.up_s) - at(plan.hips_s));
         const Vec left = G * (at(S[Role::kLeftUpperLeg]) - at(S[Role::kRightUpperLeg]));
-        w = body_frame(up, left) * hips_rest.transpose() * plan.hips_rest_frame;
-      } else if (segment_of[k] >= 0) {
-        const Segment& g = plan.segments[static_cast<std::size_t>(segment_of[k])];
+        w = body_frame(up, left) * st.hips_rest.transpose() * plan.hips_rest_frame;
+      } else if (st.segment_of[k] >= 0) {
+        const Segment& g = plan.segments[static_cast<std::size_t>(st.segment_of[k])];
         const Mat d = G * ws[static_cast<std::size_t>(g.frame_s)] * g.rest_frame_s.transpose() * G.transpose();
         const Mat predicted = d * g.tpose_t;
         const Vec want = G * (at(g.b_s) - at(g.a_s));
         w = swing(predicted * g.rest_t, want) * predicted;
       }
       wt[k] = w;
-      if (!driven[k]) continue;
+      if (!st.driven[k]) continue;
       // The rotation channels, in the joint's order, continuous with the last frame.
       const Mat local = parent_w.transpose() * w;
       const Joint& joint = out.skeleton.joint(j);
@@ -405,6 +462,15 @@ Result<Motion> retarget(const Motion& source, const Motion& target_rig, const Re
   }
   if (auto s = out.validate(); !s.ok()) return s.error();
   return out;
+}
+
+Result<Motion> retarget(const Motion& source, const Motion& target, const RetargetOptions& options,
+                        RetargetPlan* plan_out) {
+  if (auto s = source.validate(); !s.ok()) return s.error();
+  auto r = Retargeter::make(source, target, options);
+  if (!r.ok()) return r.error();
+  if (plan_out != nullptr) *plan_out = r->plan();
+  return r->apply(source);
 }
 
 }  // namespace gmr

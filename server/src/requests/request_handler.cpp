@@ -3,10 +3,14 @@
 #include <spdlog/spdlog.h>
 
 #include <exception>
+#include <map>
+#include <memory>
+#include <variant>
 #include <new>
 #include <utility>
 
 #include "gmr/wire/framing.h"
+#include "requests/rig.h"
 #include "transport/connection_log.h"
 
 namespace gmr::server {
@@ -148,6 +152,8 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point b
           [](const EditReport& e, pb::ViewInfo& info) {
             for (const auto& name : e.removed) info.add_removed(name);
           });
+    case C::kRetarget:
+      return retarget(req, began);
     case C::kSetCoordinates:
       return views_.set_coordinates(req.set_coordinates());
     case C::kQueryFrames:
@@ -178,6 +184,7 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point b
 bool RequestHandler::needs_control(pb::ClientMessage::BodyCase request) {
   using C = pb::ClientMessage;
   switch (request) {
+    case C::kRetarget:
     case C::kShiftRoot:
     case C::kSplit:
     case C::kJoin:
@@ -293,6 +300,18 @@ Reply RequestHandler::stats() {
   st->set_io_threads(static_cast<std::uint32_t>(link_.services.lanes ? link_.services.lanes->size() : 1));
   if (auto conn = link_.connection()) st->set_io_thread(static_cast<std::uint32_t>(conn->lane()));
   return out;
+}
+
+Reply RequestHandler::retarget(const pb::ClientMessage& req, Clock::time_point began) {
+  const pb::Retarget& r = req.retarget();
+  auto rig = check_rig(r, link_.services.cfg);
+  if (auto* refusal = std::get_if<Refusal>(&rig)) return *refusal;
+  std::map<std::string, std::string> target_map(r.target_map().begin(), r.target_map().end());
+  std::map<std::string, std::string> source_map(r.source_map().begin(), r.source_map().end());
+  return edit_view(req, began, r.view_id(), [&](const View& v) {
+    return v.edit_retarget(std::get<std::shared_ptr<const Motion>>(std::move(rig)), std::move(target_map),
+                           std::move(source_map));
+  });
 }
 
 Reply RequestHandler::close_view(const pb::CloseView& r) {

@@ -56,6 +56,7 @@ class RequestHandler : public Connection::Handler,
   Reply hello(const pb::Hello& r);
   Reply stats();
   Reply close_view(const pb::CloseView& r);
+  Reply retarget(const pb::ClientMessage& req, Clock::time_point began);
   // A structural edit (gmr/server/view.h's ViewEdit) of view `view_id`:
   // computed at once on a short motion, else on the server's edit thread
   // while this connection's requests wait unread (the reply then comes from

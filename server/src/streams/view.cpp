@@ -5,15 +5,18 @@
 #include <algorithm>
 #include <exception>
 #include <functional>
+#include <mutex>
 #include <new>
 
 #include "gmr/fast/compiled_motion.h"
 #include "gmr/fast/fast_fk.h"
+#include "gmr/ops/convert.h"
 #include "gmr/ops/join_tree.h"
 #include "gmr/ops/set_roots.h"
 #include "gmr/ops/shift_root.h"
 #include "gmr/ops/split_tree.h"
 #include "gmr/ops/strip_dummies.h"
+#include "gmr/retarget/retarget.h"
 
 namespace gmr::server {
 
@@ -228,6 +231,51 @@ Result<ViewEdit> View::edit_join(const std::string& root) const {
         return joined;
       },
       report);
+}
+
+Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map<std::string, std::string> target_map,
+                                     std::map<std::string, std::string> source_map) const {
+  if (content_->relative_to >= 0) {
+    return make_error("retarget: the view is seen from '" + motion().skeleton.joint(content_->relative_to).name +
+                      "'; set world coordinates first, and a viewpoint on the rig's joints after");
+  }
+  auto maps = std::make_shared<const std::pair<std::map<std::string, std::string>, std::map<std::string, std::string>>>(
+      std::move(target_map), std::move(source_map));
+  RetargetOptions options;
+  if (!maps->first.empty()) options.target_map = &maps->first;
+  if (!maps->second.empty()) options.source_map = &maps->second;
+  auto first = Retargeter::make(motion(), *rig, options);
+  if (!first.ok()) return first.error();
+  // The plan is made once: a live view replays this step on every frame, each
+  // a one-frame motion on the same skeleton (a re-rooted view makes another).
+  struct Cache {
+    std::mutex mutex;
+    Retargeter retargeter;
+  };
+  auto cache = std::make_shared<Cache>();
+  cache->retargeter = std::move(first).value();
+  ViewEdit edit = make_edit("retarget", [rig, maps, cache](const Motion& m) -> Result<Motion> {
+    Retargeter r;
+    {
+      std::lock_guard lock(cache->mutex);
+      r = cache->retargeter;
+    }
+    if (!r.fits(m)) {
+      RetargetOptions o;
+      if (!maps->first.empty()) o.target_map = &maps->first;
+      if (!maps->second.empty()) o.source_map = &maps->second;
+      auto made = Retargeter::make(m, *rig, o);
+      if (!made.ok()) return made.error();
+      r = std::move(made).value();
+      std::lock_guard lock(cache->mutex);
+      cache->retargeter = r;
+    }
+    auto out = r.apply(m);
+    if (!out.ok()) return out.error();
+    return to_pre_rotation(*out);
+  });
+  edit.written_joints_ = rig->skeleton.size();
+  return edit;
 }
 
 Result<ViewEdit> View::edit_set_roots(const std::vector<std::string>& roots) const {

@@ -27,6 +27,8 @@
 #include "gmr/server/library.h"
 #include "gmr/server/auth.h"
 #include "gmr/view/view.h"
+#include "gmr/ops/convert.h"
+#include "gmr/retarget/retarget.h"
 #include "gmr/wire/convert.h"
 #include "live_test_util.h"
 #include "net_test_util.h"
@@ -243,7 +245,8 @@ TEST(LivePublish, SubscribersOfEveryViewGetThePositionsOfThePublishedFrames) {
   EXPECT_TRUE(subs[5].joined_running);
 
   publish_frames(*pub, id, *source, 0, n, pace());
-  ASSERT_TRUE(pub->unpublish(id).ok());
+  const Status unpublished = pub->unpublish(id);
+  ASSERT_TRUE(unpublished.ok()) << unpublished.error().to_string();
   EXPECT_TRUE(pub->take_errors().empty());
 
   for (std::size_t i = 0; i < cases.size(); ++i) {
@@ -321,6 +324,45 @@ TEST(LivePublish, AViewEditedMidStreamFollowsOnTheNextFrame) {
   // re-rooted view's replays were behind (a busy or sanitized build).
   EXPECT_EQ(w.indices.size() + end->frames_dropped + end->frames_skipped, n);
   EXPECT_GE(w.indices.size(), n / 2);
+}
+
+// A live source's view put on a rig (Retarget): each published frame is
+// retargeted as it comes, and equals gmr::retarget of the whole take at that
+// frame.
+TEST(LivePublish, ARetargetedViewGetsEachFrameOnTheRig) {
+  GMR_REQUIRE_DATA();
+  const auto source = source_motion();
+  ASSERT_NE(source, nullptr);
+  const std::size_t n = std::min<std::size_t>(source->frame_count, 60);
+  auto rig = load_motion(data_file("bvh/mixamo/Beta_jump.bvh"));
+  ASSERT_TRUE(rig.ok());
+  auto on_rig = retarget(*source, *rig);
+  ASSERT_TRUE(on_rig.ok()) << on_rig.error().to_string();
+  auto expected = to_pre_rotation(*on_rig);
+  ASSERT_TRUE(expected.ok());
+  const Reference want = reference(*expected, {}, n);
+  LiveRig live;
+  ASSERT_TRUE(live.pub && live.sub);
+  const std::uint32_t id = live.pub->publish(source->skeleton, live_options(*source, "lab")).value().id;
+  auto v = live.sub->create_view("lab").value();
+  auto retargeted = live.sub->retarget(v.id, rig->skeleton);
+  ASSERT_TRUE(retargeted.ok()) << retargeted.error().to_string();
+  Watch w;
+  w.want = &want;
+  w.tolerance = 1e-9 * skeleton_size(*expected);
+  client::SubscribeOptions so;
+  so.float64 = true;
+  watch(*live.sub, *retargeted, so, w);
+  publish_frames(*live.pub, id, *source, 0, n, pace());
+  ASSERT_TRUE(live.pub->unpublish(id).ok());
+  const auto end = w.end.wait();
+  ASSERT_TRUE(end.has_value());
+  std::lock_guard lock(w.mutex);
+  EXPECT_EQ(w.bad, 0u) << w.first_problem;
+  EXPECT_EQ(w.skeleton.size(), rig->skeleton.size());
+  EXPECT_EQ(w.indices.size() + end->frames_dropped + end->frames_skipped, n);
+  EXPECT_GE(w.indices.size(), n / 2);
+  EXPECT_GE(w.compared, n / 2 * rig->skeleton.size());
 }
 
 TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {

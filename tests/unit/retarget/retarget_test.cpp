@@ -16,6 +16,7 @@
 
 #include "gmr/io/motion_file.h"
 #include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/ops/shift_root.h"
 #include "test_data.h"
 
 namespace gmr {
@@ -206,6 +207,29 @@ TEST(Retarget, RoundTripThroughMixamoKeepsEveryLimb) {
   const double worst = worst_limb_direction(source, *cmu, both);
   EXPECT_LT(worst, 1.0);
   std::printf("  round trip: limbs within %.2g deg of the source\n", worst);
+}
+
+// A re-rooted source (the legs hanging from a foot, as a view re-rooted at
+// it holds them) retargets to the same frames: the method reads positions
+// and the frames of bones, which a shift of the root does not change.
+TEST(Retarget, AReRootedSourceRetargetsTheSame) {
+  GMR_REQUIRE_DATA();
+  const Motion source = load("asfamc/01/01_01.amc");
+  const Motion rig = load("bvh/mixamo/Beta_jump.bvh");
+  auto plain = retarget(source, rig);
+  ASSERT_TRUE(plain.ok()) << plain.error().to_string();
+  for (const char* joint : {"ltibia", "head", "rhand"}) {
+    SCOPED_TRACE(joint);
+    auto rerooted = shift_root(source, source.skeleton.find(joint));
+    ASSERT_TRUE(rerooted.ok()) << rerooted.error().to_string();
+    auto out = retarget(*rerooted, rig);
+    ASSERT_TRUE(out.ok()) << out.error().to_string();
+    const auto a = compute_positions(*plain), b = compute_positions(*out);
+    ASSERT_EQ(a.size(), b.size());
+    double worst = 0;
+    for (std::size_t k = 0; k < a.size(); ++k) worst = std::max(worst, (a[k] - b[k]).norm());
+    EXPECT_LT(worst, 1e-9 * skeleton_size(*plain)) << "frames differ by " << worst;
+  }
 }
 
 // Refusals name what is wrong: a map with an absent bone, a bone given two

@@ -14,6 +14,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -314,6 +315,13 @@ class Client {
   Result<ViewState> set_roots(std::uint32_t view, const std::vector<std::string>& roots);
   Result<ViewState> strip_dummies(std::uint32_t view);
   Result<ViewState> set_coordinates(std::uint32_t view, const std::string& relative_to);  // "" = world
+  // The view's motion put on another humanoid rig (docs/retarget.md): its
+  // skeleton (BVH-like: post-rotation), the channel values of a pose it stands
+  // in when its rest pose does not (empty: the rest pose), and role -> joint
+  // maps (empty: built-in namings). Running subscriptions get the new skeleton.
+  Result<ViewState> retarget(std::uint32_t view, const Skeleton& rig, const std::vector<double>& reference = {},
+                             const std::map<std::string, std::string>& rig_map = {},
+                             const std::map<std::string, std::string>& source_map = {});
   Result<QueryResult> query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, bool orientations = false,
                             const std::vector<std::string>& joints = {}, const Conventions& conventions = {});
   Result<QueryResult> query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, const QueryOptions& options);

@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,24 @@ struct RetargetPlan {
 // that crosses chains), or when neither the rest pose nor the first frame of
 // a rig stands like a humanoid (head above hips, feet below, hips apart).
 Result<RetargetPlan> plan_retarget(const Motion& source, const Motion& target, const RetargetOptions& options = {});
+
+// A plan made once and applied to frames as they come (a live source's): made
+// for `source`'s skeleton and convention (its reference pose: the rest pose,
+// or its first frame), it retargets any motion on that skeleton. Thread-safe:
+// apply() reads only what make() computed.
+class Retargeter {
+ public:
+  static Result<Retargeter> make(const Motion& source, const Motion& target, const RetargetOptions& options = {});
+  // The frames of `source` on the rig; fails when `source` is not on the
+  // skeleton the plan was made for (fits() says).
+  Result<Motion> apply(const Motion& source) const;
+  bool fits(const Motion& source) const;
+  const RetargetPlan& plan() const;
+
+ private:
+  struct State;
+  std::shared_ptr<const State> state_;
+};
 
 // `source`'s frames on `target`'s skeleton (post-rotation, the source's frame
 // time). Joints that no role drives keep their reference-pose channels. A

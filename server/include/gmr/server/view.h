@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -97,10 +98,11 @@ class ViewEdit {
   // At most the values it writes, known before anything is computed: every
   // frame, every joint with all six channels (no edit gives a joint more).
   // A channel-less motion of 2^20 frames reads nothing and may write much.
+  // A retarget writes the rig's joints, however many the view has.
   std::uint64_t values_bound() const {
     const Motion& m = *base_->motion;
-    return static_cast<std::uint64_t>(m.frame_count) *
-           std::max<std::uint64_t>(m.stride(), 6 * static_cast<std::uint64_t>(m.skeleton.size()));
+    const std::uint64_t joints = std::max<std::uint64_t>(m.skeleton.size(), written_joints_);
+    return static_cast<std::uint64_t>(m.frame_count) * std::max<std::uint64_t>(m.stride(), 6 * joints);
   }
   // What the last run() reported.
   const EditReport& report() const { return *report_; }
@@ -114,6 +116,7 @@ class ViewEdit {
 
   std::string what_;
   LiveStep step_;
+  std::size_t written_joints_ = 0;  // joints of the motion it makes, when that may be more than the view's
   std::shared_ptr<const ViewContent> base_;
   std::shared_ptr<EditReport> report_;
 };
@@ -149,6 +152,12 @@ class View {
   Result<ViewEdit> edit_join(const std::string& root) const;
   Result<ViewEdit> edit_set_roots(const std::vector<std::string>& roots) const;
   Result<ViewEdit> edit_strip_dummies() const;
+  // Onto another humanoid skeleton (gmr/retarget/retarget.h): `rig` holds the
+  // rig's skeleton and, as its one frame when it has one, the pose it stands
+  // in. Checked here (maps, roles, a world viewpoint); run() retargets every
+  // frame, and a live view replays it on each frame.
+  Result<ViewEdit> edit_retarget(std::shared_ptr<const Motion> rig, std::map<std::string, std::string> target_map,
+                                 std::map<std::string, std::string> source_map) const;
   // Installs what `edit.run()` gave, bumping skeleton_version when the
   // structure changed; fails, leaving the view as it is, when the view
   // changed since the edit was made.
