@@ -33,6 +33,33 @@ void BM_RetargetTake(benchmark::State& state) {
 }
 BENCHMARK(BM_RetargetTake)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
+// A live source's frame: one-frame motions through a plan made once (what the
+// server's retargeted view of a live source does per frame), the copy of the
+// frame included.
+void BM_RetargetLiveFrame(benchmark::State& state) {
+  static const Motion source = load("asfamc/01/01_01.amc");
+  const Motion rig = load(kRigs[state.range(0)]);
+  auto r = Retargeter::make(source, rig);
+  if (!r) die(r.error().to_string());
+  Motion one;
+  one.skeleton = source.skeleton;
+  one.convention = source.convention;
+  one.frame_time = source.frame_time;
+  one.frame_count = 1;
+  std::size_t f = 0;
+  for (auto _ : state) {
+    const auto values = source.frame(f);
+    one.values.assign(values.begin(), values.end());
+    auto out = r->apply(one);
+    if (!out) die(out.error().to_string());
+    benchmark::DoNotOptimize(out->values.data());
+    f = (f + 1) % source.frame_count;
+  }
+  state.SetItemsProcessed(state.iterations());
+  state.SetLabel(kRigs[state.range(0)]);
+}
+BENCHMARK(BM_RetargetLiveFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
 void BM_RetargetPlan(benchmark::State& state) {
   static const Motion source = load("asfamc/01/01_01.amc");
   const Motion rig = load(kRigs[state.range(0)]);

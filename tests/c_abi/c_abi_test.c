@@ -178,6 +178,72 @@ int main(int argc, char** argv) {
            queried[3 * (joints + j) + 2]);
   }
   CHECK(gmr_close_view(c, view) == GMR_OK, "close_view: %s", gmr_last_error());
+
+  /* Retargeting: the demo walk on a 15-joint rig with Unity's humanoid names
+   * (a T-pose in centimetres), then polled on the rig's joints. */
+  {
+    static const gmr_channel rot[3] = {GMR_CHANNEL_Z_ROTATION, GMR_CHANNEL_X_ROTATION, GMR_CHANNEL_Y_ROTATION};
+    const struct {
+      const char* name;
+      int32_t parent;
+      double x, y, z;
+    } bones[15] = {{"Hips", -1, 0, 100, 0},         {"Spine", 0, 0, 10, 0},          {"Head", 1, 0, 50, 0},
+                   {"LeftUpperArm", 1, 20, 40, 0},  {"LeftLowerArm", 3, 30, 0, 0},   {"LeftHand", 4, 25, 0, 0},
+                   {"RightUpperArm", 1, -20, 40, 0}, {"RightLowerArm", 6, -30, 0, 0}, {"RightHand", 7, -25, 0, 0},
+                   {"LeftUpperLeg", 0, 10, -5, 0},  {"LeftLowerLeg", 9, 0, -45, 0},  {"LeftFoot", 10, 0, -45, 0},
+                   {"RightUpperLeg", 0, -10, -5, 0}, {"RightLowerLeg", 12, 0, -45, 0}, {"RightFoot", 13, 0, -45, 0}};
+    gmr_publish_joint rig[15];
+    for (int i = 0; i < 15; ++i) {
+      memset(&rig[i], 0, sizeof rig[i]);
+      rig[i].name = bones[i].name;
+      rig[i].parent = bones[i].parent;
+      rig[i].offset[0] = bones[i].x;
+      rig[i].offset[1] = bones[i].y;
+      rig[i].offset[2] = bones[i].z;
+      rig[i].channel_count = i == 0 ? 6 : 3;
+      for (int k = 0; k < 3; ++k) {
+        if (i == 0) rig[i].channels[k] = (gmr_channel)(GMR_CHANNEL_X_POSITION + k);
+        rig[i].channels[i == 0 ? 3 + k : k] = rot[k];
+      }
+    }
+    uint32_t rv = 0;
+    CHECK(gmr_create_view(c, "walk", &rv) == GMR_OK, "create_view: %s", gmr_last_error());
+    s = gmr_retarget(c, rv, rig, 1, NULL, 0);
+    CHECK(s == GMR_ERROR_FAILED_PRECONDITION && strstr(gmr_last_error(), "required roles without a joint: head"),
+          "one joint: %d %s", s, gmr_last_error());
+    CHECK(gmr_retarget(c, rv, NULL, 2, NULL, 0) == GMR_ERROR_INVALID_ARGUMENT, "NULL joints");
+    CHECK(gmr_retarget(c, rv, rig, 15, NULL, 0) == GMR_OK, "retarget: %s", gmr_last_error());
+    gmr_subscribe_options ro;
+    gmr_subscribe_options_init(&ro);
+    ro.float64 = 1;
+    ro.end_frame = 5;
+    ro.speed = 4;
+    gmr_subscription* rs = NULL;
+    CHECK(gmr_subscribe(c, rv, &ro, &rs) == GMR_OK, "subscribe: %s", gmr_last_error());
+    size_t rig_joints = 0;
+    CHECK(gmr_subscription_joint_count(rs, &rig_joints) == GMR_OK && rig_joints == 15, "%zu rig joints", rig_joints);
+    gmr_joint_info first;
+    CHECK(gmr_subscription_joint(rs, 0, &first) == GMR_OK && strcmp(first.name, "Hips") == 0, "joint 0 is %s",
+          first.name);
+    gmr_frame rf;
+    static double rp[3 * 15];
+    int got = 0;
+    for (int tries = 0; tries < 2000 && got == 0; ++tries) {
+      s = gmr_poll_frame(rs, &rf, rp, NULL, NULL, NULL, 15);
+      if (s == GMR_OK) {
+        got = 1;
+      } else {
+        struct timespec ts = {0, 5 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+      }
+    }
+    CHECK(got && rf.joint_count == 15, "no frame on the rig (%d)", s);
+    /* The rig's head is above its hips, by the rig's spine and neck (60 cm less what the walk bends). */
+    CHECK(rp[3 * 2 + 1] - rp[1] > 40 && rp[3 * 2 + 1] - rp[1] <= 60.000001, "head %.3f above hips",
+          rp[3 * 2 + 1] - rp[1]);
+    gmr_unsubscribe(rs);
+    CHECK(gmr_close_view(c, rv) == GMR_OK, "close_view: %s", gmr_last_error());
+  }
   gmr_disconnect(c);
   fprintf(stderr, "c abi: %d frames polled of %llu received, locals compose to the positions\n", frames,
           (unsigned long long)received);

@@ -15,6 +15,7 @@ import argparse
 import os
 import pathlib
 import sys
+import subprocess
 import tempfile
 import time
 import unittest
@@ -576,6 +577,8 @@ class RealFiles(unittest.TestCase):
         os.symlink(d / "bvh/cmu/02_01.bvh", root / "02_01.bvh")
         os.symlink(d / "asfamc/07/07-walk.asf", root / "07/07-walk.asf")
         os.symlink(d / "asfamc/07/07_05-walk.amc", root / "07/07_05-walk.amc")
+        (root / "rigs").mkdir()
+        os.symlink(d / "bvh/mixamo/Beta_jump.bvh", root / "rigs/Beta_jump.bvh")
         cls.server = env.Server(ARGS.bin_dir, "--metres-per-unit", "0.0254", library=root)
         cls.client = gmr_client.Client(port=cls.server.port)
 
@@ -612,6 +615,28 @@ class RealFiles(unittest.TestCase):
         frames = self.check("02_01", pathlib.Path(self.lib.name) / "02_01.bvh", ["Head", "LeftFoot"], "LeftHand",
                             0.0254, "--metres-per-unit", "0.0254")
         self.assertEqual(frames, 344)
+
+    def test_retarget_onto_a_rig_the_library_serves(self):
+        # The rig's skeleton from the server's own library; the frames equal
+        # `gmr retarget` of the file onto the rig file, by joint name.
+        c = self.client
+        root = pathlib.Path(self.lib.name)
+        v = c.create_view("07/07_05-walk")
+        on_rig = c.retarget(v.id, c.skeleton("rigs/Beta_jump"))
+        self.assertIn("Beta:LeftForeArm", on_rig.skeleton.names)
+        q = c.query(v.id, 0, on_rig.frame_count)
+        with tempfile.TemporaryDirectory(prefix="gmr_rt_") as tmp:
+            out = pathlib.Path(tmp) / "walk.bvh"
+            subprocess.run([str(pathlib.Path(ARGS.bin_dir) / "gmr"), "retarget", str(root / "07/07_05-walk.amc"),
+                            str(out), "--target", str(root / "rigs/Beta_jump.bvh")], check=True, capture_output=True)
+            want, names = env.gmr_positions(ARGS.bin_dir, out)
+        order = [on_rig.skeleton.index(n) for n in names]
+        self.assertEqual(q.positions.shape[0], want.shape[0])
+        self.assertLess(np.abs(q.positions[:, order] - want).max(), 1e-9 * np.abs(want).max())
+        with self.assertRaises(gmr_client.GmrError) as refused:
+            c.retarget(v.id, c.skeleton("rigs/Beta_jump"), rig_map={"hips": "Beta:Tail"})
+        self.assertIn("Beta:Tail", str(refused.exception))
+        c.close_view(v.id)
 
     def test_cmu_asf_amc(self):
         # The ASF's own unit (length 0.45: inches / 0.45) wins over the folder's.

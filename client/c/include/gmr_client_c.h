@@ -200,6 +200,15 @@ typedef struct gmr_publish_joint {
   gmr_channel channels[6];
 } gmr_publish_joint;
 
+/* The view's motion put on another humanoid rig (docs/retarget.md): the
+ * rig's joints as for gmr_publish (parents first; offsets and channels as a
+ * BVH's), and the channel values of a pose it stands in when its rest pose
+ * does not (Character Creator rigs: their first frame; NULL, 0: the rest
+ * pose). Roles come from the built-in namings. Subscriptions of the view then
+ * get the rig's joints (gmr_frame.skeleton_changed on running ones). */
+GMR_C_API gmr_status gmr_retarget(gmr_client* client, uint32_t view_id, const gmr_publish_joint* joints,
+                                  size_t joint_count, const double* reference, size_t reference_count);
+
 /* Announces live motion `name`; *publication_id names it in the calls below. */
 GMR_C_API gmr_status gmr_publish(gmr_client* client, const char* name, const gmr_publish_joint* joints,
                                  size_t joint_count, double frame_time, double metres_per_unit,

@@ -84,6 +84,37 @@ gmr_status view_op(const char* what, gmr_client* client, const char* name, Op op
   });
 }
 
+// A skeleton from gmr_publish_joint entries (gmr_publish, gmr_retarget), or
+// the status that says which joint is wrong.
+gmr_status skeleton_of(const char* what, const gmr_publish_joint* joints, size_t joint_count, gmr::Skeleton& out) {
+  std::vector<gmr::Joint> js;
+  js.reserve(joint_count);
+  for (std::size_t i = 0; i < joint_count; ++i) {
+    const gmr_publish_joint& in = joints[i];
+    const std::string where = std::string(what) + ": joint " + std::to_string(i);
+    if (in.name == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": a NULL name");
+    if (in.channel_count > 6) {
+      return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": " + std::to_string(in.channel_count) + " channels (at most 6)");
+    }
+    gmr::Joint j;
+    j.name = in.name;
+    j.parent = in.parent;
+    j.offset = Eigen::Vector3d(in.offset[0], in.offset[1], in.offset[2]);
+    for (std::uint32_t c = 0; c < in.channel_count; ++c) {
+      const int type = static_cast<int>(in.channels[c]);
+      if (type < 0 || type > 5) {
+        return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": channel " + std::to_string(c) + " is not a gmr_channel");
+      }
+      j.channels.push_back(static_cast<gmr::ChannelType>(type));
+    }
+    js.push_back(std::move(j));
+  }
+  auto skeleton = gmr::Skeleton::create(std::move(js));
+  if (!skeleton.ok()) return fail(GMR_ERROR_INVALID_ARGUMENT, std::string(what) + ": " + skeleton.error().message);
+  out = std::move(skeleton).value();
+  return GMR_OK;
+}
+
 }  // namespace
 
 // What the client's I/O thread writes and the poller reads. Shared with the
@@ -487,42 +518,32 @@ gmr_status gmr_subscription_counts(gmr_subscription* s, uint64_t* received, uint
 
 }  // extern "C"
 
+gmr_status gmr_retarget(gmr_client* client, uint32_t view_id, const gmr_publish_joint* joints, size_t joint_count,
+                        const double* reference, size_t reference_count) {
+  return guarded([&] {
+    if (client == nullptr || (joints == nullptr && joint_count > 0) || (reference == nullptr && reference_count > 0)) {
+      return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_retarget: a NULL argument");
+    }
+    gmr::Skeleton rig;
+    if (const gmr_status bad = skeleton_of("gmr_retarget", joints, joint_count, rig); bad != GMR_OK) return bad;
+    auto v = client->client->retarget(view_id, rig, std::vector<double>(reference, reference + reference_count));
+    return v.ok() ? GMR_OK : status_of(v.error());
+  });
+}
+
 gmr_status gmr_publish(gmr_client* client, const char* name, const gmr_publish_joint* joints, size_t joint_count,
                        double frame_time, double metres_per_unit, uint32_t* publication_id) {
   return guarded([&] {
     if (client == nullptr || name == nullptr || (joints == nullptr && joint_count > 0) || publication_id == nullptr) {
       return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_publish: a NULL argument");
     }
-    std::vector<gmr::Joint> js;
-    js.reserve(joint_count);
-    for (std::size_t i = 0; i < joint_count; ++i) {
-      const gmr_publish_joint& in = joints[i];
-      const std::string where = "gmr_publish: joint " + std::to_string(i);
-      if (in.name == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": a NULL name");
-      if (in.channel_count > 6) {
-        return fail(GMR_ERROR_INVALID_ARGUMENT,
-                    where + ": " + std::to_string(in.channel_count) + " channels (at most 6)");
-      }
-      gmr::Joint j;
-      j.name = in.name;
-      j.parent = in.parent;
-      j.offset = Eigen::Vector3d(in.offset[0], in.offset[1], in.offset[2]);
-      for (std::uint32_t c = 0; c < in.channel_count; ++c) {
-        const int type = static_cast<int>(in.channels[c]);
-        if (type < 0 || type > 5) {
-          return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": channel " + std::to_string(c) + " is not a gmr_channel");
-        }
-        j.channels.push_back(static_cast<gmr::ChannelType>(type));
-      }
-      js.push_back(std::move(j));
-    }
-    auto skeleton = gmr::Skeleton::create(std::move(js));
-    if (!skeleton.ok()) return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_publish: " + skeleton.error().message);
+    gmr::Skeleton skeleton;
+    if (const gmr_status bad = skeleton_of("gmr_publish", joints, joint_count, skeleton); bad != GMR_OK) return bad;
     gmr::client::PublishOptions o;
     o.name = name;
     o.frame_time = frame_time;
     o.metres_per_unit = metres_per_unit;
-    auto id = client->client->publish(*skeleton, o);
+    auto id = client->client->publish(skeleton, o);
     if (!id.ok()) return status_of(id.error());
     *publication_id = id->id;
     return GMR_OK;

@@ -30,7 +30,7 @@ import collections
 import select
 import socket
 import time
-from typing import List, Sequence, Union
+from typing import Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
@@ -146,6 +146,24 @@ class Client:
     def set_coordinates(self, view: int, relative_to: str = "") -> View:
         """World coordinates (""), or the motion seen from joint `relative_to`."""
         return self._view(self._ask("set_coordinates", "view", view_id=view, relative_to=relative_to))
+
+    def retarget(self, view: int, rig: Skeleton, reference: Sequence[float] = (),
+                 rig_map: Optional[Dict[str, str]] = None, source_map: Optional[Dict[str, str]] = None) -> View:
+        """The view's motion put on another humanoid rig (docs/retarget.md):
+        `rig` its skeleton (a library motion's, `skeleton("rigs/mine")`, or one
+        built by hand), `reference` the rig's channel values in a pose it
+        stands in when its rest pose does not, the maps role -> joint name
+        (none: the built-in namings). Subscriptions then get the rig's joints."""
+        m = pb.ClientMessage()
+        r = m.retarget
+        r.view_id = view
+        rig.to_proto(r.target)
+        r.reference.extend(float(v) for v in reference)
+        for role, joint in (rig_map or {}).items():
+            r.target_map[role] = joint
+        for role, joint in (source_map or {}).items():
+            r.source_map[role] = joint
+        return self._view(self._request(m, "view"))
 
     def query(self, view: int, begin: int, end: int = 0, *, orientations: bool = False,
               local_transforms: bool = False, joints: Sequence[str] = (),

@@ -74,6 +74,12 @@ constexpr Naming kNamings[] = {
                           "clavicle_r", "upperarm_r", "lowerarm_r", "hand_r", "middle_01_r",
                           "thigh_l", "calf_l", "foot_l", "ball_l", "",
                           "thigh_r", "calf_r", "foot_r", "ball_r", ""}},
+    // gmr's own built-in demo library (gmr demo, gmr-server without --library).
+    {"gmr-demo", {"pelvis", "spine", "chest", "", "neck", "head", "head_top",
+                  "", "l_shoulder", "l_elbow", "l_wrist", "l_hand",
+                  "", "r_shoulder", "r_elbow", "r_wrist", "r_hand",
+                  "l_hip", "l_knee", "l_ankle", "l_toe", "",
+                  "r_hip", "r_knee", "r_ankle", "r_toe", ""}},
     // Unity's humanoid avatar; Godot's humanoid skeleton profile uses the same names.
     {"unity-humanoid", {"Hips", "Spine", "Chest", "UpperChest", "Neck", "Head", "",
                         "LeftShoulder", "LeftUpperArm", "LeftLowerArm", "LeftHand", "LeftMiddleProximal",

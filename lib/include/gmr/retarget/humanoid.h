@@ -68,7 +68,7 @@ struct HumanoidMap {
 // The names of the built-in namings: cmu-asf, cmu-bvh (cgspeed MotionBuilder),
 // cmu-3dsmax, daz (and cgspeed's Daz release), mixamo, character-creator,
 // bandai-namco, makehuman, unreal-mannequin, unity-humanoid (also Godot's
-// humanoid profile).
+// humanoid profile), gmr-demo (the built-in demo library).
 std::vector<std::string> builtin_namings();
 
 // The skeleton's roles. `given` (role name -> joint name, e.g. read from a
