@@ -187,10 +187,10 @@ int main(int argc, char** argv) {
       const char* name;
       int32_t parent;
       double x, y, z;
-    } bones[15] = {{"Hips", -1, 0, 100, 0},         {"Spine", 0, 0, 10, 0},          {"Head", 1, 0, 50, 0},
-                   {"LeftUpperArm", 1, 20, 40, 0},  {"LeftLowerArm", 3, 30, 0, 0},   {"LeftHand", 4, 25, 0, 0},
-                   {"RightUpperArm", 1, -20, 40, 0}, {"RightLowerArm", 6, -30, 0, 0}, {"RightHand", 7, -25, 0, 0},
-                   {"LeftUpperLeg", 0, 10, -5, 0},  {"LeftLowerLeg", 9, 0, -45, 0},  {"LeftFoot", 10, 0, -45, 0},
+    } bones[15] = {{"Hips", -1, 0, 100, 0},          {"Spine", 0, 0, 10, 0},           {"Head", 1, 0, 50, 0},
+                   {"LeftUpperArm", 1, 20, 40, 0},   {"LeftLowerArm", 3, 30, 0, 0},    {"LeftHand", 4, 25, 0, 0},
+                   {"RightUpperArm", 1, -20, 40, 0}, {"RightLowerArm", 6, -30, 0, 0},  {"RightHand", 7, -25, 0, 0},
+                   {"LeftUpperLeg", 0, 10, -5, 0},   {"LeftLowerLeg", 9, 0, -45, 0},   {"LeftFoot", 10, 0, -45, 0},
                    {"RightUpperLeg", 0, -10, -5, 0}, {"RightLowerLeg", 12, 0, -45, 0}, {"RightFoot", 13, 0, -45, 0}};
     gmr_publish_joint rig[15];
     for (int i = 0; i < 15; ++i) {

@@ -94,7 +94,8 @@ gmr_status skeleton_of(const char* what, const gmr_publish_joint* joints, size_t
     const std::string where = std::string(what) + ": joint " + std::to_string(i);
     if (in.name == nullptr) return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": a NULL name");
     if (in.channel_count > 6) {
-      return fail(GMR_ERROR_INVALID_ARGUMENT, where + ": " + std::to_string(in.channel_count) + " channels (at most 6)");
+      return fail(GMR_ERROR_INVALID_ARGUMENT,
+                  where + ": " + std::to_string(in.channel_count) + " channels (at most 6)");
     }
     gmr::Joint j;
     j.name = in.name;
