@@ -5,9 +5,9 @@
 #include <exception>
 #include <map>
 #include <memory>
-#include <variant>
 #include <new>
 #include <utility>
+#include <variant>
 
 #include "gmr/wire/framing.h"
 #include "requests/rig.h"
