@@ -361,8 +361,12 @@ TEST(LivePublish, ARetargetedViewGetsEachFrameOnTheRig) {
   EXPECT_EQ(w.bad, 0u) << w.first_problem;
   EXPECT_EQ(w.skeleton.size(), rig->skeleton.size());
   EXPECT_EQ(w.indices.size() + end->frames_dropped + end->frames_skipped, n);
-  EXPECT_GE(w.indices.size(), n / 2);
-  EXPECT_GE(w.compared, n / 2 * rig->skeleton.size());
+  // Every frame arrived or was counted; a sanitizer build retargets each
+  // frame about ten times slower, and its replays skip more (ASan: 26 of 60
+  // arrived once), so it is asked for fewer.
+  const std::size_t least = kSlowBuild ? n / 6 : n / 2;
+  EXPECT_GE(w.indices.size(), least);
+  EXPECT_GE(w.compared, least * rig->skeleton.size());
 }
 
 TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {
