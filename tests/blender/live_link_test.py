@@ -17,7 +17,6 @@ corpus is missing; under CI=true that is a failure.
 
 import argparse
 import json
-import os
 import pathlib
 import shutil
 import subprocess
@@ -39,25 +38,14 @@ def main():
     blender = shutil.which("blender")
     if blender is None:
         env.skip_or_fail("blender is not installed (scripts/install-deps.sh installs it)")
-    try:
-        import numpy as np
-    except ImportError:
-        env.skip_or_fail("numpy is missing (scripts/install-deps.sh installs python3-numpy)")
-    if not env.have_data():
-        env.skip_or_fail(f"the corpus is missing at {env.data_dir()}")
+    np = env.require_numpy_and_corpus()
 
     work = pathlib.Path(args.keep) if args.keep else pathlib.Path(tempfile.mkdtemp(prefix="gmr_blender_"))
     work.mkdir(parents=True, exist_ok=True)
     bin_dir = pathlib.Path(args.bin_dir).resolve()
     subprocess.run([str(bin_dir / "gmr"), "demo", str(work / "demo"), "--format", "gmr"], check=True,
                    capture_output=True)
-    lib = work / "library"
-    (lib / "07").mkdir(parents=True, exist_ok=True)
-    d = env.data_dir()
-    for src, dst in ((d / "bvh/cmu/02_01.bvh", lib / "02_01.bvh"), (d / "asfamc/07/07-walk.asf", lib / "07/07-walk.asf"),
-                     (d / "asfamc/07/07_05-walk.amc", lib / "07/07_05-walk.amc")):
-        if not dst.exists():
-            os.symlink(src, dst)
+    lib = env.cmu_library(work / "library")
 
     # (server library or None for the built-in demo, motion, file for gmr
     # positions, its unit flag, roots, viewpoint, roots asked from Blender)

@@ -57,12 +57,7 @@ def main():
     mcs, mono = shutil.which("mcs"), shutil.which("mono")
     if mcs is None or mono is None:
         env.skip_or_fail("mcs or mono is not installed (scripts/install-deps.sh installs mono-mcs and mono-runtime)")
-    try:
-        import numpy as np
-    except ImportError:
-        env.skip_or_fail("numpy is missing (scripts/install-deps.sh installs python3-numpy)")
-    if not env.have_data():
-        env.skip_or_fail(f"the corpus is missing at {env.data_dir()}")
+    np = env.require_numpy_and_corpus()
     bin_dir = pathlib.Path(args.bin_dir).resolve()
     work = pathlib.Path(tempfile.mkdtemp(prefix="gmr_csharp_"))
     package = repo / "client/csharp"
@@ -80,12 +75,7 @@ def main():
     compile_cs("-target:library", "-out:UnityComponent.dll", "-define:UNITY_5_3_OR_NEWER", "-warnaserror",
                str(repo / "tests/csharp/UnityEngineStub.cs"), *runtime, str(package / "Runtime/Unity/GmrLiveLink.cs"))
 
-    lib = work / "library"
-    (lib / "07").mkdir(parents=True)
-    d = env.data_dir()
-    for src, dst in ((d / "bvh/cmu/02_01.bvh", lib / "02_01.bvh"), (d / "asfamc/07/07-walk.asf", lib / "07/07-walk.asf"),
-                     (d / "asfamc/07/07_05-walk.amc", lib / "07/07_05-walk.amc")):
-        os.symlink(src, dst)
+    lib = env.cmu_library(work / "library")
     run_env = dict(os.environ, LD_LIBRARY_PATH=str(pathlib.Path(args.lib_dir).resolve()))
     # (motion, file, roots, roots asked while streaming, unit given to the subscription, unit flag for gmr positions)
     cases = [("02_01", lib / "02_01.bvh", "LeftFoot", "Head", 0.0254, ["--metres-per-unit", "0.0254"]),

@@ -114,12 +114,7 @@ def main():
     godot = shutil.which("godot3-server")
     if godot is None:
         env.skip_or_fail("godot3-server is not installed (scripts/install-deps.sh installs it)")
-    try:
-        import numpy as np
-    except ImportError:
-        env.skip_or_fail("numpy is missing (scripts/install-deps.sh installs python3-numpy)")
-    if not env.have_data():
-        env.skip_or_fail(f"the corpus is missing at {env.data_dir()}")
+    np = env.require_numpy_and_corpus()
 
     work = pathlib.Path(args.keep) if args.keep else pathlib.Path(tempfile.mkdtemp(prefix="gmr_godot_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -132,13 +127,7 @@ def main():
     shutil.copy(repo / "tests/godot/hostile_messages.gd", project / "hostile_messages.gd")
     subprocess.run([str(bin_dir / "gmr"), "demo", str(work / "demo"), "--format", "gmr"], check=True,
                    capture_output=True)
-    lib = work / "library"
-    (lib / "07").mkdir(parents=True, exist_ok=True)
-    d = env.data_dir()
-    for src, dst in ((d / "bvh/cmu/02_01.bvh", lib / "02_01.bvh"), (d / "asfamc/07/07-walk.asf", lib / "07/07-walk.asf"),
-                     (d / "asfamc/07/07_05-walk.amc", lib / "07/07_05-walk.amc")):
-        if not dst.exists():
-            os.symlink(src, dst)
+    lib = env.cmu_library(work / "library")
 
     # (library or None for the built-in demo, (motion, roots, viewpoint, the
     # link's source_metres_per_unit, roots asked mid-stream), file for gmr

@@ -33,6 +33,29 @@ def have_data() -> bool:
     return data_dir().is_dir()
 
 
+def require_numpy_and_corpus():
+    """numpy (returned) and the corpus, or skip (outside CI) / fail without them."""
+    try:
+        import numpy
+    except ImportError:
+        skip_or_fail("numpy is missing (scripts/install-deps.sh installs python3-numpy)")
+    if not have_data():
+        skip_or_fail(f"the corpus is missing at {data_dir()}")
+    return numpy
+
+
+def cmu_library(root: pathlib.Path) -> pathlib.Path:
+    """A library folder of links into the corpus: CMU 02_01 as BVH (02_01)
+    and CMU 07_05 as ASF/AMC (07/07_05-walk)."""
+    d = data_dir()
+    (root / "07").mkdir(parents=True, exist_ok=True)
+    for src, dst in (("bvh/cmu/02_01.bvh", "02_01.bvh"), ("asfamc/07/07-walk.asf", "07/07-walk.asf"),
+                     ("asfamc/07/07_05-walk.amc", "07/07_05-walk.amc")):
+        if not (root / dst).exists():
+            os.symlink(d / src, root / dst)
+    return root
+
+
 class Server:
     """gmr-server on 127.0.0.1 with any free port, stopped on exit. `http`: False
     (no HTTP port), True (any free one) or a port number (a server started
