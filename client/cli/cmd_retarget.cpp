@@ -2,6 +2,7 @@
 // docs/retarget.md); gmr info RIG --humanoid prints what a rig's map finds.
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <map>
 #include <memory>

@@ -122,12 +122,7 @@ def main():
         print(f"{label}: {len(result['before'])} + {len(result['after'])} frames applied, "
               f"{len(result['played'])} played from the Action")
 
-    if failures:
-        print("\n".join(failures), file=sys.stderr)
-        sys.exit(1)
-    if checked < 4 * 40:
-        print(f"only {checked} frames checked", file=sys.stderr)
-        sys.exit(1)
+    env.finish(failures, checked, 4 * 40)
     print(f"live link in Blender: {len(cases)} motions, {checked} frames checked")
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)

@@ -155,12 +155,7 @@ def main():
             received, replaced = (int(x) for x in other["counts"][0].split(" "))
             print(f"{motion} (roots {roots}, then {new_roots}): {FRAMES} + {FRAMES} frames polled; received {received}, "
                   f"replaced {replaced}; latency {float(other['latency'][0]):.2f} ms")
-    if failures:
-        print("\n".join(failures), file=sys.stderr)
-        sys.exit(1)
-    if checked < len(cases) * 2 * FRAMES:
-        print(f"only {checked} frames checked", file=sys.stderr)
-        sys.exit(1)
+    env.finish(failures, checked, len(cases) * 2 * FRAMES)
     print(f"C# package under Mono: {len(cases)} motions, {checked} frames equal gmr positions in Unity's conventions; "
           f"the example ran; the Unity component compiled against a stub")
     shutil.rmtree(work, ignore_errors=True)

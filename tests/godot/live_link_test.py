@@ -208,12 +208,7 @@ def main():
               f"; received {result['frames_received']}, applied {result['frames_applied']}, dropped "
               f"{result['frames_dropped']}; largest difference {worst_case:.2g} m; {last.get('fps', 0):.0f} fps, latency {last.get('latency_ms', 0):.2f} ms")
 
-    if failures:
-        print("\n".join(failures), file=sys.stderr)
-        sys.exit(1)
-    if checked < len(cases) * 2 * FRAMES:
-        print(f"only {checked} frames checked", file=sys.stderr)
-        sys.exit(1)
+    env.finish(failures, checked, len(cases) * 2 * FRAMES)
     print(f"live link in Godot: {len(cases)} motions, {checked} frames checked within {TOLERANCE} m")
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)

@@ -56,6 +56,17 @@ def cmu_library(root: pathlib.Path) -> pathlib.Path:
     return root
 
 
+def finish(failures, checked: int, at_least: int) -> None:
+    """Ends a test program: exit 1 with every failure, or when fewer than
+    `at_least` frames were checked (a test that compared nothing passes nothing)."""
+    if failures:
+        print("\n".join(failures), file=sys.stderr)
+        sys.exit(1)
+    if checked < at_least:
+        print(f"only {checked} frames checked, at least {at_least} expected", file=sys.stderr)
+        sys.exit(1)
+
+
 class Server:
     """gmr-server on 127.0.0.1 with any free port, stopped on exit. `http`: False
     (no HTTP port), True (any free one) or a port number (a server started

@@ -239,11 +239,18 @@ Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map
     return make_error("retarget: the view is seen from '" + motion().skeleton.joint(content_->relative_to).name +
                       "'; set world coordinates first, and a viewpoint on the rig's joints after");
   }
-  auto maps = std::make_shared<const std::pair<std::map<std::string, std::string>, std::map<std::string, std::string>>>(
-      std::move(target_map), std::move(source_map));
-  RetargetOptions options;
-  if (!maps->first.empty()) options.target_map = &maps->first;
-  if (!maps->second.empty()) options.source_map = &maps->second;
+  // The maps live as long as the step (RetargetOptions points into them).
+  struct Maps {
+    std::map<std::string, std::string> target, source;
+    RetargetOptions options() const {
+      RetargetOptions o;
+      if (!target.empty()) o.target_map = &target;
+      if (!source.empty()) o.source_map = &source;
+      return o;
+    }
+  };
+  auto maps = std::make_shared<const Maps>(Maps{std::move(target_map), std::move(source_map)});
+  const RetargetOptions options = maps->options();
   auto first = Retargeter::make(motion(), *rig, options);
   if (!first.ok()) return first.error();
   // The plan is made once: a live view replays this step on every frame, each
@@ -261,10 +268,7 @@ Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map
       r = cache->retargeter;
     }
     if (!r.fits(m)) {
-      RetargetOptions o;
-      if (!maps->first.empty()) o.target_map = &maps->first;
-      if (!maps->second.empty()) o.source_map = &maps->second;
-      auto made = Retargeter::make(m, *rig, o);
+      auto made = Retargeter::make(m, *rig, maps->options());
       if (!made.ok()) return made.error();
       r = std::move(made).value();
       std::lock_guard lock(cache->mutex);
