@@ -290,11 +290,12 @@ Result<ViewState> Client::shift_root(std::uint32_t view, const std::string& join
 
 Result<ViewState> Client::retarget(std::uint32_t view, const Skeleton& rig, const std::vector<double>& reference,
                                    const std::map<std::string, std::string>& rig_map,
-                                   const std::map<std::string, std::string>& source_map) {
+                                   const std::map<std::string, std::string>& source_map, double rig_metres_per_unit) {
   pb::ClientMessage m;
   auto* r = m.mutable_retarget();
   r->set_view_id(view);
   wire::to_proto(rig, *r->mutable_target());
+  r->mutable_target()->set_metres_per_unit(rig_metres_per_unit);
   r->mutable_reference()->Add(reference.begin(), reference.end());
   for (const auto& [role, joint] : rig_map) (*r->mutable_target_map())[role] = joint;
   for (const auto& [role, joint] : source_map) (*r->mutable_source_map())[role] = joint;

@@ -77,6 +77,7 @@ std::shared_ptr<LiveSource> Catalog::live(std::string_view name) const {
 }
 
 double Catalog::metres_per_unit(const View& view) const {
+  if (view.content()->metres_per_unit > 0.0) return view.content()->metres_per_unit;  // a rig's
   if (view.live()) {
     const auto source = view.live_source();
     return source ? source->metres_per_unit() : 0.0;

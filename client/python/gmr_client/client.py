@@ -148,16 +148,20 @@ class Client:
         return self._view(self._ask("set_coordinates", "view", view_id=view, relative_to=relative_to))
 
     def retarget(self, view: int, rig: Skeleton, reference: Sequence[float] = (),
-                 rig_map: Optional[Dict[str, str]] = None, source_map: Optional[Dict[str, str]] = None) -> View:
+                 rig_map: Optional[Dict[str, str]] = None, source_map: Optional[Dict[str, str]] = None,
+                 metres_per_unit: float = 0.0) -> View:
         """The view's motion put on another humanoid rig (docs/retarget.md):
-        `rig` its skeleton (a library motion's, `skeleton("rigs/mine")`, or one
-        built by hand), `reference` the rig's channel values in a pose it
-        stands in when its rest pose does not, the maps role -> joint name
-        (none: the built-in namings). Subscriptions then get the rig's joints."""
+        `rig` its skeleton in the motion's axes (a library motion's,
+        `skeleton("rigs/mine")`, or one built by hand), `reference` the rig's
+        channel values in a pose it stands in when its rest pose does not, the
+        maps role -> joint name (none: the built-in namings), the rig's unit
+        in metres (0: the motion's). Subscriptions then get the rig's joints,
+        in the rig's unit."""
         m = pb.ClientMessage()
         r = m.retarget
         r.view_id = view
         rig.to_proto(r.target)
+        r.target.metres_per_unit = float(metres_per_unit)
         r.reference.extend(float(v) for v in reference)
         for role, joint in (rig_map or {}).items():
             r.target_map[role] = joint

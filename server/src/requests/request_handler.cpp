@@ -310,7 +310,7 @@ Reply RequestHandler::retarget(const pb::ClientMessage& req, Clock::time_point b
   std::map<std::string, std::string> source_map(r.source_map().begin(), r.source_map().end());
   return edit_view(req, began, r.view_id(), [&](const View& v) {
     return v.edit_retarget(std::get<std::shared_ptr<const Motion>>(std::move(rig)), std::move(target_map),
-                           std::move(source_map));
+                           std::move(source_map), r.target().metres_per_unit());
   });
 }
 

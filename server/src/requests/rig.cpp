@@ -1,5 +1,6 @@
 #include "requests/rig.h"
 
+#include <cmath>
 #include <string>
 
 #include "gmr/wire/convert.h"
@@ -12,6 +13,10 @@ std::variant<std::shared_ptr<const Motion>, Refusal> check_rig(const pb::Retarge
                                                           std::to_string(r.target().joints_size()) +
                                                           " joints, above the server's limit of " +
                                                           std::to_string(cfg.max_live_joints) + " (--max-live-joints)"};
+  }
+  if (const double u = r.target().metres_per_unit(); !std::isfinite(u) || u < 0.0) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST,
+                   "retarget: the rig's unit (metres_per_unit) must be a positive length, or 0 for the motion's"};
   }
   auto skeleton = wire::from_proto(r.target());
   if (!skeleton.ok()) return Refusal{pb::ERROR_CODE_BAD_REQUEST, "retarget: the rig: " + skeleton.error().message};

@@ -131,8 +131,9 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
                                                 : std::chrono::milliseconds(r.max_staleness_ms()));
   stream->add(target, r.max_frames());
-  subs_[id] = Subscription{v->id(),        stream,       target, names, rate_mhz, v->content()->skeleton_version,
-                           settings.basis, use_multicast};
+  subs_[id] =
+      Subscription{v->id(),        stream,        target,         names, rate_mhz, v->content()->skeleton_version,
+                   settings.basis, use_multicast, r.conventions()};
   if (!joined) {
     stream->start();
     if (source) attach_live(*source, stream);
@@ -263,6 +264,13 @@ void Subscriptions::view_changed(const View& v) {
       ended.emplace_back(id, "the view changed: a multicast subscription follows its shared stream (subscribe again)");
       continue;
     }
+    // A retarget may change the unit (a rig in its own): the same conventions from the new one.
+    auto basis = output_basis_of(sub.conventions, link_.services.catalog.metres_per_unit(v));
+    if (!basis.ok()) {
+      ended.emplace_back(id, "the view changed: " + basis.error().message);
+      continue;
+    }
+    sub.basis = *basis;
     // The new skeleton goes out before any frame of its version (replies
     // and pushes are written before waiting frames, connection.h), and
     // after every frame of the old one: those still waiting go first.
@@ -280,7 +288,7 @@ void Subscriptions::view_changed(const View& v) {
       if (viewer >= 0) c->set_relative_to(v.motion().skeleton.joint(viewer).name);
       link_.send(m);
     }
-    detach(sub)->set_content(v.content(), std::move(joints).value());
+    detach(sub)->set_content(v.content(), std::move(joints).value(), sub.basis);
   }
   for (auto& [id, reason] : ended) {
     pb::ServerMessage m;

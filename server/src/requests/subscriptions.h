@@ -60,6 +60,7 @@ class Subscriptions final : public SubscriptionEvents {
     std::uint32_t skeleton_version = 0;    // of the frames it last got word of
     OutputBasis basis;                     // its conventions (of the rest pose it is sent)
     bool multicast = false;                // frames go to the group with its stream's (pause, seek refused)
+    pb::Conventions conventions;           // as asked: the basis again when the view's unit changes
   };
 
   Subscription* find(std::uint32_t id);

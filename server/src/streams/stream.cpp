@@ -84,9 +84,11 @@ void Stream::seek(std::uint32_t frame) {
   arm();
 }
 
-void Stream::set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints) {
+void Stream::set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints,
+                         const OutputBasis& basis) {
   content_ = std::move(content);
   settings_.joints = std::move(joints);
+  settings_.basis = basis;
   if (settings_.local_transforms) own_frames_ = own_frame_sources(*content_->motion);
   last_frame_ = -1;
 }

@@ -118,7 +118,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void resume();
   void seek(std::uint32_t frame);
   void stop() { timer_.cancel(); }
-  void set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints);
+  void set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints, const OutputBasis& basis);
   const std::shared_ptr<const ViewContent>& content() const { return content_; }
 
   // Live: frames come from a source's live_frame calls instead of a timer.

@@ -109,9 +109,9 @@ namespace {
 // what a client sees changes: the joints, their order and links, or the frame
 // the coordinates are in. An edit that gives the same structure (a shift to
 // the root it has, stripping a motion with no zero-length bone) keeps it.
-std::shared_ptr<const ViewContent> next_content(const ViewContent& base, std::shared_ptr<const Motion> motion,
-                                                int relative_to, std::shared_ptr<const CompiledForm> compiled,
-                                                std::shared_ptr<const std::vector<LiveStep>> live_steps) {
+std::shared_ptr<ViewContent> next_content(const ViewContent& base, std::shared_ptr<const Motion> motion,
+                                          int relative_to, std::shared_ptr<const CompiledForm> compiled,
+                                          std::shared_ptr<const std::vector<LiveStep>> live_steps) {
   auto c = std::make_shared<ViewContent>();
   if (!live_steps && (!compiled || compiled->motion() != motion)) {
     compiled = std::make_shared<const CompiledForm>(motion);
@@ -124,6 +124,7 @@ std::shared_ptr<const ViewContent> next_content(const ViewContent& base, std::sh
   c->live_steps = std::move(live_steps);
   c->library_name = base.library_name;
   c->library_version = base.library_version;
+  c->metres_per_unit = base.metres_per_unit;
   return c;
 }
 
@@ -168,8 +169,9 @@ Result<std::shared_ptr<const ViewContent>> ViewEdit::run() const {
     steps = std::move(more);
   }
   auto content = next_content(base, std::move(next), viewer, {}, std::move(steps));
+  if (metres_per_unit_ > 0.0) content->metres_per_unit = metres_per_unit_;
   if (compile && content->compiled) content->compiled->get();
-  return content;
+  return std::shared_ptr<const ViewContent>(std::move(content));
 }
 
 ViewEdit View::make_edit(std::string what, LiveStep step, std::shared_ptr<EditReport> report) const {
@@ -234,7 +236,7 @@ Result<ViewEdit> View::edit_join(const std::string& root) const {
 }
 
 Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map<std::string, std::string> target_map,
-                                     std::map<std::string, std::string> source_map) const {
+                                     std::map<std::string, std::string> source_map, double rig_metres_per_unit) const {
   if (content_->relative_to >= 0) {
     return make_error("retarget: the view is seen from '" + motion().skeleton.joint(content_->relative_to).name +
                       "'; set world coordinates first, and a viewpoint on the rig's joints after");
@@ -279,6 +281,7 @@ Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map
     return to_pre_rotation(*out);
   });
   edit.written_joints_ = rig->skeleton.size();
+  edit.metres_per_unit_ = rig_metres_per_unit;
   return edit;
 }
 

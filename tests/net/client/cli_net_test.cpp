@@ -170,11 +170,11 @@ TEST(CliNet, LocalTransformsPrintAndComposeToThePositions) {
       std::vector<Eigen::Vector3d> at(n);
       for (int j = 0; j < static_cast<int>(n); ++j) {
         const auto k = static_cast<std::size_t>(j);
-        const auto& [q, t] = frame.at(tree.joint(j).name);
+        const auto& [r, t] = frame.at(tree.joint(j).name);
         const int parent = tree.joint(j).parent;
         ASSERT_LT(parent, j);
         const auto pk = static_cast<std::size_t>(parent);
-        o[k] = parent < 0 ? q : Eigen::Matrix3d(o[pk] * q);
+        o[k] = parent < 0 ? r : Eigen::Matrix3d(o[pk] * r);
         at[k] = parent < 0 ? t : Eigen::Vector3d(at[pk] + o[pk] * t);
         composed[tree.joint(j).name] = at[k];
       }

@@ -7,7 +7,10 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <mutex>
+#include <thread>
 
 #include "gmr/io/motion_file.h"
 #include "gmr/kinematics/forward_kinematics.h"
@@ -143,6 +146,94 @@ TEST(Retarget, ARunningSubscriptionGetsTheRigAndAReferencePoseServesAFoldedRig) 
   EXPECT_LT(worst_difference(want, on_rig->skeleton, q->joints, 100, q->positions), 1e-9 * skeleton_size(want.motion));
 }
 
+// A rig that states its unit (centimetres) on a take in inches: the view is in
+// the rig's unit, so engine conventions give metres, for a query and for a
+// subscription that was running in Blender's conventions before the retarget.
+TEST(Retarget, ARigInItsOwnUnitComesOutInMetres) {
+  GMR_REQUIRE_DATA();
+  auto library = test_library();
+  for (auto& e : library) {
+    if (e.name == "cmu/02_01") e.metres_per_unit = 0.0254;
+  }
+  TestServer s({}, library);
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  const Motion mixamo = load("bvh/mixamo/Beta_jump.bvh");
+  const Expected want = expected_on(mixamo);  // in the rig's numbers
+  const std::size_t n = want.motion.skeleton.size();
+  auto blender = [](const Eigen::Vector3d& v) -> Eigen::Vector3d {
+    return Eigen::Vector3d(v.x(), -v.z(), v.y()) * 0.01;
+  };
+  const double tol = 1e-9 * skeleton_size(want.motion) * 0.01;
+  auto v = c->create_view("cmu/02_01");
+  ASSERT_TRUE(v.ok());
+  Conventions conventions;
+  conventions.preset = ConventionPreset::kBlender;
+  std::mutex mutex;
+  std::vector<client::ReceivedFrame> after;
+  Latch<client::SkeletonChange> changed;
+  client::SubscribeOptions o;
+  o.loop = true;
+  o.float64 = true;
+  o.conventions = conventions;
+  auto sub = c->subscribe(
+      v->id, o,
+      [&](const client::ReceivedFrame& f) {
+        std::lock_guard lock(mutex);
+        if (f.skeleton_version != v->skeleton_version && after.size() < 40) after.push_back(f);
+      },
+      {}, [&](const client::SkeletonChange& sc) { changed.set(sc); });
+  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  auto on_rig = c->retarget(v->id, mixamo.skeleton, {}, {}, {}, 0.01);
+  ASSERT_TRUE(on_rig.ok()) << on_rig.error().to_string();
+  // Queried in Blender's conventions: metres.
+  client::QueryOptions qo;
+  qo.conventions = conventions;
+  auto q = c->query(v->id, 0, 50, qo);
+  ASSERT_TRUE(q.ok()) << q.error().to_string();
+  EXPECT_EQ(q->metres_per_unit, 1.0);
+  double worst = 0;
+  for (std::size_t f = 0; f < 50; ++f) {
+    for (std::size_t k = 0; k < q->joints.size(); ++k) {
+      const int j = want.motion.skeleton.find(on_rig->skeleton.joint(q->joints[k]).name);
+      ASSERT_GE(j, 0);
+      worst = std::max(
+          worst, (q->positions[f * q->joints.size() + k] - blender(want.positions[f * n + static_cast<std::size_t>(j)]))
+                     .norm());
+    }
+  }
+  EXPECT_LT(worst, tol) << "queried positions are not the rig's centimetres in metres";
+  // The running subscription: the rig's skeleton, then frames, in metres.
+  auto sc = changed.wait();
+  ASSERT_TRUE(sc.has_value()) << "no SkeletonChanged after the retarget";
+  const int hips = sc->skeleton.find("Beta:Hips");
+  ASSERT_GE(hips, 0);
+  EXPECT_LT(
+      (sc->rest.translations[static_cast<std::size_t>(hips)] - blender(mixamo.skeleton.joint(hips).offset)).norm(),
+      tol);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(kSlowBuild ? 60 : 20);
+  for (;;) {
+    {
+      std::lock_guard lock(mutex);
+      if (after.size() >= 20) break;
+    }
+    ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "fewer than 20 frames after the retarget";
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  std::lock_guard lock(mutex);
+  double streamed = 0;
+  for (const auto& f : after) {
+    ASSERT_EQ(f.positions.size(), sc->joints.size());
+    for (std::size_t k = 0; k < sc->joints.size(); ++k) {
+      const int j = want.motion.skeleton.find(sc->skeleton.joint(sc->joints[k]).name);
+      ASSERT_GE(j, 0);
+      streamed = std::max(
+          streamed, (f.positions[k] - blender(want.positions[f.frame_index * n + static_cast<std::size_t>(j)])).norm());
+    }
+  }
+  EXPECT_LT(streamed, tol) << "streamed frames after the retarget are not in metres";
+}
+
 TEST(Retarget, BadRigsAndMapsAreRefusedNamingTheRoleOrJoint) {
   GMR_REQUIRE_DATA();
   TestServer s;
@@ -159,6 +250,8 @@ TEST(Retarget, BadRigsAndMapsAreRefusedNamingTheRoleOrJoint) {
   refused(c->retarget(v->id, mixamo.skeleton, {}, {{"hips", "Beta:Tail"}}), "'Beta:Tail'");
   refused(c->retarget(v->id, mixamo.skeleton, {1.0, 2.0}), "the reference pose has 2 values");
   refused(c->retarget(v->id + 99, mixamo.skeleton), "view");
+  refused(c->retarget(v->id, mixamo.skeleton, {}, {}, {}, -0.01), "unit (metres_per_unit)");
+  refused(c->retarget(v->id, mixamo.skeleton, {}, {}, {}, std::nan("")), "unit (metres_per_unit)");
   ASSERT_TRUE(c->set_coordinates(v->id, "Head").ok());
   refused(c->retarget(v->id, mixamo.skeleton), "set world coordinates first");
   ASSERT_TRUE(c->set_coordinates(v->id, "").ok());

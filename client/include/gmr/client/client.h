@@ -318,10 +318,12 @@ class Client {
   // The view's motion put on another humanoid rig (docs/retarget.md): its
   // skeleton (BVH-like: post-rotation), the channel values of a pose it stands
   // in when its rest pose does not (empty: the rest pose), and role -> joint
-  // maps (empty: built-in namings). Running subscriptions get the new skeleton.
+  // maps (empty: built-in namings), and the rig's unit in metres (0: the
+  // motion's). Running subscriptions get the new skeleton.
   Result<ViewState> retarget(std::uint32_t view, const Skeleton& rig, const std::vector<double>& reference = {},
                              const std::map<std::string, std::string>& rig_map = {},
-                             const std::map<std::string, std::string>& source_map = {});
+                             const std::map<std::string, std::string>& source_map = {},
+                             double rig_metres_per_unit = 0.0);
   Result<QueryResult> query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, bool orientations = false,
                             const std::vector<std::string>& joints = {}, const Conventions& conventions = {});
   Result<QueryResult> query(std::uint32_t view, std::uint32_t begin, std::uint32_t end, const QueryOptions& options);

@@ -74,6 +74,9 @@ struct ViewContent {
   // (Catalog::stale). Empty for live sources.
   std::string library_name;
   std::uint32_t library_version = 0;
+  // The unit of `motion` in metres when an edit changed it (a retarget onto a
+  // rig that states its unit); 0: the source's.
+  double metres_per_unit = 0.0;
 };
 
 // What an edit reports besides the view it makes.
@@ -117,6 +120,7 @@ class ViewEdit {
   std::string what_;
   LiveStep step_;
   std::size_t written_joints_ = 0;  // joints of the motion it makes, when that may be more than the view's
+  double metres_per_unit_ = 0.0;    // the unit of the motion it makes, when it changes it (a retarget)
   std::shared_ptr<const ViewContent> base_;
   std::shared_ptr<EditReport> report_;
 };
@@ -155,9 +159,10 @@ class View {
   // Onto another humanoid skeleton (gmr/retarget/retarget.h): `rig` holds the
   // rig's skeleton and, as its one frame when it has one, the pose it stands
   // in. Checked here (maps, roles, a world viewpoint); run() retargets every
-  // frame, and a live view replays it on each frame.
+  // frame, and a live view replays it on each frame. `rig_metres_per_unit`:
+  // the rig's unit, the view's after it (0: the rig is in the source's unit).
   Result<ViewEdit> edit_retarget(std::shared_ptr<const Motion> rig, std::map<std::string, std::string> target_map,
-                                 std::map<std::string, std::string> source_map) const;
+                                 std::map<std::string, std::string> source_map, double rig_metres_per_unit = 0.0) const;
   // Installs what `edit.run()` gave, bumping skeleton_version when the
   // structure changed; fails, leaving the view as it is, when the view
   // changed since the edit was made.
