@@ -37,6 +37,7 @@ struct RetargetCommand {
   std::string source, out, target, asf, map, source_map;
   double fps = 0.0;
   bool single_root = false;
+  bool keep_contacts = false;
 };
 
 void run_retarget(const RetargetCommand& o) {
@@ -55,7 +56,9 @@ void run_retarget(const RetargetCommand& o) {
     options.source_map = &source_map;
   }
   RetargetPlan plan;
-  const Motion out = take(retarget(source, rig, options, &plan));
+  Motion out = take(retarget(source, rig, options, &plan));
+  ContactReport contacts;
+  if (o.keep_contacts) out = take(keep_contacts(out, plan, {}, &contacts));
   LoadOptions save;
   save.bvh_single_root = o.single_root;
   take(save_motion(out, o.out, save));
@@ -65,6 +68,15 @@ void run_retarget(const RetargetCommand& o) {
                out.frame_count, o.source.c_str(), plan.source.naming.c_str(), plan.source_reference.c_str(),
                o.target.c_str(), plan.target.naming.c_str(), plan.target_reference.c_str(), plan.driven.size(),
                plan.scale);
+  if (o.keep_contacts) {
+    std::fprintf(stderr,
+                 "feet kept on the floor: %zu contacts (%zu foot-frames); the farthest a resting ankle slid: %.6g "
+                 "before, %.6g after (rig units)%s\n",
+                 contacts.contacts, contacts.frames_pinned, contacts.slide_before, contacts.slide_after,
+                 contacts.out_of_reach > 0
+                     ? (", " + std::to_string(contacts.out_of_reach) + " foot-frames out of the leg's reach").c_str()
+                     : "");
+  }
   print_warnings(warnings);
 }
 
@@ -101,6 +113,9 @@ void add_retarget_commands(CLI::App& app) {
   cmd->add_option("--map", o->map, "The rig's roles as JSON {\"hips\": \"Pelvis\", ...} (default: built-in namings)");
   cmd->add_option("--source-map", o->source_map, "The source's roles, as --map (default: built-in namings)");
   add_single_root_flag(*cmd, o->single_root);
+  cmd->add_flag("--keep-contacts", o->keep_contacts,
+                "Keep resting feet where they rest: an IK on each leg pins the ankle while it is on the floor "
+                "(docs/retarget.md, \"Foot contacts\")");
   cmd->callback([o] { run_retarget(*o); });
 }
 

@@ -78,5 +78,25 @@ TEST_F(CliRetarget, BadMapsAndRigsGiveOneLine) {
   EXPECT_FALSE(std::filesystem::exists(dir_ / "o.bvh")) << "nothing written on a refusal";
 }
 
+// --keep-contacts: the same take with its resting feet pinned, and the command
+// says how many contacts it kept and how far the ankles slid before and after.
+TEST_F(CliRetarget, KeepContactsPinsTheFeetAndSaysSo) {
+  GMR_REQUIRE_DATA();
+  const std::string source = shell_quote(test::data_file("bvh/cmu/02_01.bvh").string());
+  const std::string rig = shell_quote(test::data_file("bvh/mixamo/Beta_jump.bvh").string());
+  const auto plain = gmr("retarget " + source + " " + path("plain.bvh") + " --target " + rig);
+  ASSERT_EQ(plain.status, 0) << plain.err;
+  EXPECT_THAT(plain.err, ::testing::Not(HasSubstr("contacts")));
+  const auto kept = gmr("retarget " + source + " " + path("kept.bvh") + " --target " + rig + " --keep-contacts");
+  ASSERT_EQ(kept.status, 0) << kept.err;
+  EXPECT_THAT(kept.err, HasSubstr("feet kept on the floor: "));
+  EXPECT_THAT(kept.err, HasSubstr("the farthest a resting ankle slid: "));
+  auto a = load_motion(dir_ / "plain.bvh");
+  auto b = load_motion(dir_ / "kept.bvh");
+  ASSERT_TRUE(a.ok() && b.ok());
+  ASSERT_EQ(a->frame_count, b->frame_count);
+  EXPECT_NE(a->values, b->values) << "--keep-contacts changed nothing";
+}
+
 }  // namespace
 }  // namespace gmr

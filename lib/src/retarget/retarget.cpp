@@ -225,6 +225,8 @@ Result<Plan> make_plan(const Motion& source_motion, const Motion& target_motion,
   plan.report.axes = G;
   const double hs = hip_height(S, ps, up_s.normalized()), ht = hip_height(T, pt, up_t.normalized());
   plan.report.scale = hs > 1e-9 && ht > 1e-9 ? ht / hs : 1.0;
+  plan.report.target_up = snapped(body_frame(up_t, left_t)).col(1);
+  plan.report.target_hip_height = ht;
 
   auto add_segment = [&](Role from, Role to) -> Status {
     Segment g{from, to, T[from], T[to], S[from], S[to], kNoParent, {}, {}, {}};

@@ -33,6 +33,10 @@ struct RetargetPlan {
   // within 30 degrees of one, so output directions are G times the source's.
   Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
   double scale = 1.0;  // target hip height / source hip height (reference poses)
+  // The rig's up axis (hips to head at its reference, snapped like `axes`)
+  // and its hip height above its lowest foot there, in the rig's units.
+  Eigen::Vector3d target_up = Eigen::Vector3d::UnitY();
+  double target_hip_height = 0.0;
   // The pose each rig is measured in: "rest pose" (every rotation zero) when
   // that is a standing humanoid, else "first frame" (Character Creator rigs
   // bake their bone axes into the rotations, so their rest pose is folded up;
@@ -74,5 +78,39 @@ class Retargeter {
 // would add joints is refused.
 Result<Motion> retarget(const Motion& source, const Motion& target, const RetargetOptions& options = {},
                         RetargetPlan* plan_out = nullptr);
+
+// Foot contacts (`gmr retarget --keep-contacts`; docs/retarget.md, "Foot
+// contacts"). A foot rests while its ankle is within `height` hip heights
+// above its floor (its height in the lowest 5% of the take's frames) and moves
+// slower than `speed` hip heights per second along the floor, for at least
+// `min_frames` frames; each such stretch
+// gets one pin (the ankle's mean place on the floor), eased in over
+// `blend_frames` frames before it and out after.
+struct ContactOptions {
+  double height = 0.1;
+  double speed = 0.5;
+  std::size_t min_frames = 3;
+  std::size_t blend_frames = 5;
+};
+
+struct ContactReport {
+  std::size_t contacts = 0;       // stretches pinned, both feet
+  std::size_t frames_pinned = 0;  // foot-frames inside them
+  // The farthest a resting ankle was from its pin along the floor, before and
+  // after (rig units); after is 0 to round-off unless a pin was out of reach.
+  double slide_before = 0.0, slide_after = 0.0;
+  std::size_t out_of_reach = 0;  // foot-frames whose pin the straightened leg could not reach
+  double lowest = 0.0;           // the most the body was lowered to reach a pin (rig units)
+};
+
+// `retargeted` (retarget()'s output, with its plan) with the resting feet
+// pinned: a two-bone IK on each leg (the hip joint and the knee turn, the knee
+// bending in its own plane) puts the ankle on its pin, the foot keeps its
+// world orientation, every other joint keeps its rotations and every bone its
+// length; where a straight leg cannot reach its pin the root is lowered along
+// up just enough, eased in and out. Whole takes only: a live frame has no
+// future to find a stretch in.
+Result<Motion> keep_contacts(const Motion& retargeted, const RetargetPlan& plan, const ContactOptions& options = {},
+                             ContactReport* report = nullptr);
 
 }  // namespace gmr
