@@ -7,7 +7,11 @@ pose-bone heads (world space) must equal `gmr positions` of that frame with
 the same roots and viewpoint, converted to Blender's axes and metres, to
 1e-4 of the skeleton's size: before and after a root change requested from
 Blender (the armature is rebuilt with the new hierarchy), and when the
-Action the add-on recorded is played back.
+Action the add-on recorded is played back. And the user's own character: a
+Mixamo rig imported by Blender's BVH importer, selected, is the armature the
+add-on asks the server to retarget CMU 02_01 onto; its bone heads must equal
+`gmr retarget` onto the same BVH (same tolerance), and each bone's rotation
+must turn its rest direction onto its child (what skinning sees).
 
     live_link_test.py --repo . --bin-dir build/bin --python-dir build/python
 
@@ -122,7 +126,49 @@ def main():
         print(f"{label}: {len(result['before'])} + {len(result['after'])} frames applied, "
               f"{len(result['played'])} played from the Action")
 
-    env.finish(failures, checked, 4 * 40)
+    # The selected armature as the target.
+    rig = env.data_dir() / "bvh/mixamo/Beta_jump.bvh"
+    retargeted = work / "02_01_on_beta.bvh"
+    subprocess.run([str(bin_dir / "gmr"), "retarget", str(lib / "02_01.bvh"), str(retargeted), "--target", str(rig)],
+                   check=True, capture_output=True)
+    want, names = env.gmr_positions(bin_dir, retargeted, "--conventions", "blender")
+    size = max(float(np.linalg.norm(want[0] - want[0][k])) for k in range(len(names)))
+    with env.Server(bin_dir, "--metres-per-unit", "0.0254", library=lib) as server:
+        out = work / "retarget.json"
+        run = subprocess.run([blender, "-b", "--factory-startup", "--python",
+                              str(repo / "tests/blender/live_link_in_blender.py"), "--",
+                              "--addon-dir", str(repo / "client/blender"), "--python-dir",
+                              str(pathlib.Path(args.python_dir).resolve()), "--port", str(server.port),
+                              "--motion", "02_01", "--new-roots", "", "--target-bvh", str(rig), "--out", str(out)],
+                             capture_output=True, text=True, timeout=300)
+    if run.returncode != 0 or not out.exists():
+        failures.append(f"retarget onto the selected armature: Blender failed ({run.returncode}):\n"
+                        f"{run.stdout[-3000:]}\n{run.stderr[-3000:]}")
+    else:
+        result = json.loads(out.read_text())
+        index = {n: k for k, n in enumerate(names)}
+        bones = sorted(result["before"][0]["heads"]) if result["before"] else []
+        if len(bones) != result["bones"] or any(b not in index for b in bones):
+            failures.append(f"retarget: the armature's {result['bones']} bones are not all joints of gmr retarget's output")
+        worst = 0.0
+        for s in result["before"]:
+            got = np.array([s["heads"][b] for b in bones])
+            err = float(np.abs(got - want[s["frame"]][[index[b] for b in bones]]).max())
+            worst = max(worst, err)
+            checked += 1
+            if err > 1e-4 * size:
+                failures.append(f"retarget: frame {s['frame']}: a head of '{result['object']}' is {err:.3g} off "
+                                f"gmr retarget's (allowed {1e-4 * size:.3g})")
+                break
+        misses = result["rotation_misses"]
+        bad = {b: m for b, m in misses.items() if m > 1e-4}
+        if len(misses) < 20 or bad:
+            failures.append(f"retarget: {len(misses)} bones checked; rotations that miss their child: {bad}")
+        print(f"retarget onto the selected armature ({result['object']}, {result['bones']} bones): "
+              f"{len(result['before'])} frames, largest head difference {worst:.3g} (size {size:.3g}), "
+              f"largest rotation miss {max(misses.values(), default=0):.2g}")
+
+    env.finish(failures, checked, 4 * 40 + 20)
     print(f"live link in Blender: {len(cases)} motions, {checked} frames checked")
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)

@@ -13,7 +13,8 @@ bl_info = {
     "version": (0, 1, 0),
     "blender": (3, 4, 0),
     "location": "View3D > Sidebar > gmr",
-    "description": "Stream a motion from gmr-server onto an armature, from any root or joint's viewpoint",
+    "description": "Stream a motion from gmr-server onto an armature (built for it or your own character), "
+                   "from any root or joint's viewpoint",
     "category": "Animation",
 }
 
@@ -63,6 +64,10 @@ class GmrSettings(bpy.types.PropertyGroup):
     viewpoint: bpy.props.StringProperty(name="Viewpoint", description="See the motion from this joint (empty: world)")
     rate_hz: bpy.props.FloatProperty(name="Rate", default=0.0, min=0.0, description="Frames per second (0: the motion's)")
     record: bpy.props.BoolProperty(name="Record into an Action", default=False)
+    retarget: bpy.props.BoolProperty(
+        name="Onto the selected armature",
+        description="The server puts the motion on the selected armature (your character, a humanoid rig) "
+                    "instead of building one from the capture skeleton (docs/retarget.md)")
 
 
 def _tick():
@@ -118,15 +123,21 @@ class GMR_OT_start(bpy.types.Operator):
             self.report({"ERROR"}, "connect first")
             return {"CANCELLED"}
         roots = [r.strip() for r in s.roots.split(",") if r.strip()]
+        target = None
+        if s.retarget:
+            target = context.active_object
+            if target is None or target.type != "ARMATURE":
+                self.report({"ERROR"}, "select the armature to retarget onto")
+                return {"CANCELLED"}
         try:
-            _link.open(s.motion, roots=roots, viewpoint=s.viewpoint.strip(), rate_hz=s.rate_hz)
+            _link.open(s.motion, roots=roots, viewpoint=s.viewpoint.strip(), rate_hz=s.rate_hz, target=target)
         except Exception as e:
             _status = str(e)
             self.report({"ERROR"}, _status)
             return {"CANCELLED"}
         if not bpy.app.timers.is_registered(_tick):
             bpy.app.timers.register(_tick, first_interval=0.0)
-        _status = f"streaming {s.motion}"
+        _status = f"streaming {s.motion}" + (f" on {target.name}" if target is not None else "")
         return {"FINISHED"}
 
 
@@ -183,6 +194,7 @@ class GMR_PT_panel(bpy.types.Panel):
         col.prop(s, "viewpoint")
         col.prop(s, "rate_hz")
         col.prop(s, "record")
+        col.prop(s, "retarget")
         row = col.row()
         row.operator("gmr.start")
         row.operator("gmr.stop")

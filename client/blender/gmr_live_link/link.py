@@ -11,6 +11,13 @@ transform that puts its head at P_j turned by O_j from its rest:
     pose_j = [O_j A_j | P_j]      (A_j: the bone's rest orientation)
     matrix_basis_j = rest_j^-1 rest_p pose_p^-1 pose_j   (rest_j^-1 pose_j for a root)
 
+With a target armature (the user's own character), the server retargets
+the view onto it (docs/retarget.md) and the frames drive that armature's
+bones instead: `armature_rig` sends its bones as the rig, in the motion's
+axes and the armature's unit, and the subscription asks for the armature's
+own space back, so the pose bones take the same formula with their own rest
+matrices (and their own parents, should the server's hierarchy differ).
+
 `tick()` never blocks: it reads what has arrived and applies the newest
 frame. The add-on runs it on a bpy.app.timers timer; a script can call it.
 """
@@ -18,6 +25,7 @@ frame. The add-on runs it on a bpy.app.timers timer; a script can call it.
 import time
 
 import bpy
+import numpy as np
 from mathutils import Matrix, Quaternion, Vector
 
 import gmr_client
@@ -38,6 +46,63 @@ def _own_frame_children(parents):
     return best
 
 
+# Blender's axes (Z up, -Y forward) to the motion's (Y up, +Z forward): the
+# inverse of the "blender" conventions (x, y, z) -> (x, -z, y).
+def _to_motion_axes(v):
+    return (v[0], v[2], -v[1])
+
+
+def armature_rig(obj):
+    """The armature `obj` as a gmr rig for Client.retarget: one joint per bone
+    (parents first), each bone's head relative to its parent's head in the
+    armature's space turned into the motion's axes, BVH channels, and the unit
+    of the armature's space in metres (its object scale times the scene's unit
+    scale). A bone without children also ends in a joint at its tail, named
+    "<bone>_End" without channels: a BVH's End Site, where Blender's importer
+    puts that tail, and what gmr's roles `head_end` and `toes_end` (and the
+    rig's hip height, over its lowest toe) read. Returns (Skeleton,
+    metres_per_unit)."""
+    if obj is None or obj.type != "ARMATURE":
+        raise ValueError("select an armature to retarget onto")
+    scale = obj.matrix_world.to_scale()
+    if max(scale) - min(scale) > 1e-6 * max(scale) or min(scale) <= 0:
+        raise ValueError(f"armature '{obj.name}' is scaled unevenly ({tuple(round(s, 6) for s in scale)}): "
+                         "apply its scale first")
+    unit = float(scale[0]) * float(bpy.context.scene.unit_settings.scale_length or 1.0)
+    order = []
+
+    def visit(bone):
+        order.append(bone)
+        for c in bone.children:
+            visit(c)
+    for b in obj.data.bones:
+        if b.parent is None:
+            visit(b)
+    if not order:
+        raise ValueError(f"armature '{obj.name}' has no bones")
+    index = {}  # bone name -> joint index (the tips' joints come between bones)
+    names, parents, offsets, channels = [], [], [], []
+    rot = ["Zrotation", "Xrotation", "Yrotation"]
+    for b in order:
+        p = index[b.parent.name] if b.parent else -1
+        head = b.head_local - (b.parent.head_local if b.parent else Vector((0.0, 0.0, 0.0)))
+        index[b.name] = len(names)
+        names.append(b.name)
+        parents.append(p)
+        offsets.append(_to_motion_axes(head))
+        channels.append((["Xposition", "Yposition", "Zposition"] + rot) if p < 0 else rot)
+        if not b.children and f"{b.name}_End" not in obj.data.bones:
+            names.append(f"{b.name}_End")
+            parents.append(len(names) - 2)
+            offsets.append(_to_motion_axes(b.tail_local - b.head_local))
+            channels.append([])
+    n = len(names)
+    sk = gmr_client.Skeleton(names, np.array(parents, dtype=np.int32), np.full(n, -1, dtype=np.int32),
+                             np.array(offsets, dtype=np.float64), channels, np.zeros((n, 3)),
+                             np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
+    return sk, unit
+
+
 class LiveLink:
     def __init__(self, host="127.0.0.1", port=gmr_client.DEFAULT_PORT, token="", name="blender"):
         self.client = gmr_client.Client(host, port, name=name, token=token)
@@ -50,25 +115,42 @@ class LiveLink:
         self.record = False      # insert keyframes into the armature's Action
         self.recorded = 0
         self._rest = []          # per joint: the bone's rest matrix (armature space)
+        self.target = None       # the user's armature the view is retargeted onto, or None
 
     # ------------------------------------------------------------ set-up
 
     def motions(self):
         return self.client.list_motions()
 
-    def open(self, motion, roots=(), viewpoint="", rate_hz=0.0, speed=1.0, loop=True, udp=False, max_frames=0):
+    def open(self, motion, roots=(), viewpoint="", rate_hz=0.0, speed=1.0, loop=True, udp=False, max_frames=0,
+             target=None):
         """A view of `motion` with these roots and viewpoint, a subscription in
-        Blender's conventions with local transforms, and its armature."""
+        Blender's conventions with local transforms, and its armature: one
+        built from the view's skeleton, or `target` (an armature object), the
+        user's character the server retargets the view onto (no viewpoint:
+        the retargeted motion is in world coordinates)."""
         self.close_stream()
+        if target is not None and viewpoint:
+            raise ValueError("a retargeted view is seen in world coordinates: clear the viewpoint")
+        rig = armature_rig(target) if target is not None else None
         self.view = self.client.create_view(motion)
         if roots:
             self.client.set_roots(self.view.id, list(roots))
         if viewpoint:
             self.client.set_coordinates(self.view.id, viewpoint)
+        conventions = "blender"
+        if rig is not None:
+            self.client.retarget(self.view.id, rig[0], metres_per_unit=rig[1])
+            # Frames in the armature's own space: Blender's axes, its unit.
+            conventions = gmr_client.Conventions(preset="custom", up=3, forward=-2, target_metres_per_unit=rig[1])
         self.sub = self.client.subscribe(self.view.id, loop=loop, rate_hz=rate_hz, speed=speed, udp=udp,
                                          local_transforms=True, float64=True, max_frames=max_frames,
-                                         conventions="blender", max_staleness_ms=100)  # live: fresh frames only
-        self.build_armature(motion)
+                                         conventions=conventions, max_staleness_ms=100)  # live: fresh frames only
+        self.target = target
+        if target is not None:
+            self.bind_armature(target)
+        else:
+            self.build_armature(motion)
         return self.object
 
     def set_roots(self, roots):
@@ -154,6 +236,31 @@ class LiveLink:
         self.object = obj
         self.version = self.sub.skeleton_version
         self.parents = parents
+        self.bone_parents = parents
+        return obj
+
+    def bind_armature(self, obj):
+        """Drives the user's armature `obj`: every joint of the subscription's
+        skeleton is one of its bones (the rig it was retargeted onto)."""
+        sk = self.sub.skeleton
+        bones = obj.data.bones
+        # Every joint is a bone, or the tip of a bone without children that
+        # armature_rig added (nothing to pose).
+        tips = {f"{b.name}_End" for b in bones if not b.children}
+        missing = [name for name in sk.names if name not in bones and name not in tips]
+        if missing:
+            raise RuntimeError(f"armature '{obj.name}' has no bones {', '.join(missing[:5])}: "
+                               "the view is not on this armature")
+        index = {name: j for j, name in enumerate(sk.names)}
+        self.bone_names = [name if name in bones else None for name in sk.names]
+        self.parents = [int(p) for p in sk.parents]
+        self.bone_parents = [index[bones[name].parent.name] if name in bones and bones[name].parent
+                             and bones[name].parent.name in index else -1 for name in sk.names]
+        self._rest = [bones[name].matrix_local.copy() if name in bones else Matrix.Identity(4) for name in sk.names]
+        for pb in obj.pose.bones:
+            pb.rotation_mode = "QUATERNION"
+        self.object = obj
+        self.version = self.sub.skeleton_version
         return obj
 
     # ------------------------------------------------------------ frames
@@ -169,7 +276,10 @@ class LiveLink:
         if frame.skeleton_version != self.version:
             if frame.skeleton_version != self.sub.skeleton_version:
                 return None  # a frame of a skeleton not announced yet (UDP can overtake): skip it
-            self.build_armature(self.view.motion if self.view else "motion")
+            if self.target is not None:
+                self.bind_armature(self.target)
+            else:
+                self.build_armature(self.view.motion if self.view else "motion")
         self.apply(frame)
         return frame
 
@@ -199,7 +309,9 @@ class LiveLink:
             pose.append(m)
         bones = self.object.pose.bones
         for j in range(n):
-            p = self.parents[j]
+            if self.bone_names[j] is None:
+                continue  # a bone's tip (armature_rig), not a bone
+            p = self.bone_parents[j]  # the armature's parent (a retarget target keeps its own hierarchy)
             rest_j_inv = self._rest[j].inverted()
             if p < 0:
                 basis = rest_j_inv @ pose[j]
