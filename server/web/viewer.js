@@ -17,6 +17,7 @@ import { OrbitControls } from '/three/examples/jsm/controls/OrbitControls.js';
 const PROTOCOL_VERSION = 1;
 const HEARTBEAT_MS = 2000;
 const STALENESS_MS = 250;  // frames older than this are neither sent (the server's bound) nor drawn
+const JOINT_CAPTION = 'From a joint: pick one and tick “View from this joint”';
 const $ = (id) => document.getElementById(id);
 
 // ------------------------------------------------------------------ protocol
@@ -319,6 +320,7 @@ class Viewer {
     this.subs = { world: null, joint: null };           // Subscribed per panel
     this.selected = null;
     this.viewpoint = null;   // the joint the right panel is seen from
+    this.rig = null;         // the library motion whose skeleton the right panel shows the motion on
     this.playing = true;
     this.motion = null;
     this.figures = { frames: 0, windowStart: performance.now(), fps: 0, latencies: [], drops: 0, stale: 0, lastSeq: new Map() };
@@ -389,6 +391,13 @@ class Viewer {
       li.onclick = () => this.open(m.name).catch((e) => this.fail(e));
       ul.append(li);
     }
+    const rigs = $('rig');
+    rigs.replaceChildren(rigs.options[0]);
+    for (const m of this.motions) {
+      const o = document.createElement('option');
+      o.value = o.textContent = m.name;
+      rigs.append(o);
+    }
   }
 
   wire() {
@@ -401,6 +410,7 @@ class Viewer {
     $('btn-split').onclick = () => this.edit('split', { joint: this.selected }).catch((e) => this.fail(e));
     $('btn-join').onclick = () => this.edit('join', { root: this.selected }).catch((e) => this.fail(e));
     $('viewpoint').onchange = () => this.setViewpoint($('viewpoint').checked ? this.selected : null).catch((e) => this.fail(e));
+    $('rig').onchange = () => this.setRig($('rig').value).catch((e) => this.fail(e));
     for (const panel of Object.values(this.panels)) {
       // A click (not a drag of the orbit camera) on a joint selects it.
       let down = null;
@@ -425,7 +435,10 @@ class Viewer {
     this.motion = info;
     this.selected = null;
     this.viewpoint = null;
+    this.rig = null;
+    $('rig').value = '';
     $('viewpoint').checked = false;
+    $('joint-caption').textContent = JOINT_CAPTION;
     for (const li of $('motions').children) li.classList.toggle('current', li.dataset.motion === name);
     this.views.world = (await this.socket.ask({ createView: { motion: name } })).view;
     this.views.joint = (await this.socket.ask({ createView: { motion: name } })).view;
@@ -501,7 +514,7 @@ class Viewer {
     $('btn-shift').disabled = !j || j.parent < 0;
     $('btn-split').disabled = !j || j.parent < 0;
     $('btn-join').disabled = !j || !(j.parent < 0 && j.softParent >= 0);
-    $('viewpoint').disabled = !j && !this.viewpoint;
+    $('viewpoint').disabled = this.rig !== null || (!j && !this.viewpoint);
   }
 
   joint(name) {
@@ -510,9 +523,10 @@ class Viewer {
     return j ? jointOf(j) : null;
   }
 
-  // A root edit, on both views (the right panel shows the same forest).
+  // A root edit, on both views (the right panel shows the same forest; on a
+  // rig it shows the rig's, which a root edit of the source leaves as it is).
   async edit(kind, args) {
-    for (const key of ['world', 'joint']) {
+    for (const key of this.rig === null ? ['world', 'joint'] : ['world']) {
       const reply = await this.socket.ask({ [kind]: { viewId: this.views[key].viewId, ...args } });
       this.views[key] = reply.view;
     }
@@ -527,13 +541,48 @@ class Viewer {
     this.panels.joint.clear();
     this.viewpoint = joint;
     if (!joint) {
-      $('joint-caption').textContent = 'From a joint: pick one and tick “View from this joint”';
+      $('joint-caption').textContent = JOINT_CAPTION;
       this.showJoint();
       return;
     }
     this.views.joint = (await this.socket.ask({ setCoordinates: { viewId: view.viewId, relativeTo: joint } })).view;
     $('joint-caption').textContent = `From ${joint} (its bone frame; axes: x red, y green, z blue)`;
     await this.subscribe('joint', this.currentFrame());
+    this.showJoint();
+  }
+
+  // The right panel shows the motion on another library motion's skeleton
+  // (the server retargets a view of it, docs/retarget.md), beside the source;
+  // '' brings back the view from a joint.
+  async setRig(name) {
+    if (!this.motion) return;
+    await this.unsubscribe('joint');
+    this.panels.joint.clear();
+    if (this.views.joint) await this.socket.ask({ closeView: { viewId: this.views.joint.viewId } }).catch(() => {});
+    this.views.joint = null;
+    this.viewpoint = null;
+    $('viewpoint').checked = false;
+    this.rig = null;
+    $('joint-caption').textContent = JOINT_CAPTION;
+    // A fresh view of the source with the left panel's roots (a rig keeps its own).
+    let view = (await this.socket.ask({ createView: { motion: this.motion.name } })).view;
+    const roots = this.views.world.skeleton.joints.map(jointOf).filter((j) => j.parent < 0).map((j) => j.name);
+    view = (await this.socket.ask({ setRoots: { viewId: view.viewId, roots } })).view;
+    this.views.joint = view;
+    if (name) {
+      try {
+        const rig = (await this.socket.ask({ getSkeleton: { motion: name } })).skeleton.skeleton;
+        this.views.joint = (await this.socket.ask({ retarget: { viewId: view.viewId, target: rig } })).view;
+      } catch (e) {
+        $('rig').value = '';
+        this.showJoint();
+        throw new Error(`cannot put ${this.motion.name} on ${name}: ${e.message}`);
+      }
+      this.rig = name;
+      $('message').textContent = '';
+      $('joint-caption').textContent = `On ${name}'s skeleton (retargeted by the server)`;
+      await this.subscribe('joint', this.currentFrame());
+    }
     this.showJoint();
   }
 
@@ -648,6 +697,7 @@ window.gmrViewer = {
       motion: viewer.motion && viewer.motion.name,
       selected: viewer.selected,
       viewpoint: viewer.viewpoint,
+      rig: viewer.rig,
       roots: viewer.views.world ? viewer.views.world.skeleton.joints.map(jointOf).filter((j) => j.parent < 0).map((j) => j.name) : [],
       figures: { fps: viewer.figures.fps, drops: viewer.figures.drops, stale: viewer.figures.stale },
       world: viewer.panels.world.drawn(),

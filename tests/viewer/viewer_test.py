@@ -1,9 +1,10 @@
 """The browser viewer in a real headless Chromium (Debian's), against a real
 gmr-server serving a real CMU capture: the page's motion list, the joints it
 draws (read back from its three.js scene objects) against `gmr positions`
-of the same frames, a click on a joint that makes it the root, and the view
-from a joint against `gmr positions --relative-to`. Saves a screenshot and
-fails on a blank canvas.
+of the same frames, a click on a joint that makes it the root, the view
+from a joint against `gmr positions --relative-to`, and the motion put on
+another skeleton of the library (a Mixamo rig) beside the source against
+`gmr retarget`. Saves a screenshot and fails on a blank canvas.
 
   viewer_test.py --bin-dir BUILD/bin [--screenshot FILE]
 
@@ -26,6 +27,7 @@ import cdp  # noqa: E402
 MOTION = "02_01"
 PICKED = "LeftForeArm"     # clicked, then made the root
 VIEWPOINT = "Head"         # clicked, then seen from
+RIG = "rigs/Beta_jump"     # the skeleton the motion is retargeted onto, beside the source
 
 
 def check(condition, message):
@@ -105,11 +107,15 @@ def main():
     if chromium is None:
         env.skip_or_fail("no chromium on PATH (scripts/install-deps.sh installs Debian's)")
     bvh = env.data_dir() / "bvh" / "cmu" / f"{MOTION}.bvh"
-    if not bvh.is_file():
-        env.skip_or_fail(f"{bvh} is missing (the corpus in ../shared/data)")
+    rig = env.data_dir() / "bvh" / "mixamo" / "Beta_jump.bvh"
+    for f in (bvh, rig):
+        if not f.is_file():
+            env.skip_or_fail(f"{f} is missing (the corpus in ../shared/data)")
 
     library = tempfile.TemporaryDirectory(prefix="gmr_viewer_lib_")
     (pathlib.Path(library.name) / bvh.name).symlink_to(bvh)
+    (pathlib.Path(library.name) / "rigs").mkdir()
+    (pathlib.Path(library.name) / "rigs" / rig.name).symlink_to(rig)
     expected, names = env.gmr_positions(args.bin_dir, bvh)
     frame0 = expected[0]
     size = float(((frame0.max(axis=0) - frame0.min(axis=0)) ** 2).sum() ** 0.5)
@@ -121,9 +127,9 @@ def main():
             browser.navigate(base)
             motions = browser.wait_for("gmrViewer.state().motions.length && gmrViewer.state().motions", 30,
                                        "the motion list")
-            check(motions == [MOTION], f"the page lists {motions}, the server serves [{MOTION}]")
+            check(motions == [MOTION, RIG], f"the page lists {motions}, the server serves [{MOTION}, {RIG}]")
             listed = browser.evaluate("[...document.querySelectorAll('#motions li')].map(li => li.dataset.motion)")
-            check(listed == [MOTION], f"the page shows {listed}")
+            check(listed == [MOTION, RIG], f"the page shows {listed}")
             browser.wait_for("gmrViewer.state().world.frame !== null", 30, "the first frame drawn")
 
             # 1. The world panel plays the motion where gmr positions puts it.
@@ -176,7 +182,24 @@ def main():
             check(max(abs(v) for v in head) <= 1e-4 * size, f"{VIEWPOINT} seen from itself is at {head}")
             check(not s["errors"], f"the page reported errors: {s['errors']}")
 
-            # 5. Something is drawn, and a screenshot shows it.
+            # 5. The motion on the Mixamo rig beside the source (the server retargets it).
+            browser.evaluate(f"(() => {{ const r = document.getElementById('rig'); r.value = '{RIG}';"
+                             " r.dispatchEvent(new Event('change')); })()")
+            browser.wait_for(f"gmrViewer.state().rig === '{RIG}' && gmrViewer.state().joint.frame !== null", 20,
+                             "the motion drawn on the rig")
+            with tempfile.TemporaryDirectory(prefix="gmr_viewer_rig_") as tmp:
+                out = pathlib.Path(tmp) / "on_rig.bvh"
+                subprocess.run([str(pathlib.Path(args.bin_dir) / "gmr"), "retarget", str(bvh), str(out),
+                                "--target", str(rig)], check=True, capture_output=True)
+                on_rig, rig_names = env.gmr_positions(args.bin_dir, out)
+            rig0 = on_rig[0]
+            rig_size = float(((rig0.max(axis=0) - rig0.min(axis=0)) ** 2).sum() ** 0.5)
+            s = sample(browser, "joint", 5, on_rig, rig_names, rig_size, f"on {RIG}")
+            check(s["viewpoint"] is None and s["world"]["joints"].keys() == set(seen_names),
+                  "the left panel no longer shows the source")
+            check(not s["errors"], f"the page reported errors: {s['errors']}")
+
+            # 6. Something is drawn, and a screenshot shows it.
             time.sleep(2.2)  # a whole second of figures on screen
             figures = browser.evaluate("gmrViewer.state().figures")
             # (How many of the 120 a busy machine's software-rendered tab takes in varies: some.)
@@ -192,7 +215,7 @@ def main():
             browser.screenshot(shot)
             check(shot.stat().st_size > 10000, f"the screenshot {shot} is {shot.stat().st_size} bytes")
             print(f"screenshot: {shot}")
-            # 6. The page's traffic, as /metrics reports it.
+            # 7. The page's traffic, as /metrics reports it.
             samples, _ = env.scrape_metrics(server.http_port)
             ws = (("transport", "websocket"),)
             check(samples.get(("gmr_connections", ws)) == 1, "gmr_connections{transport=websocket} is not 1")
@@ -205,7 +228,7 @@ def main():
             check(not errors, f"the page's console: {errors}")
         finally:
             browser.close()
-        # 7. The screenshot recipe docs/viewer.md gives (scripts/viewer-screenshot.py) draws the skeleton.
+        # 8. The screenshot recipe docs/viewer.md gives (scripts/viewer-screenshot.py) draws the skeleton.
         recipe = pathlib.Path(tempfile.gettempdir()) / "gmr_viewer_recipe.png"
         script = pathlib.Path(__file__).resolve().parents[2] / "scripts" / "viewer-screenshot.py"
         run = subprocess.run([sys.executable, str(script), f"http://127.0.0.1:{server.http_port}/", str(recipe),
