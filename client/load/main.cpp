@@ -1,6 +1,6 @@
 // gmr-load: N clients subscribe to a gmr-server and measure what arrives.
 //
-//   gmr-load [--host H] [--port P] [--token T] [--tls-ca CA] [--clients N] [--motion M] [--seconds S]
+//   gmr-load [--host H] [--port P] [--token T] [--tls-ca CA] [--clients N] [--motion M] [--retarget RIG] [--seconds S]
 //            [--rate HZ] [--udp] [--shared] [--orientations] [--float64] [--threads T]
 //            [--server-pid PID] [--start-at EPOCH_S] [--json FILE] [--plot FILE.png]
 //   gmr-load --merge A.json B.json ... [--json FILE] [--plot FILE.png]
@@ -194,6 +194,10 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 20000));
   app.add_option("--motion", motion, "Motion to stream, looped (default: the first in the server's list)");
+  std::string retarget_rig;
+  app.add_option("--retarget", retarget_rig,
+                 "Each client's view retargeted onto this library motion's skeleton (docs/retarget.md) before it "
+                 "subscribes: what a retargeted subscription costs the server");
   app.add_option("--seconds", seconds, "Measurement time")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--warmup", warmup, "Seconds ignored after the last client subscribed")->capture_default_str();
   app.add_option("--rate", rate, "Output rate in Hz (0: the motion's rate)")->capture_default_str();
@@ -297,6 +301,15 @@ int main(int argc, char** argv) {
   // by one, the last clients' requests and registrations would queue behind
   // the frames of the first thousands.)
   std::vector<std::uint32_t> views(runs.size(), 0);
+  gmr::Skeleton rig;
+  if (!retarget_rig.empty()) {
+    auto s = runs[0]->client->skeleton(retarget_rig);
+    if (!s.ok()) {
+      std::fprintf(stderr, "gmr-load: --retarget %s: %s\n", retarget_rig.c_str(), s.error().to_string().c_str());
+      return 1;
+    }
+    rig = std::move(s).value();
+  }
   auto prepare_one = [&](std::size_t i) -> bool {
     if (!runs[i]) runs[i] = connect_one(i);
     if (!runs[i]) return false;
@@ -308,6 +321,13 @@ int main(int argc, char** argv) {
       return false;
     }
     views[i] = view->id;
+    if (!retarget_rig.empty()) {
+      if (auto on_rig = r->client->retarget(view->id, rig); !on_rig.ok()) {
+        std::lock_guard lock(error_mutex);
+        if (error.empty()) error = "client " + std::to_string(i) + ": " + on_rig.error().to_string();
+        return false;
+      }
+    }
     if (udp) {
       if (gmr::Status s = r->client->register_udp(); !s.ok()) {
         std::lock_guard lock(error_mutex);
