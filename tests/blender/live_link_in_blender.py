@@ -108,8 +108,14 @@ if args.target_bvh:
         turn = pb.matrix.to_3x3() @ pb.bone.matrix_local.to_3x3().inverted()
         now = child.head - pb.head
         misses[pb.name] = (turn @ rest - now).length / rest.length
-    json.dump({"before": before, "object": first_object, "rotation_misses": misses,
-               "bones": len(obj.pose.bones)}, open(args.out, "w"))
+    # Streaming again without a target builds an armature of its own and
+    # leaves the user's alone (twice: the second build removes the first).
+    bones = len(obj.pose.bones)
+    link.open(args.motion)
+    link.open(args.motion)
+    kept = character.name in bpy.data.objects and len(character.pose.bones) == bones
+    json.dump({"before": before, "object": first_object, "rotation_misses": misses, "bones": bones,
+               "character_kept": kept, "built": link.object.name}, open(args.out, "w"))
     link.close()
     print("live link: done")
     sys.exit(0)

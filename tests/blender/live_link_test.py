@@ -160,6 +160,9 @@ def main():
                 failures.append(f"retarget: frame {s['frame']}: a head of '{result['object']}' is {err:.3g} off "
                                 f"gmr retarget's (allowed {1e-4 * size:.3g})")
                 break
+        if not result["character_kept"] or result["built"] == result["object"]:
+            failures.append(f"retarget: streaming without a target afterwards touched the user's armature "
+                            f"(kept: {result['character_kept']}, built '{result['built']}')")
         misses = result["rotation_misses"]
         bad = {b: m for b, m in misses.items() if m > 1e-4}
         if len(misses) < 20 or bad:

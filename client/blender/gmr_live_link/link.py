@@ -116,6 +116,7 @@ class LiveLink:
         self.recorded = 0
         self._rest = []          # per joint: the bone's rest matrix (armature space)
         self.target = None       # the user's armature the view is retargeted onto, or None
+        self._built = None       # the armature build_armature made last (removed when it makes another)
 
     # ------------------------------------------------------------ set-up
 
@@ -199,12 +200,16 @@ class LiveLink:
         child = _own_frame_children(parents)
 
         # A new skeleton starts a new Action (the old one stays in the file:
-        # its keys belong to the old bones' hierarchy).
-        old = self.object
+        # its keys belong to the old bones' hierarchy). Only an armature this
+        # link built is removed, never the user's own (a retarget target).
+        old = self._built
         if old is not None:
-            data = old.data
-            bpy.data.objects.remove(old, do_unlink=True)
-            bpy.data.armatures.remove(data)
+            try:
+                data = old.data
+                bpy.data.objects.remove(old, do_unlink=True)
+                bpy.data.armatures.remove(data)
+            except ReferenceError:
+                pass  # the user deleted it already
         arm = bpy.data.armatures.new(f"gmr {name}")
         obj = bpy.data.objects.new(f"gmr {name}", arm)
         bpy.context.scene.collection.objects.link(obj)
@@ -234,6 +239,7 @@ class LiveLink:
         for pb in obj.pose.bones:
             pb.rotation_mode = "QUATERNION"
         self.object = obj
+        self._built = obj
         self.version = self.sub.skeleton_version
         self.parents = parents
         self.bone_parents = parents
