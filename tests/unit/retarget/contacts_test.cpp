@@ -53,7 +53,8 @@ double skate(const Poses& m, const Poses& reference, int ankle, const Vec& up, d
   const double floor = heights[heights.size() / 10];
   auto down = [&](std::size_t f) {
     const Vec d = reference.p[std::min(f + 1, reference.p.size() - 1)][a] - reference.p[f > 0 ? f - 1 : f][a];
-    return reference.p[f][a].dot(up) - floor < 0.1 * hip_height && (d - d.dot(up) * up).norm() / (2 * frame_time) < hip_height / 3;
+    return reference.p[f][a].dot(up) - floor < 0.1 * hip_height &&
+           (d - d.dot(up) * up).norm() / (2 * frame_time) < hip_height / 3;
   };
   double travel = 0;
   for (std::size_t f = 1; f < m.p.size(); ++f) {
@@ -86,11 +87,12 @@ TEST(Contacts, AWalkOnMixamoKeepsItsRestingFeetWhereTheyRest) {
   const double dt = kept->frame_time;
   const double skate_before = skate(a, a, left, up, h, dt) + skate(a, a, right, up, h, dt);
   const double skate_after = skate(b, a, left, up, h, dt) + skate(b, a, right, up, h, dt);
-  std::printf("02_01 on Mixamo, %zu frames: %zu contacts, %zu foot-frames pinned, %zu out of reach; "
-              "ankle slide from the pin %.4g -> %.4g; body lowered up to %.4g; foot skate %.4g -> %.4g "
-              "(hip height %.4g)\n",
-              kept->frame_count, report.contacts, report.frames_pinned, report.out_of_reach, report.slide_before,
-              report.slide_after, report.lowest, skate_before, skate_after, h);
+  std::printf(
+      "02_01 on Mixamo, %zu frames: %zu contacts, %zu foot-frames pinned, %zu out of reach; "
+      "ankle slide from the pin %.4g -> %.4g; body lowered up to %.4g; foot skate %.4g -> %.4g "
+      "(hip height %.4g)\n",
+      kept->frame_count, report.contacts, report.frames_pinned, report.out_of_reach, report.slide_before,
+      report.slide_after, report.lowest, skate_before, skate_after, h);
   // A walk of several steps: each foot rests more than once.
   EXPECT_GE(report.contacts, 4u);
   EXPECT_GE(report.frames_pinned, kept->frame_count / 4);
@@ -102,10 +104,10 @@ TEST(Contacts, AWalkOnMixamoKeepsItsRestingFeetWhereTheyRest) {
   EXPECT_LT(skate_after, 0.5 * skate_before);
 
   // The feet keep their world orientation in every frame, every bone its
-  // length (the offsets are the rig's), and nothing above the legs moves.
+  // length (the offsets are the rig's), and nothing above the legs turns.
   std::vector<bool> leg(kept->skeleton.size(), false);
-  for (Role r : {Role::kLeftUpperLeg, Role::kLeftLowerLeg, Role::kLeftFoot, Role::kRightUpperLeg,
-                 Role::kRightLowerLeg, Role::kRightFoot}) {
+  for (Role r : {Role::kLeftUpperLeg, Role::kLeftLowerLeg, Role::kLeftFoot, Role::kRightUpperLeg, Role::kRightLowerLeg,
+                 Role::kRightFoot}) {
     leg[static_cast<std::size_t>(plan.target[r])] = true;
   }
   double foot_turn = 0;
