@@ -45,7 +45,7 @@ test-tsan: setup
 	@cd $(TSAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize -E '_NOT_BUILT$$'
 
 # Coverage-guided fuzzing (libFuzzer, clang, ASan/UBSan) of every reader and
-# the wire decoders, FUZZ_SECONDS each (default 60, 30 in CI), seeded from ../shared/data
+# the wire decoders, FUZZ_SECONDS each (default 60, 10 in CI), seeded from ../shared/data
 # (scripts/fuzz.sh; longer runs' figures are in docs/reliability.md).
 fuzz: setup
 	@scripts/fuzz.sh
