@@ -243,6 +243,48 @@ int main(int argc, char** argv) {
           rp[3 * 2 + 1] - rp[1]);
     gmr_unsubscribe(rs);
     CHECK(gmr_close_view(c, rv) == GMR_OK, "close_view: %s", gmr_last_error());
+
+    /* The same rig with a map of its own, said to be in inches (the walk is in
+     * centimetres): bad maps refused with the joint or role named, then the
+     * view in the rig's unit. */
+    static const gmr_role_joint map[15] = {{"hips", "Hips"},
+                                           {"spine", "Spine"},
+                                           {"head", "Head"},
+                                           {"left_upper_arm", "LeftUpperArm"},
+                                           {"left_lower_arm", "LeftLowerArm"},
+                                           {"left_hand", "LeftHand"},
+                                           {"right_upper_arm", "RightUpperArm"},
+                                           {"right_lower_arm", "RightLowerArm"},
+                                           {"right_hand", "RightHand"},
+                                           {"left_upper_leg", "LeftUpperLeg"},
+                                           {"left_lower_leg", "LeftLowerLeg"},
+                                           {"left_foot", "LeftFoot"},
+                                           {"right_upper_leg", "RightUpperLeg"},
+                                           {"right_lower_leg", "RightLowerLeg"},
+                                           {"right_foot", "RightFoot"}};
+    CHECK(gmr_create_view(c, "walk", &rv) == GMR_OK, "create_view: %s", gmr_last_error());
+    gmr_role_joint wrong[15];
+    memcpy(wrong, map, sizeof wrong);
+    wrong[5].joint = "LeftPaw";
+    s = gmr_retarget_mapped(c, rv, rig, 15, NULL, 0, wrong, 15, NULL, 0, 0.01);
+    CHECK(s == GMR_ERROR_FAILED_PRECONDITION && strstr(gmr_last_error(), "'LeftPaw'"), "absent joint: %d %s", s,
+          gmr_last_error());
+    wrong[5] = map[4];
+    s = gmr_retarget_mapped(c, rv, rig, 15, NULL, 0, wrong, 15, NULL, 0, 0.01);
+    CHECK(s == GMR_ERROR_INVALID_ARGUMENT && strstr(gmr_last_error(), "'left_lower_arm' is given twice"),
+          "a role twice: %d %s", s, gmr_last_error());
+    wrong[5].role = NULL;
+    CHECK(gmr_retarget_mapped(c, rv, rig, 15, NULL, 0, wrong, 15, NULL, 0, 0.01) == GMR_ERROR_INVALID_ARGUMENT,
+          "a NULL role");
+    CHECK(gmr_retarget_mapped(c, rv, rig, 15, NULL, 0, map, 15, NULL, 0, -1.0) == GMR_ERROR_BAD_REQUEST,
+          "a negative unit");
+    CHECK(gmr_retarget_mapped(c, rv, rig, 15, NULL, 0, map, 15, NULL, 0, 0.0254) == GMR_OK, "mapped: %s",
+          gmr_last_error());
+    CHECK(gmr_subscribe(c, rv, &ro, &rs) == GMR_OK, "subscribe: %s", gmr_last_error());
+    double unit = 0;
+    CHECK(gmr_subscription_metres_per_unit(rs, &unit) == GMR_OK && unit == 0.0254, "the rig's unit: %g", unit);
+    gmr_unsubscribe(rs);
+    CHECK(gmr_close_view(c, rv) == GMR_OK, "close_view: %s", gmr_last_error());
   }
   gmr_disconnect(c);
   fprintf(stderr, "c abi: %d frames polled of %llu received, locals compose to the positions\n", frames,

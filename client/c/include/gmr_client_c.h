@@ -209,6 +209,23 @@ typedef struct gmr_publish_joint {
 GMR_C_API gmr_status gmr_retarget(gmr_client* client, uint32_t view_id, const gmr_publish_joint* joints,
                                   size_t joint_count, const double* reference, size_t reference_count);
 
+/* One entry of a role -> joint map (docs/retarget.md, "Maps"): role "hips",
+ * "left_lower_arm", ...; joint a name of the skeleton it maps. */
+typedef struct gmr_role_joint {
+  const char* role;
+  const char* joint;
+} gmr_role_joint;
+
+/* gmr_retarget with maps and the rig's unit: `rig_map` names the rig's joints
+ * by role and `source_map` the source's (NULL, 0: the built-in namings); a map
+ * that gives a role twice is refused. `metres_per_unit` is the rig's unit (the
+ * view's after it, so conventions give metres; 0: the motion's). */
+GMR_C_API gmr_status gmr_retarget_mapped(gmr_client* client, uint32_t view_id, const gmr_publish_joint* joints,
+                                         size_t joint_count, const double* reference, size_t reference_count,
+                                         const gmr_role_joint* rig_map, size_t rig_map_count,
+                                         const gmr_role_joint* source_map, size_t source_map_count,
+                                         double metres_per_unit);
+
 /* Announces live motion `name`; *publication_id names it in the calls below. */
 GMR_C_API gmr_status gmr_publish(gmr_client* client, const char* name, const gmr_publish_joint* joints,
                                  size_t joint_count, double frame_time, double metres_per_unit,

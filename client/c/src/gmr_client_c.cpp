@@ -9,6 +9,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -521,13 +522,38 @@ gmr_status gmr_subscription_counts(gmr_subscription* s, uint64_t* received, uint
 
 gmr_status gmr_retarget(gmr_client* client, uint32_t view_id, const gmr_publish_joint* joints, size_t joint_count,
                         const double* reference, size_t reference_count) {
+  return gmr_retarget_mapped(client, view_id, joints, joint_count, reference, reference_count, nullptr, 0, nullptr, 0,
+                             0.0);
+}
+
+gmr_status gmr_retarget_mapped(gmr_client* client, uint32_t view_id, const gmr_publish_joint* joints,
+                               size_t joint_count, const double* reference, size_t reference_count,
+                               const gmr_role_joint* rig_map, size_t rig_map_count, const gmr_role_joint* source_map,
+                               size_t source_map_count, double metres_per_unit) {
   return guarded([&] {
-    if (client == nullptr || (joints == nullptr && joint_count > 0) || (reference == nullptr && reference_count > 0)) {
+    if (client == nullptr || (joints == nullptr && joint_count > 0) || (reference == nullptr && reference_count > 0) ||
+        (rig_map == nullptr && rig_map_count > 0) || (source_map == nullptr && source_map_count > 0)) {
       return fail(GMR_ERROR_INVALID_ARGUMENT, "gmr_retarget: a NULL argument");
     }
     gmr::Skeleton rig;
     if (const gmr_status bad = skeleton_of("gmr_retarget", joints, joint_count, rig); bad != GMR_OK) return bad;
-    auto v = client->client->retarget(view_id, rig, std::vector<double>(reference, reference + reference_count));
+    std::map<std::string, std::string> maps[2];
+    const gmr_role_joint* given[2] = {rig_map, source_map};
+    const size_t counts[2] = {rig_map_count, source_map_count};
+    for (int m = 0; m < 2; ++m) {
+      const std::string what = m == 0 ? "gmr_retarget: the rig's map" : "gmr_retarget: the source's map";
+      for (size_t i = 0; i < counts[m]; ++i) {
+        const gmr_role_joint& e = given[m][i];
+        if (e.role == nullptr || e.joint == nullptr) {
+          return fail(GMR_ERROR_INVALID_ARGUMENT, what + ": entry " + std::to_string(i) + " has a NULL role or joint");
+        }
+        if (!maps[m].emplace(e.role, e.joint).second) {
+          return fail(GMR_ERROR_INVALID_ARGUMENT, what + ": role '" + e.role + "' is given twice");
+        }
+      }
+    }
+    auto v = client->client->retarget(view_id, rig, std::vector<double>(reference, reference + reference_count),
+                                      maps[0], maps[1], metres_per_unit);
     return v.ok() ? GMR_OK : status_of(v.error());
   });
 }
