@@ -8,7 +8,7 @@
 # retargeted / plain.
 #
 #   bench/server/retarget.sh [BUILD_DIR] [OUT_DIR]
-#     SUBSCRIBERS=100  REPEATS=3  SECONDS_PER_POINT=10
+#     SUBSCRIBERS=100  REPEATS=3  SECONDS_PER_POINT=10  KINDS="library live"
 #     MOTION_FILE=../shared/data/bvh/cmu/02_01.bvh  RIG_FILE=../shared/data/bvh/mixamo/Beta_jump.bvh
 #
 # A benchmark, not a CI step: about 2 minutes per repeat.
@@ -57,7 +57,7 @@ trap cleanup EXIT
 # ns per delivered frame, from gmr-load's report.
 per_frame() { sed -n 's/^server CPU .*, \([0-9]*\) ns per delivered frame.*/\1/p' "$1"; }
 
-for kind in library live; do
+for kind in ${KINDS:-library live}; do
   for mode in plain retarget; do
     figures=()
     for rep in $(seq "$repeats"); do

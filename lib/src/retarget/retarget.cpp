@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <optional>
+#include <string>
 
 #include "gmr/core/rotation.h"
 #include "gmr/kinematics/forward_kinematics.h"
@@ -289,7 +290,7 @@ Result<Plan> make_plan(const Motion& source_motion, const Motion& target_motion,
 // The output skeleton: the target's, with three rotation channels on every
 // driven joint that had fewer (Z X Y added in that order, the rig's own
 // rotation channels kept first).
-Result<Skeleton> output_skeleton(const Skeleton& target, const std::vector<bool>& driven) {
+Result<Skeleton> make_output_skeleton(const Skeleton& target, const std::vector<bool>& driven) {
   std::vector<Joint> joints = target.joints();
   for (std::size_t j = 0; j < joints.size(); ++j) {
     if (!driven[j]) continue;
@@ -350,7 +351,7 @@ Result<Retargeter> Retargeter::make(const Motion& source, const Motion& target_r
     st->driven[a] = true;
   }
   st->driven[static_cast<std::size_t>(plan.hips_t)] = true;
-  auto skeleton = output_skeleton(target, st->driven);
+  auto skeleton = make_output_skeleton(target, st->driven);
   if (!skeleton.ok()) return skeleton.error();
   st->out = std::move(skeleton).value();
   // The reference values, moved to the output's channel slots (added channels start at 0).
@@ -392,20 +393,32 @@ bool Retargeter::fits(const Motion& source) const {
   return true;
 }
 
+const Skeleton& Retargeter::output_skeleton() const { return state_->out; }
+
 Result<Motion> Retargeter::apply(const Motion& source) const {
+  auto values = apply_values(source);
+  if (!values.ok()) return values.error();
+  Motion out;
+  out.skeleton = state_->out;
+  out.convention = Convention::kPostRotation;
+  out.frame_time = source.frame_time;
+  out.frame_count = source.frame_count;
+  out.values = std::move(values).value();
+  if (auto s = out.validate(); !s.ok()) return s.error();
+  return out;
+}
+
+Result<std::vector<double>> Retargeter::apply_values(const Motion& source) const {
   if (auto s = source.validate(); !s.ok()) return s.error();
   if (!fits(source)) return make_error("retarget: the motion is not on the skeleton the retargeter was made for");
   const State& st = *state_;
   const Plan& plan = st.plan;
   const Skeleton& target = st.target;
+  const Skeleton& out_skeleton = st.out;
   const Mat& G = plan.report.axes;
   const std::size_t n = target.size();
-  Motion out;
-  out.skeleton = st.out;
-  out.convention = Convention::kPostRotation;
-  out.frame_time = source.frame_time;
-  out.frame_count = source.frame_count;
-  out.values.resize(out.frame_count * out.stride());
+  const auto stride = static_cast<std::size_t>(out_skeleton.channel_count());
+  std::vector<double> out_values(source.frame_count * stride);
 
   std::vector<Vec> ps;
   std::vector<Mat> ws, wt(n);
@@ -414,7 +427,7 @@ Result<Motion> Retargeter::apply(const Motion& source) const {
   const HumanoidMap& S = plan.report.source;
   for (std::size_t f = 0; f < source.frame_count; ++f) {
     positions_and_frames(source, f, ps, ws);
-    std::span<double> values = out.frame(f);
+    const std::span<double> values(out_values.data() + f * stride, stride);
     std::copy(st.reference.begin(), st.reference.end(), values.begin());
     for (int j = 0; j < static_cast<int>(n); ++j) {
       const auto k = static_cast<std::size_t>(j);
@@ -436,13 +449,13 @@ Result<Motion> Retargeter::apply(const Motion& source) const {
       if (!st.driven[k]) continue;
       // The rotation channels, in the joint's order, continuous with the last frame.
       const Mat local = parent_w.transpose() * w;
-      const Joint& joint = out.skeleton.joint(j);
+      const Joint& joint = out_skeleton.joint(j);
       Axis order[3];
       int slots[3], found = 0;
       for (std::size_t c = 0; c < joint.channels.size() && found < 3; ++c) {
         if (is_rotation(joint.channels[c])) {
           order[found] = axis_of(joint.channels[c]);
-          slots[found++] = out.skeleton.channel_offset(j) + static_cast<int>(c);
+          slots[found++] = out_skeleton.channel_offset(j) + static_cast<int>(c);
         }
       }
       const Vec angles = decompose_euler(local, order, f == 0 ? nullptr : &hint[k]);
@@ -454,16 +467,21 @@ Result<Motion> Retargeter::apply(const Motion& source) const {
     // so the hips sit at a fixed offset from the root unless the root is the hips.)
     const Vec hips = plan.report.scale * (G * at(plan.hips_s));
     const Vec root = plan.root_t == plan.hips_t ? hips : Vec(hips - plan.root_to_hips);
-    const Joint& root_joint = out.skeleton.joint(plan.root_t);
+    const Joint& root_joint = out_skeleton.joint(plan.root_t);
     for (std::size_t c = 0; c < root_joint.channels.size(); ++c) {
       if (is_position(root_joint.channels[c])) {
-        values[static_cast<std::size_t>(out.skeleton.channel_offset(plan.root_t)) + c] =
+        values[static_cast<std::size_t>(out_skeleton.channel_offset(plan.root_t)) + c] =
             root[static_cast<int>(axis_of(root_joint.channels[c]))];
       }
     }
   }
-  if (auto s = out.validate(); !s.ok()) return s.error();
-  return out;
+  for (std::size_t k = 0; k < out_values.size(); ++k) {
+    if (!std::isfinite(out_values[k])) {
+      return make_error("retarget: frame " + std::to_string(k / std::max<std::size_t>(stride, 1)) +
+                        " gives a value that is not finite (a degenerate pose)");
+    }
+  }
+  return out_values;
 }
 
 Result<Motion> retarget(const Motion& source, const Motion& target, const RetargetOptions& options,

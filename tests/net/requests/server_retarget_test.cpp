@@ -156,6 +156,10 @@ TEST(Retarget, ARigInItsOwnUnitComesOutInMetres) {
     if (e.name == "cmu/02_01") e.metres_per_unit = 0.0254;
   }
   TestServer s({}, library);
+  // What the frame callbacks touch outlives the client (declared before it).
+  std::mutex mutex;
+  std::vector<client::ReceivedFrame> after;
+  Latch<client::SkeletonChange> changed;
   auto c = s.connect();
   ASSERT_NE(c, nullptr);
   const Motion mixamo = load("bvh/mixamo/Beta_jump.bvh");
@@ -169,18 +173,15 @@ TEST(Retarget, ARigInItsOwnUnitComesOutInMetres) {
   ASSERT_TRUE(v.ok());
   Conventions conventions;
   conventions.preset = ConventionPreset::kBlender;
-  std::mutex mutex;
-  std::vector<client::ReceivedFrame> after;
-  Latch<client::SkeletonChange> changed;
   client::SubscribeOptions o;
   o.loop = true;
   o.float64 = true;
   o.conventions = conventions;
   auto sub = c->subscribe(
       v->id, o,
-      [&](const client::ReceivedFrame& f) {
+      [&mutex, &after, first = v->skeleton_version](const client::ReceivedFrame& f) {
         std::lock_guard lock(mutex);
-        if (f.skeleton_version != v->skeleton_version && after.size() < 40) after.push_back(f);
+        if (f.skeleton_version != first && after.size() < 40) after.push_back(f);
       },
       {}, [&](const client::SkeletonChange& sc) { changed.set(sc); });
   ASSERT_TRUE(sub.ok()) << sub.error().to_string();

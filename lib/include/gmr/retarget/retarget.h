@@ -64,6 +64,11 @@ class Retargeter {
   // The frames of `source` on the rig; fails when `source` is not on the
   // skeleton the plan was made for (fits() says).
   Result<Motion> apply(const Motion& source) const;
+  // The values apply() gives (frames x output_skeleton()'s channels) without
+  // building a motion around them: what a live view converts each frame.
+  // Fails as apply() does, and when a value is not finite (a degenerate frame).
+  Result<std::vector<double>> apply_values(const Motion& source) const;
+  const Skeleton& output_skeleton() const;
   bool fits(const Motion& source) const;
   const RetargetPlan& plan() const;
 
