@@ -118,6 +118,30 @@ public static class CsharpClientTest
             int joints;
             double[] q = client.QueryPositions(view, 0, 3, Gmr.Conventions.Unity, out joints);
             w.WriteLine("query " + joints + Numbers(q));
+            // Your character: the motion retargeted onto a rig given line by line
+            // ("name parent x y z", centimetres; a joint ending in _End has no channels).
+            string rigFile = Arg(args, "--rig");
+            if (rigFile != "")
+            {
+                var rig = new System.Collections.Generic.List<Gmr.RigJoint>();
+                foreach (string line in File.ReadAllLines(rigFile))
+                {
+                    string[] f = line.Split(' ');
+                    Func<int, double> at = k => double.Parse(f[k], CultureInfo.InvariantCulture);
+                    int parent = int.Parse(f[1]);
+                    Gmr.Channel[] channels = f[0].EndsWith("_End") ? new Gmr.Channel[0]
+                        : parent < 0 ? new[] { Gmr.Channel.XPosition, Gmr.Channel.YPosition, Gmr.Channel.ZPosition,
+                                               Gmr.Channel.ZRotation, Gmr.Channel.XRotation, Gmr.Channel.YRotation }
+                        : new[] { Gmr.Channel.ZRotation, Gmr.Channel.XRotation, Gmr.Channel.YRotation };
+                    rig.Add(new Gmr.RigJoint(f[0], parent, at(2), at(3), at(4), channels));
+                }
+                uint onRig = client.CreateView(motion);
+                var badMap = new System.Collections.Generic.Dictionary<string, string> { { "left_hand", "LeftPaw" } };
+                Refused(w, "a map naming an absent joint", () => client.Retarget(onRig, rig.ToArray(), null, badMap));
+                client.Retarget(onRig, rig.ToArray(), metresPerUnit: 0.01);
+                double[] r = client.QueryPositions(onRig, 0, 3, Gmr.Conventions.Unity, out joints);
+                w.WriteLine("retarget " + joints + Numbers(r));
+            }
             Refused(w, "unknown motion", () => client.CreateView("no such motion"));
             Refused(w, "unknown joint", () => client.ShiftRoot(view, "no such joint"));
             Refused(w, "frames past the end", () => client.QueryPositions(view, 1u << 30, (1u << 30) + 1, Gmr.Conventions.Unity, out joints));

@@ -76,6 +76,30 @@ def main():
                str(repo / "tests/csharp/UnityEngineStub.cs"), *runtime, str(package / "Runtime/Unity/GmrLiveLink.cs"))
 
     lib = env.cmu_library(work / "library")
+    # A character rig with Unity's humanoid names, a T-pose in centimetres: for
+    # the C# program as lines, for `gmr retarget` as a BVH (the same joints:
+    # its End Sites are the "_End" lines).
+    rig = [("Hips", -1, 0, 100, 0), ("Spine", 0, 0, 10, 0), ("Head", 1, 0, 50, 0), ("Head_End", 2, 0, 15, 0),
+           ("LeftUpperArm", 1, 20, 40, 0), ("LeftLowerArm", 4, 30, 0, 0), ("LeftHand", 5, 25, 0, 0),
+           ("LeftHand_End", 6, 15, 0, 0), ("RightUpperArm", 1, -20, 40, 0), ("RightLowerArm", 8, -30, 0, 0),
+           ("RightHand", 9, -25, 0, 0), ("RightHand_End", 10, -15, 0, 0), ("LeftUpperLeg", 0, 10, -5, 0),
+           ("LeftLowerLeg", 12, 0, -45, 0), ("LeftFoot", 13, 0, -45, 0), ("LeftFoot_End", 14, 0, -5, 12),
+           ("RightUpperLeg", 0, -10, -5, 0), ("RightLowerLeg", 16, 0, -45, 0), ("RightFoot", 17, 0, -45, 0),
+           ("RightFoot_End", 18, 0, -5, 12)]
+    (work / "rig.txt").write_text("".join(f"{n} {p} {x} {y} {z}\n" for n, p, x, y, z in rig))
+
+    def bvh_joint(j, depth):
+        n, p, x, y, z = rig[j]
+        pad = "  " * depth
+        if n.endswith("_End"):
+            return f"{pad}End Site\n{pad}{{\n{pad}  OFFSET {x} {y} {z}\n{pad}}}\n"
+        channels = ("6 Xposition Yposition Zposition" if p < 0 else "3") + " Zrotation Xrotation Yrotation"
+        out = f"{pad}{'ROOT' if p < 0 else 'JOINT'} {n}\n{pad}{{\n{pad}  OFFSET {x} {y} {z}\n{pad}  CHANNELS {channels}\n"
+        out += "".join(bvh_joint(k, depth + 1) for k in range(len(rig)) if rig[k][1] == j)
+        return out + f"{pad}}}\n"
+    values = 6 + 3 * sum(1 for n, p, *_ in rig if p >= 0 and not n.endswith("_End"))
+    (work / "rig.bvh").write_text("HIERARCHY\n" + bvh_joint(0, 0) + "MOTION\nFrames: 1\nFrame Time: 0.0333333\n"
+                                  + " ".join(["0"] * values) + "\n")
     run_env = dict(os.environ, LD_LIBRARY_PATH=str(pathlib.Path(args.lib_dir).resolve()))
     # (motion, file, roots, roots asked while streaming, unit given to the subscription, unit flag for gmr positions)
     cases = [("02_01", lib / "02_01.bvh", "LeftFoot", "Head", 0.0254, ["--metres-per-unit", "0.0254"]),
@@ -92,7 +116,8 @@ def main():
             out = work / (motion.replace("/", "_") + ".txt")
             run = subprocess.run([mono, str(work / "test.exe"), "--port", str(server.port), "--motion", motion, "--roots",
                                   roots, "--new-roots", new_roots, "--mpu", repr(mpu), "--frames", str(FRAMES), "--out",
-                                  str(out)], capture_output=True, text=True, env=run_env, timeout=300)
+                                  str(out), "--rig", str(work / "rig.txt") if motion == "02_01" else ""],
+                                 capture_output=True, text=True, env=run_env, timeout=300)
             if run.returncode != 0:
                 failures.append(f"{motion}: the C# test program failed ({run.returncode}):\n{run.stdout[-3000:]}"
                                 f"{run.stderr[-3000:]}")
@@ -149,7 +174,26 @@ def main():
             got = np.array([float(x) for x in q]).reshape(3, int(count), 3)
             if float(np.abs(got - want[:3][:, order]).max()) > 1e-9:
                 failures.append(f"{motion}: the query is {float(np.abs(got - want[:3][:, order]).max()):.3g} off")
-            statuses = [e.split(" ")[0] for e in other.get("error", [])]
+            errors = other.get("error", [])
+            statuses = [e.split(" ")[0] for e in errors]
+            if motion == "02_01":
+                # On the rig: its first frames as `gmr retarget` onto the same rig puts them, in metres.
+                on_rig = work / "02_01_on_rig.bvh"
+                subprocess.run([str(bin_dir / "gmr"), "retarget", str(path), str(on_rig), "--target",
+                                str(work / "rig.bvh")], check=True, capture_output=True)
+                want, want_names = env.gmr_positions(bin_dir, on_rig, "--conventions", "unity", "--metres-per-unit",
+                                                     "0.01")
+                count, *r = other["retarget"][0].split(" ")
+                got = np.array([float(x) for x in r]).reshape(3, int(count), 3)
+                order = [want_names.index(name) for name, *_ in rig]
+                err = float(np.abs(got - want[:3][:, order]).max()) if int(count) == len(rig) else float("inf")
+                checked += 1
+                if err > 1e-9:
+                    failures.append(f"{motion}: retargeted by C# onto the rig: {count} joints, {err:.3g} m from "
+                                    "gmr retarget's")
+                if statuses[:1] != ["FailedPrecondition"] or "'LeftPaw'" not in errors[0]:
+                    failures.append(f"{motion}: a map naming an absent joint came back as {errors[:1]}")
+                statuses = statuses[1:]
             if statuses != ["NotFound", "NotFound", "BadRequest"]:
                 failures.append(f"{motion}: refusals came back as {other.get('error')}")
             received, replaced = (int(x) for x in other["counts"][0].split(" "))

@@ -26,6 +26,37 @@ namespace Gmr
         Godot = 4,    // Y up, -Z forward, right-handed, m
     }
 
+    /// <summary>A BVH channel (the C ABI's gmr_channel).</summary>
+    public enum Channel
+    {
+        XPosition = 0,
+        YPosition = 1,
+        ZPosition = 2,
+        XRotation = 3,
+        YRotation = 4,
+        ZRotation = 5,
+    }
+
+    /// <summary>One joint of a rig to retarget onto: parents before children, the offset from its
+    /// parent (a root: its position) in the motion's axes.</summary>
+    public struct RigJoint
+    {
+        public string Name;
+        public int Parent;
+        public double OffsetX, OffsetY, OffsetZ;
+        public Channel[] Channels;
+
+        public RigJoint(string name, int parent, double x, double y, double z, params Channel[] channels)
+        {
+            Name = name;
+            Parent = parent;
+            OffsetX = x;
+            OffsetY = y;
+            OffsetZ = z;
+            Channels = channels;
+        }
+    }
+
     /// <summary>The C ABI's gmr_status.</summary>
     public enum Status
     {
@@ -167,6 +198,61 @@ namespace Gmr
         public void SetViewpoint(uint view, string joint)
         {
             GmrException.Check(Native.gmr_set_viewpoint(Handle, view, Native.Utf8(joint ?? "")), "view from " + joint);
+        }
+
+        /// <summary>Puts the view's motion on your character's rig (docs/retarget.md): its joints
+        /// parents first, in the motion's axes (Y up) with BVH channels; `reference`: the rig's
+        /// channel values in a pose it stands in when its rest pose does not (null: the rest
+        /// pose); the maps role -> joint name (null: the built-in namings); `metresPerUnit`: the
+        /// rig's unit (0: the motion's). Subscriptions then get the rig's joints.</summary>
+        public void Retarget(uint view, RigJoint[] rig, double[] reference = null,
+                             System.Collections.Generic.IDictionary<string, string> rigMap = null,
+                             System.Collections.Generic.IDictionary<string, string> sourceMap = null,
+                             double metresPerUnit = 0)
+        {
+            if (rig == null) throw new ArgumentNullException(nameof(rig));
+            var owned = new System.Collections.Generic.List<IntPtr>();
+            try
+            {
+                var joints = new Native.PublishJoint[rig.Length];
+                for (int i = 0; i < rig.Length; i++)
+                {
+                    RigJoint j = rig[i];
+                    if (j.Channels == null || j.Channels.Length > 6)
+                        throw new ArgumentException("rig joint " + i + " ('" + j.Name + "'): 0 to 6 channels");
+                    joints[i].name = Native.Utf8Alloc(j.Name, owned);
+                    joints[i].parent = j.Parent;
+                    joints[i].offset = new[] { j.OffsetX, j.OffsetY, j.OffsetZ };
+                    joints[i].channel_count = (uint)j.Channels.Length;
+                    joints[i].channels = new int[6];
+                    for (int c = 0; c < j.Channels.Length; c++) joints[i].channels[c] = (int)j.Channels[c];
+                }
+                Native.RoleJoint[] rigEntries = RoleEntries(rigMap, owned), sourceEntries = RoleEntries(sourceMap, owned);
+                double[] pose = reference ?? new double[0];
+                GmrException.Check(Native.gmr_retarget_mapped(Handle, view, joints, (UIntPtr)joints.Length, pose,
+                                                              (UIntPtr)pose.Length, rigEntries, (UIntPtr)rigEntries.Length,
+                                                              sourceEntries, (UIntPtr)sourceEntries.Length, metresPerUnit),
+                                   "retarget view " + view);
+            }
+            finally
+            {
+                foreach (IntPtr p in owned) Marshal.FreeHGlobal(p);
+            }
+        }
+
+        static Native.RoleJoint[] RoleEntries(System.Collections.Generic.IDictionary<string, string> map,
+                                              System.Collections.Generic.List<IntPtr> owned)
+        {
+            var entries = new Native.RoleJoint[map == null ? 0 : map.Count];
+            int k = 0;
+            if (map != null)
+                foreach (var e in map)
+                {
+                    entries[k].role = Native.Utf8Alloc(e.Key, owned);
+                    entries[k].joint = Native.Utf8Alloc(e.Value, owned);
+                    k++;
+                }
+            return entries;
         }
 
         /// <summary>Makes exactly these joints the view's roots.</summary>

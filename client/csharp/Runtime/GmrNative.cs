@@ -38,6 +38,23 @@ namespace Gmr
         }
 
         [StructLayout(LayoutKind.Sequential)]
+        public struct PublishJoint
+        {
+            public IntPtr name;  // NUL-terminated UTF-8, owned by the caller for the call
+            public int parent;
+            [MarshalAs(UnmanagedType.ByValArray, SizeConst = 3)] public double[] offset;
+            public uint channel_count;
+            [MarshalAs(UnmanagedType.ByValArray, SizeConst = 6)] public int[] channels;
+        }
+
+        [StructLayout(LayoutKind.Sequential)]
+        public struct RoleJoint
+        {
+            public IntPtr role;
+            public IntPtr joint;
+        }
+
+        [StructLayout(LayoutKind.Sequential)]
         public struct SubscribeOptions
         {
             public uint struct_size;
@@ -83,6 +100,11 @@ namespace Gmr
         [DllImport(Lib)] public static extern int gmr_join(IntPtr client, uint viewId, byte[] root);
         [DllImport(Lib)] public static extern int gmr_strip_dummies(IntPtr client, uint viewId);
         [DllImport(Lib)] public static extern int gmr_set_viewpoint(IntPtr client, uint viewId, byte[] joint);
+        [DllImport(Lib)] public static extern int gmr_retarget_mapped(IntPtr client, uint viewId, PublishJoint[] joints, UIntPtr jointCount,
+                                                                      double[] reference, UIntPtr referenceCount,
+                                                                      RoleJoint[] rigMap, UIntPtr rigMapCount,
+                                                                      RoleJoint[] sourceMap, UIntPtr sourceMapCount,
+                                                                      double metresPerUnit);
         [DllImport(Lib)] public static extern int gmr_query_positions(IntPtr client, uint viewId, uint begin, uint end, int preset,
                                                                      [Out] double[] positions, UIntPtr capacity, out UIntPtr jointCount);
         [DllImport(Lib)] public static extern void gmr_subscribe_options_init(ref SubscribeOptions options);
@@ -99,6 +121,16 @@ namespace Gmr
         [DllImport(Lib)] public static extern int gmr_subscription_counts(IntPtr subscription, out ulong received, out ulong replaced);
 
         /// <summary>A string as the C ABI takes it: UTF-8, NUL-terminated; null stays null.</summary>
+        // A NUL-terminated UTF-8 copy in unmanaged memory, added to `owned` (freed by the caller).
+        public static IntPtr Utf8Alloc(string s, System.Collections.Generic.List<IntPtr> owned)
+        {
+            byte[] bytes = Utf8(s ?? "");
+            IntPtr p = Marshal.AllocHGlobal(bytes.Length);
+            owned.Add(p);
+            Marshal.Copy(bytes, 0, p, bytes.Length);
+            return p;
+        }
+
         public static byte[] Utf8(string s)
         {
             if (s == null) return null;
