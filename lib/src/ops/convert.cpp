@@ -57,6 +57,41 @@ Result<Motion> to_pre_rotation(const Motion& motion) {
   return out.to_motion();
 }
 
+std::optional<PreRotationGather> PreRotationGather::make(const Skeleton& post) {
+  Motion probe;
+  probe.skeleton = post;
+  probe.convention = Convention::kPostRotation;
+  probe.frame_time = 1.0;
+  probe.frame_count = 1;
+  probe.values.resize(probe.stride());
+  for (std::size_t k = 0; k < probe.values.size(); ++k) probe.values[k] = static_cast<double>(k + 1);
+  auto pre = to_pre_rotation(probe);
+  if (!pre.ok()) return std::nullopt;
+  PreRotationGather g;
+  g.skeleton_ = pre->skeleton;
+  g.post_stride_ = probe.values.size();
+  for (double v : pre->values) {
+    if (v != std::floor(v) || v < 1.0 || v > static_cast<double>(probe.values.size())) return std::nullopt;
+    g.from_.push_back(static_cast<std::size_t>(v) - 1);
+  }
+  return g;
+}
+
+Motion PreRotationGather::apply(std::span<const double> post, std::size_t frames, double frame_time) const {
+  Motion out;
+  out.skeleton = skeleton_;
+  out.convention = Convention::kPreRotation;
+  out.frame_time = frame_time;
+  out.frame_count = frames;
+  out.values.resize(frames * from_.size());
+  for (std::size_t f = 0; f < frames && (f + 1) * post_stride_ <= post.size(); ++f) {
+    const double* in = post.data() + f * post_stride_;
+    double* to = out.values.data() + f * from_.size();
+    for (std::size_t k = 0; k < from_.size(); ++k) to[k] = in[from_[k]];
+  }
+  return out;
+}
+
 Result<Motion> to_post_rotation(const Motion& motion) {
   if (Status s = motion.validate(); !s) return s.error();
   if (motion.convention == Convention::kPostRotation) return motion;

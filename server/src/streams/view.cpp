@@ -3,7 +3,6 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <cmath>
 #include <exception>
 #include <functional>
 #include <mutex>
@@ -129,52 +128,6 @@ std::shared_ptr<ViewContent> next_content(const ViewContent& base, std::shared_p
   c->metres_per_unit = base.metres_per_unit;
   return c;
 }
-
-// The pre-rotation form of motions on one post-rotation skeleton, made once.
-// to_pre_rotation only moves channels (each joint takes its parent's rotation
-// channels, a root loses its own), so a frame's values are a gather of the
-// post-rotation ones: found by converting a frame whose values are their own
-// slot numbers. A live retargeted view converts every frame this way instead
-// of rebuilding the skeleton each time.
-struct PreRotationGather {
-  Skeleton skeleton;
-  std::vector<std::size_t> from;  // per pre-rotation channel: its post-rotation channel
-
-  // Nothing when the conversion computes a value rather than moving it.
-  static std::optional<PreRotationGather> make(const Skeleton& post) {
-    Motion probe;
-    probe.skeleton = post;
-    probe.convention = Convention::kPostRotation;
-    probe.frame_time = 1.0;
-    probe.frame_count = 1;
-    probe.values.resize(probe.stride());
-    for (std::size_t k = 0; k < probe.values.size(); ++k) probe.values[k] = static_cast<double>(k + 1);
-    auto pre = to_pre_rotation(probe);
-    if (!pre.ok()) return std::nullopt;
-    PreRotationGather g{pre->skeleton, {}};
-    for (double v : pre->values) {
-      if (v != std::floor(v) || v < 1.0 || v > static_cast<double>(probe.values.size())) return std::nullopt;
-      g.from.push_back(static_cast<std::size_t>(v) - 1);
-    }
-    return g;
-  }
-
-  // `post`: frames x `stride` values on the post-rotation skeleton.
-  Motion apply(const std::vector<double>& post, std::size_t stride, std::size_t frames, double frame_time) const {
-    Motion out;
-    out.skeleton = skeleton;
-    out.convention = Convention::kPreRotation;
-    out.frame_time = frame_time;
-    out.frame_count = frames;
-    out.values.resize(frames * from.size());
-    for (std::size_t f = 0; f < frames; ++f) {
-      const double* in = post.data() + f * stride;
-      double* to = out.values.data() + f * from.size();
-      for (std::size_t k = 0; k < from.size(); ++k) to[k] = in[from[k]];
-    }
-    return out;
-  }
-};
 
 // A step's joint, by name in the motion it is applied to (a live view's
 // frames all have the structure the edit was made on).
@@ -340,8 +293,7 @@ Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map
     }
     auto values = p.retargeter.apply_values(m);
     if (!values.ok()) return values.error();
-    const auto stride = static_cast<std::size_t>(p.retargeter.output_skeleton().channel_count());
-    return (*p.gather)->apply(*values, stride, m.frame_count, m.frame_time);
+    return (*p.gather)->apply(*values, m.frame_count, m.frame_time);
   });
   edit.written_joints_ = rig->skeleton.size();
   edit.metres_per_unit_ = rig_metres_per_unit;

@@ -2,10 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <set>
 
+#include "gmr/io/motion_file.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "ops_test_util.h"
+#include "test_data.h"
 
 namespace gmr {
 namespace {
@@ -317,6 +320,43 @@ TEST(Convert, RejectsInvalidMotion) {
   m = random_motion(5);
   m.values[0] = std::numeric_limits<double>::quiet_NaN();
   EXPECT_FALSE(to_pre_rotation(m).ok());
+}
+
+}  // namespace
+}  // namespace gmr
+
+namespace gmr {
+namespace {
+
+// The gather a live view converts its frames with gives what to_pre_rotation
+// gives, value for value, on real rigs and takes (first 200 frames each).
+TEST(PreRotationGather, EqualsToPreRotationOnRealFiles) {
+  GMR_REQUIRE_DATA();
+  int files = 0;
+  for (const char* relative : {"bvh/cmu/01_01.bvh", "bvh/mixamo/Beta_jump.bvh", "bvh/cmu_iclone/001_01.bvh"}) {
+    SCOPED_TRACE(relative);
+    auto m = load_motion(test::data_file(relative));
+    ASSERT_TRUE(m.ok()) << m.error().to_string();
+    m->frame_count = std::min<std::size_t>(m->frame_count, 200);
+    m->values.resize(m->frame_count * m->stride());
+    auto want = to_pre_rotation(*m);
+    ASSERT_TRUE(want.ok());
+    auto gather = PreRotationGather::make(m->skeleton);
+    ASSERT_TRUE(gather.has_value());
+    const Motion got = gather->apply(m->values, m->frame_count, m->frame_time);
+    ASSERT_EQ(got.skeleton.size(), want->skeleton.size());
+    for (int j = 0; j < static_cast<int>(got.skeleton.size()); ++j) {
+      EXPECT_EQ(got.skeleton.joint(j).name, want->skeleton.joint(j).name);
+      EXPECT_EQ(got.skeleton.joint(j).parent, want->skeleton.joint(j).parent);
+      EXPECT_EQ(got.skeleton.joint(j).channels, want->skeleton.joint(j).channels);
+      EXPECT_EQ(got.skeleton.joint(j).offset, want->skeleton.joint(j).offset);
+    }
+    EXPECT_EQ(got.convention, Convention::kPreRotation);
+    EXPECT_EQ(got.frame_count, want->frame_count);
+    EXPECT_EQ(got.values, want->values);
+    ++files;
+  }
+  EXPECT_EQ(files, 3);
 }
 
 }  // namespace

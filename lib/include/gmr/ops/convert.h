@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -18,6 +19,26 @@ namespace gmr {
 // rotation R'_j = R_p(j) and keeps its offset and position channels.
 // A pre-rotation motion is returned unchanged.
 Result<Motion> to_pre_rotation(const Motion& motion);
+
+// to_pre_rotation for many motions on one post-rotation skeleton (a live
+// view's frames): the conversion only moves channel values (each joint takes
+// its parent's rotation channels, a root loses its own), so it is found once,
+// by converting a frame whose values are their own slot numbers, and is then a
+// gather of values into a skeleton made once.
+class PreRotationGather {
+ public:
+  // Empty when the conversion would compute a value rather than move it.
+  static std::optional<PreRotationGather> make(const Skeleton& post);
+  const Skeleton& skeleton() const { return skeleton_; }
+  // `post`: frames x the post-rotation skeleton's channels, as to_pre_rotation
+  // of that motion gives them (its values are not checked: finite in, finite out).
+  Motion apply(std::span<const double> post, std::size_t frames, double frame_time) const;
+
+ private:
+  Skeleton skeleton_;
+  std::size_t post_stride_ = 0;
+  std::vector<std::size_t> from_;  // per pre-rotation channel: its post-rotation channel
+};
 
 // Pre-rotation -> post-rotation for a forest of trees. Where a joint's children
 // rotate independently, zero-length joints named `<child>_gmr_pre` are inserted
