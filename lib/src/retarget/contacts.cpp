@@ -115,6 +115,10 @@ Result<Motion> keep_contacts(const Motion& retargeted, const RetargetPlan& plan,
   }
 
   const std::size_t frames = retargeted.frame_count;
+  if (frames == 0) {  // nothing rests in no frame
+    if (report != nullptr) *report = {};
+    return retargeted;
+  }
   const Vec up = plan.target_up.normalized();
   std::vector<std::vector<Vec>> p(frames, std::vector<Vec>(sk.size()));
   std::vector<std::vector<Mat>> w(frames, std::vector<Mat>(sk.size()));

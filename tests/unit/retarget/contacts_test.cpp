@@ -150,6 +150,7 @@ TEST(Contacts, AWalkOnMixamoKeepsItsRestingFeetWhereTheyRest) {
   EXPECT_LE(changed_frames, kept->frame_count);
 }
 
+// Refusals, and a take without frames (nothing to pin, not a crash).
 TEST(Contacts, AMotionThatIsNotARetargetsOutputIsRefused) {
   GMR_REQUIRE_DATA();
   const Motion source = load("bvh/cmu/02_01.bvh");
@@ -161,6 +162,14 @@ TEST(Contacts, AMotionThatIsNotARetargetsOutputIsRefused) {
   auto wrong = keep_contacts(*pre, plan);
   ASSERT_FALSE(wrong.ok());
   EXPECT_NE(wrong.error().message.find("post-rotation"), std::string::npos);
+  Motion empty = *plain;
+  empty.frame_count = 0;
+  empty.values.clear();
+  ContactReport none;
+  auto nothing = keep_contacts(empty, plan, {}, &none);
+  ASSERT_TRUE(nothing.ok()) << nothing.error().to_string();
+  EXPECT_EQ(nothing->frame_count, 0u);
+  EXPECT_EQ(none.contacts, 0u);
   RetargetPlan no_height = plan;
   no_height.target_hip_height = 0;
   auto unknown = keep_contacts(*plain, no_height);
