@@ -13,6 +13,7 @@
 #include "gmr/core/rotation.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/retarget/retarget.h"
+#include "rig_joints.h"
 
 namespace gmr {
 namespace {
@@ -30,31 +31,10 @@ struct Stretch {
   Vec pin;
 };
 
-bool above(const Skeleton& s, int ancestor, int j) {
-  for (int k = s.joint(j).parent; k != kNoParent; k = s.joint(k).parent) {
-    if (k == ancestor) return true;
-  }
-  return false;
-}
-
-// The joint's rotation channels in order and their value slots; false when it
-// has fewer than three.
-bool rotation_slots(const Skeleton& s, int j, Axis order[3], int slots[3]) {
-  const Joint& joint = s.joint(j);
-  int found = 0;
-  for (std::size_t c = 0; c < joint.channels.size() && found < 3; ++c) {
-    if (is_rotation(joint.channels[c])) {
-      order[found] = axis_of(joint.channels[c]);
-      slots[found++] = s.channel_offset(j) + static_cast<int>(c);
-    }
-  }
-  return found == 3;
-}
-
 void write_rotation(const Skeleton& s, int j, const Mat& local, std::span<double> values) {
   Axis order[3];
   int slots[3];
-  rotation_slots(s, j, order, slots);
+  detail::rotation_slots(s, j, order, slots);
   // Continuous with the angles the frame had (the retarget kept them continuous).
   const Vec hint(values[static_cast<std::size_t>(slots[0])], values[static_cast<std::size_t>(slots[1])],
                  values[static_cast<std::size_t>(slots[2])]);
@@ -100,14 +80,14 @@ Result<Motion> keep_contacts(const Motion& retargeted, const RetargetPlan& plan,
         leg.knee >= static_cast<int>(sk.size()) || leg.ankle >= static_cast<int>(sk.size())) {
       return make_error("keep contacts: the plan's leg roles are not joints of this motion");
     }
-    if (!above(sk, leg.hip, leg.knee) || !above(sk, leg.knee, leg.ankle)) {
+    if (!detail::below(sk, leg.hip, leg.knee) || !detail::below(sk, leg.knee, leg.ankle)) {
       return make_error("keep contacts: '" + sk.joint(leg.ankle).name + "' does not hang from '" +
                         sk.joint(leg.knee).name + "' and '" + sk.joint(leg.hip).name + "'");
     }
     for (int j : {leg.hip, leg.knee, leg.ankle}) {
       Axis order[3];
       int slots[3];
-      if (!rotation_slots(sk, j, order, slots)) {
+      if (!detail::rotation_slots(sk, j, order, slots)) {
         return make_error("keep contacts: '" + sk.joint(j).name + "' has fewer than three rotation channels");
       }
     }

@@ -10,6 +10,7 @@
 #include "gmr/core/rotation.h"
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/ops/convert.h"
+#include "rig_joints.h"
 
 namespace gmr {
 namespace {
@@ -118,18 +119,11 @@ Mat snapped(const Mat& f) {
   return std::abs(s.determinant() - 1.0) < 1e-9 ? s : f;
 }
 
-bool below(const Skeleton& s, int ancestor, int j) {
-  for (int k = s.joint(j).parent; k != kNoParent; k = s.joint(k).parent) {
-    if (k == ancestor) return true;
-  }
-  return false;
-}
-
 // The joint after `a` on the tree path from `a` to `b` (same tree, a != b):
 // a child of `a` when `b` is below it, else its parent (a re-rooted view
 // holds limbs upside down).
 int next_on_path(const Skeleton& s, int a, int b) {
-  if (!below(s, a, b)) return s.joint(a).parent;
+  if (!detail::below(s, a, b)) return s.joint(a).parent;
   int k = b;
   while (s.joint(k).parent != a) k = s.joint(k).parent;
   return k;
@@ -239,7 +233,7 @@ Result<Plan> make_plan(const Motion& source_motion, const Motion& target_motion,
                         rig.joint(b).name + "' is not " + relation + " its " + std::string(role_name(from)) +
                         " joint '" + rig.joint(a).name + "'");
     };
-    if (g.a_t == g.b_t || !below(target, g.a_t, g.b_t)) return refuse(target, g.a_t, g.b_t, "target", "below");
+    if (g.a_t == g.b_t || !detail::below(target, g.a_t, g.b_t)) return refuse(target, g.a_t, g.b_t, "target", "below");
     if (g.a_s == g.b_s || source.root_of(g.a_s) != source.root_of(g.b_s)) {
       return refuse(source, g.a_s, g.b_s, "source", "in the tree of");
     }
@@ -449,15 +443,9 @@ Result<std::vector<double>> Retargeter::apply_values(const Motion& source) const
       if (!st.driven[k]) continue;
       // The rotation channels, in the joint's order, continuous with the last frame.
       const Mat local = parent_w.transpose() * w;
-      const Joint& joint = out_skeleton.joint(j);
       Axis order[3];
-      int slots[3], found = 0;
-      for (std::size_t c = 0; c < joint.channels.size() && found < 3; ++c) {
-        if (is_rotation(joint.channels[c])) {
-          order[found] = axis_of(joint.channels[c]);
-          slots[found++] = out_skeleton.channel_offset(j) + static_cast<int>(c);
-        }
-      }
+      int slots[3];
+      detail::rotation_slots(out_skeleton, j, order, slots);  // a driven joint has three
       const Vec angles = decompose_euler(local, order, f == 0 ? nullptr : &hint[k]);
       hint[k] = angles;
       for (int i = 0; i < 3; ++i) values[static_cast<std::size_t>(slots[i])] = angles[i];

@@ -274,8 +274,7 @@ Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map
       std::lock_guard lock(cache->mutex);
       p = cache->plan;
     }
-    const bool remade = !p.retargeter.fits(m);
-    if (remade) {
+    if (!p.retargeter.fits(m)) {
       auto made = Retargeter::make(m, *rig, maps->options());
       if (!made.ok()) return made.error();
       p = Plan{std::move(made).value(), nullptr};
