@@ -380,6 +380,7 @@ bool Retargeter::fits(const Motion& source) const {
   const Skeleton& a = state_->source_skeleton;
   const Skeleton& b = source.skeleton;
   if (source.convention != state_->source_convention || a.size() != b.size()) return false;
+  if (a.shares(b)) return true;  // a live source's frames: copies of its skeleton
   for (int j = 0; j < static_cast<int>(a.size()); ++j) {
     const Joint &x = a.joint(j), &y = b.joint(j);
     if (x.name != y.name || x.parent != y.parent || x.offset != y.offset || x.channels != y.channels) return false;

@@ -38,56 +38,61 @@ Result<Skeleton> Skeleton::create(std::vector<Joint> joints) {
     }
   }
 
-  Skeleton s;
-  s.joints_ = std::move(joints);
-  s.channel_offsets_.resize(static_cast<std::size_t>(n));
-  s.depth_.resize(static_cast<std::size_t>(n));
-  s.root_.resize(static_cast<std::size_t>(n));
+  auto d = std::make_shared<Data>();
+  d->joints = std::move(joints);
+  d->channel_offsets.resize(static_cast<std::size_t>(n));
+  d->depth.resize(static_cast<std::size_t>(n));
+  d->root.resize(static_cast<std::size_t>(n));
   std::vector<int> child_count(static_cast<std::size_t>(n), 0);
   // Parents come before children, so one pass gives every depth and root.
   for (int j = 0; j < n; ++j) {
     const auto u = static_cast<std::size_t>(j);
-    const Joint& joint = s.joints_[u];
-    s.channel_offsets_[u] = s.channel_count_;
-    s.channel_count_ += static_cast<int>(joint.channels.size());
+    const Joint& joint = d->joints[u];
+    d->channel_offsets[u] = d->channel_count;
+    d->channel_count += static_cast<int>(joint.channels.size());
     if (joint.parent == kNoParent) {
-      s.roots_.push_back(j);
-      s.depth_[u] = 0;
-      s.root_[u] = j;
+      d->roots.push_back(j);
+      d->depth[u] = 0;
+      d->root[u] = j;
     } else {
       const auto p = static_cast<std::size_t>(joint.parent);
       ++child_count[p];
-      s.depth_[u] = s.depth_[p] + 1;
-      s.root_[u] = s.root_[p];
+      d->depth[u] = d->depth[p] + 1;
+      d->root[u] = d->root[p];
     }
   }
-  s.child_begin_.assign(static_cast<std::size_t>(n) + 1, 0);
-  for (int j = 0; j < n; ++j) s.child_begin_[j + 1] = s.child_begin_[j] + child_count[j];
-  s.child_list_.resize(static_cast<std::size_t>(s.child_begin_[n]));
-  std::vector<int> fill(s.child_begin_.begin(), s.child_begin_.end() - 1);
+  d->child_begin.assign(static_cast<std::size_t>(n) + 1, 0);
+  for (int j = 0; j < n; ++j) d->child_begin[j + 1] = d->child_begin[j] + child_count[j];
+  d->child_list.resize(static_cast<std::size_t>(d->child_begin[n]));
+  std::vector<int> fill(d->child_begin.begin(), d->child_begin.end() - 1);
   for (int j = 0; j < n; ++j) {
-    const int p = s.joints_[static_cast<std::size_t>(j)].parent;
-    if (p != kNoParent) s.child_list_[static_cast<std::size_t>(fill[p]++)] = j;
+    const int p = d->joints[static_cast<std::size_t>(j)].parent;
+    if (p != kNoParent) d->child_list[static_cast<std::size_t>(fill[p]++)] = j;
   }
+  Skeleton s;
+  s.data_ = std::move(d);
   return s;
 }
 
+const Skeleton::Data& Skeleton::empty_data() {
+  static const Data empty;
+  return empty;
+}
+
 int Skeleton::find(std::string_view name) const {
-  for (std::size_t j = 0; j < joints_.size(); ++j) {
-    if (joints_[j].name == name) return static_cast<int>(j);
+  const auto& joints = data().joints;
+  for (std::size_t j = 0; j < joints.size(); ++j) {
+    if (joints[j].name == name) return static_cast<int>(j);
   }
   return -1;
 }
 
 std::span<const int> Skeleton::children(int j) const {
-  const auto b = static_cast<std::size_t>(child_begin_[j]);
-  const auto e = static_cast<std::size_t>(child_begin_[j + 1]);
-  return std::span<const int>(child_list_).subspan(b, e - b);
+  const Data& d = data();
+  const auto b = static_cast<std::size_t>(d.child_begin[static_cast<std::size_t>(j)]);
+  const auto e = static_cast<std::size_t>(d.child_begin[static_cast<std::size_t>(j) + 1]);
+  return std::span<const int>(d.child_list).subspan(b, e - b);
 }
-
-int Skeleton::root_of(int j) const { return root_[static_cast<std::size_t>(j)]; }
-
-int Skeleton::depth(int j) const { return depth_[static_cast<std::size_t>(j)]; }
 
 Result<std::vector<int>> find_joints(const Skeleton& skeleton, std::span<const std::string> names) {
   std::vector<int> out;

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <memory>
 #include <span>
 #include <string>
 #include <string_view>
@@ -46,39 +47,50 @@ class Skeleton {
   // the same channel twice.
   static Result<Skeleton> create(std::vector<Joint> joints);
 
-  std::size_t size() const { return joints_.size(); }
-  bool empty() const { return joints_.empty(); }
-  const std::vector<Joint>& joints() const { return joints_; }
-  const Joint& joint(int j) const { return joints_[static_cast<std::size_t>(j)]; }
+  std::size_t size() const { return data().joints.size(); }
+  bool empty() const { return data().joints.empty(); }
+  const std::vector<Joint>& joints() const { return data().joints; }
+  const Joint& joint(int j) const { return data().joints[static_cast<std::size_t>(j)]; }
   const Joint& operator[](int j) const { return joint(j); }
 
   // Index of the joint with this exact name, or -1.
   int find(std::string_view name) const;
   bool is_root(int j) const { return joint(j).parent == kNoParent; }
   // Root joints, in index order.
-  const std::vector<int>& roots() const { return roots_; }
+  const std::vector<int>& roots() const { return data().roots; }
   // Children of j, in index order.
   std::span<const int> children(int j) const;
   // The root of the tree that holds j (constant time).
-  int root_of(int j) const;
+  int root_of(int j) const { return data().root[static_cast<std::size_t>(j)]; }
   // Number of edges from j up to its root (constant time).
-  int depth(int j) const;
+  int depth(int j) const { return data().depth[static_cast<std::size_t>(j)]; }
 
   // Index of j's first channel within one frame's values; channels of joint j
   // occupy [channel_offset(j), channel_offset(j) + joint(j).channels.size()).
-  int channel_offset(int j) const { return channel_offsets_[static_cast<std::size_t>(j)]; }
+  int channel_offset(int j) const { return data().channel_offsets[static_cast<std::size_t>(j)]; }
   // Total number of channels per frame.
-  int channel_count() const { return channel_count_; }
+  int channel_count() const { return data().channel_count; }
+
+  // True when both are copies of the same create() (so equal in everything):
+  // a constant-time answer before comparing joints.
+  bool shares(const Skeleton& other) const { return data_ && data_ == other.data_; }
 
  private:
-  std::vector<Joint> joints_;
-  std::vector<int> roots_;
-  std::vector<int> channel_offsets_;
-  std::vector<int> depth_;        // per joint: edges up to its root
-  std::vector<int> root_;         // per joint: the root of its tree
-  std::vector<int> child_begin_;  // CSR: children of j are child_list_[child_begin_[j] .. child_begin_[j+1])
-  std::vector<int> child_list_;
-  int channel_count_ = 0;
+  struct Data {
+    std::vector<Joint> joints;
+    std::vector<int> roots;
+    std::vector<int> channel_offsets;
+    std::vector<int> depth;        // per joint: edges up to its root
+    std::vector<int> root;         // per joint: the root of its tree
+    std::vector<int> child_begin;  // CSR: children of j are child_list[child_begin[j] .. child_begin[j+1])
+    std::vector<int> child_list;
+    int channel_count = 0;
+  };
+  // Immutable once made, so copies share it: a skeleton is copied with every
+  // frame a live source publishes and every frame its views replay.
+  std::shared_ptr<const Data> data_;
+  const Data& data() const { return data_ ? *data_ : empty_data(); }
+  static const Data& empty_data();
 };
 
 // Indices of the joints named `names`, in the same order; fails on the first
