@@ -3,15 +3,17 @@
 # "Retargeted subscriptions"): N subscribers of a library motion and of a
 # live source, each with its own view, plain and retargeted onto a rig
 # (gmr-load --retarget), on a freshly started gmr-server pinned to CPU 0 with
-# gmr-load (and the live source's publisher) on CPU 1. Prints the server's CPU
-# per delivered frame for each case, each repeat and the median, and the ratio
-# retargeted / plain.
+# gmr-load (and the live source's publisher) on CPU 1. Modes: plain; retarget
+# (every client the same rig: a live source's views share one replay a
+# frame); own-rigs (each client a rig of its own, gmr-load --own-rigs: one
+# replay a frame per view, the worst case). Prints the server's CPU per
+# delivered frame for each case, each repeat and the median.
 #
 #   bench/server/retarget.sh [BUILD_DIR] [OUT_DIR]
-#     SUBSCRIBERS=100  REPEATS=3  SECONDS_PER_POINT=10  KINDS="library live"
+#     SUBSCRIBERS=100  REPEATS=3  SECONDS_PER_POINT=10  KINDS="library live"  MODES="plain retarget own-rigs"
 #     MOTION_FILE=../shared/data/bvh/cmu/02_01.bvh  RIG_FILE=../shared/data/bvh/mixamo/Beta_jump.bvh
 #
-# A benchmark, not a CI step: about 2 minutes per repeat.
+# A benchmark, not a CI step: about 40 s per run (kind x mode x repeat).
 set -euo pipefail
 build=${1:-build}
 out=${2:-bench/server/results-retarget}
@@ -58,7 +60,7 @@ trap cleanup EXIT
 per_frame() { sed -n 's/^server CPU .*, \([0-9]*\) ns per delivered frame.*/\1/p' "$1"; }
 
 for kind in ${KINDS:-library live}; do
-  for mode in plain retarget; do
+  for mode in ${MODES:-plain retarget own-rigs}; do
     figures=()
     for rep in $(seq "$repeats"); do
       name="$kind-$mode-$n-$rep"
@@ -72,7 +74,8 @@ for kind in ${KINDS:-library live}; do
         for _ in $(seq 100); do "$bin/gmr" ls --port "$port" 2>/dev/null | grep -q '^live' && break; sleep 0.1; done
       fi
       flags=()
-      [ "$mode" = retarget ] && flags+=(--retarget "$rig")
+      [ "$mode" != plain ] && flags+=(--retarget "$rig")
+      [ "$mode" = own-rigs ] && flags+=(--own-rigs)
       taskset -c 1 "$bin/gmr-load" --port "$port" --clients "$n" --motion "$source" --seconds "$seconds" \
         --warmup 2 --threads 1 --server-pid "$spid" "${flags[@]}" --json "$out/$name.json" >"$out/$name.txt" 2>&1 ||
         { echo "retarget bench: $name failed:" >&2; cat "$out/$name.txt" >&2; }

@@ -1,7 +1,7 @@
 // gmr-load: N clients subscribe to a gmr-server and measure what arrives.
 //
-//   gmr-load [--host H] [--port P] [--token T] [--tls-ca CA] [--clients N] [--motion M] [--retarget RIG] [--seconds S]
-//            [--rate HZ] [--udp] [--shared] [--orientations] [--float64] [--threads T]
+//   gmr-load [--host H] [--port P] [--token T] [--tls-ca CA] [--clients N] [--motion M] [--retarget RIG [--own-rigs]]
+//            [--seconds S] [--rate HZ] [--udp] [--shared] [--orientations] [--float64] [--threads T]
 //            [--server-pid PID] [--start-at EPOCH_S] [--json FILE] [--plot FILE.png]
 //   gmr-load --merge A.json B.json ... [--json FILE] [--plot FILE.png]
 //
@@ -198,6 +198,10 @@ int main(int argc, char** argv) {
   app.add_option("--retarget", retarget_rig,
                  "Each client's view retargeted onto this library motion's skeleton (docs/retarget.md) before it "
                  "subscribes: what a retargeted subscription costs the server");
+  bool own_rigs = false;
+  app.add_flag("--own-rigs", own_rigs,
+               "With --retarget: each client's rig its own (its root placed k nm apart for client k), so no two "
+               "views of a live source share a replay: the worst case");
   app.add_option("--seconds", seconds, "Measurement time")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--warmup", warmup, "Seconds ignored after the last client subscribed")->capture_default_str();
   app.add_option("--rate", rate, "Output rate in Hz (0: the motion's rate)")->capture_default_str();
@@ -322,7 +326,13 @@ int main(int argc, char** argv) {
     }
     views[i] = view->id;
     if (!retarget_rig.empty()) {
-      if (auto on_rig = r->client->retarget(view->id, rig); !on_rig.ok()) {
+      gmr::Skeleton own = rig;
+      if (own_rigs) {
+        auto joints = rig.joints();
+        joints[static_cast<std::size_t>(rig.roots()[0])].offset.x() += 1e-9 * static_cast<double>(i);
+        own = gmr::Skeleton::create(std::move(joints)).value();
+      }
+      if (auto on_rig = r->client->retarget(view->id, own); !on_rig.ok()) {
         std::lock_guard lock(error_mutex);
         if (error.empty()) error = "client " + std::to_string(i) + ": " + on_rig.error().to_string();
         return false;

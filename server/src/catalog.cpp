@@ -114,6 +114,7 @@ std::shared_ptr<LiveSource> Catalog::add_live(const std::string& name, Skeleton 
   auto source =
       std::make_shared<LiveSource>(name, next_live_serial_++, std::move(skeleton), frame_time, metres_per_unit);
   if (replay_work_) source->set_replay(*replay_work_, *replay_home_);
+  source->count_replays(live_edit_replays_);
   live_[name] = source;
   return source;
 }

@@ -82,6 +82,7 @@ class Catalog final : public LiveDirectory {
   std::uint64_t live_frames_received() const { return live_frames_received_; }
   std::uint64_t live_frames_refused() const { return live_frames_refused_; }
   std::uint64_t live_frames_over_rate() const { return live_frames_over_rate_; }
+  std::uint64_t live_edit_replays() const { return *live_edit_replays_; }
 
  private:
   std::vector<LibraryEntry> library_;
@@ -97,6 +98,8 @@ class Catalog final : public LiveDirectory {
   std::uint64_t live_frames_received_ = 0;   // frames published and accepted, all sources
   std::uint64_t live_frames_refused_ = 0;    // refused (wrong size, not finite, unknown publication)
   std::uint64_t live_frames_over_rate_ = 0;  // faster than the declared rate: dropped (RateHold)
+  // Edit lists the sources replayed (LiveSource::count_replays), all sources.
+  std::shared_ptr<std::uint64_t> live_edit_replays_ = std::make_shared<std::uint64_t>(0);
 };
 
 }  // namespace gmr::server

@@ -219,6 +219,7 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.live_frames_received = catalog.live_frames_received();
   s.live_frames_refused = catalog.live_frames_refused();
   s.live_frames_over_rate = catalog.live_frames_over_rate();
+  s.live_edit_replays = catalog.live_edit_replays();
   s.library_reloads = catalog.reloads();
   s.library_changes = catalog.library_changes();
   s.relay_announces_refused = replicas.announces_refused();

@@ -207,6 +207,9 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   f.add("gmr_live_frames_over_rate_total",
         "Frames published to live sources faster than their declared rate, dropped (a burst of a second passes)",
         T::Counter, static_cast<double>(s.live_frames_over_rate));
+  f.add("gmr_live_edit_replays_total",
+        "Live views' edit lists replayed on published frames (views with equal edits share one replay a frame)",
+        T::Counter, static_cast<double>(s.live_edit_replays));
   f.add("gmr_library_reloads_total", "Library reloads (files under --library changed, or SIGHUP)", T::Counter,
         static_cast<double>(s.library_reloads));
   const char* kChangeHelp = "Library motions a reload added, read again (changed on disk) or removed";

@@ -41,6 +41,7 @@ struct MetricsSnapshot {
   std::uint64_t multicast_frames_sent = 0;
   std::size_t live_sources = 0;
   std::uint64_t live_frames_received = 0, live_frames_refused = 0, live_frames_over_rate = 0;
+  std::uint64_t live_edit_replays = 0;
   std::uint64_t relay_announces_refused = 0;
   std::uint64_t library_reloads = 0;
   LibraryChanges library_changes;

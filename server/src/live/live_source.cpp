@@ -3,7 +3,8 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
-#include <map>
+#include <algorithm>
+#include <unordered_map>
 #include <utility>
 
 #include "streams/stream.h"
@@ -30,6 +31,13 @@ std::shared_ptr<const ViewContent> at_frame(const ViewContent& content, std::sha
 }
 
 }  // namespace
+
+bool LiveSource::shows(const ViewContent& content, const ReplayGroup& g) {
+  const ViewContent& first = *g.content;
+  if (content.live_steps == first.live_steps) return true;
+  return content.live_key && first.live_key && content.live_key_hash == first.live_key_hash &&
+         *content.live_key == *first.live_key;
+}
 
 LiveSource::LiveSource(std::string name, std::uint64_t serial, Skeleton skeleton, double frame_time,
                        double metres_per_unit)
@@ -118,23 +126,29 @@ Result<LiveSource::Pushed> LiveSource::push(std::span<const double> values, std:
     return false;
   });
   ReplayBatch batch{index, latest_, {}};
-  std::map<const std::vector<LiveStep>*, std::size_t> group_of;
+  std::unordered_map<std::size_t, std::vector<std::size_t>> groups_by_hash;
   for (const auto& s : streams) {
-    const auto content = s->content();
+    auto content = s->content();
     if (!content->live_steps || content->live_steps->empty()) {
       s->live_frame(at_frame(*content, latest_), index);
       continue;
     }
-    auto [it, added] = group_of.emplace(content->live_steps.get(), batch.groups.size());
-    if (added) batch.groups.push_back(ReplayGroup{content->live_steps, {}});
-    batch.groups[it->second].streams.push_back(s);
+    auto& candidates = groups_by_hash[content->live_key_hash];
+    const auto same = std::ranges::find_if(candidates, [&](std::size_t g) { return shows(*content, batch.groups[g]); });
+    if (same != candidates.end()) {
+      batch.groups[*same].streams.push_back(s);
+      continue;
+    }
+    candidates.push_back(batch.groups.size());
+    batch.groups.push_back(ReplayGroup{std::move(content), {s}});
   }
   if (batch.groups.empty()) return Pushed::kSent;
   if (!replay_work_) {
     for (auto& g : batch.groups) {
-      g.made = replay(*g.steps, latest_);
+      g.made = replay(*g.content->live_steps, latest_);
       deliver(g, index, 0);
     }
+    if (replays_total_) *replays_total_ += batch.groups.size();
   } else if (replaying_) {
     // The frame waits for the batch under way; with the queue full, the
     // oldest waiting one is skipped by its streams.
@@ -169,7 +183,7 @@ void LiveSource::start_replay(ReplayBatch batch) {
   net::post(*replay_work_, [self = shared_from_this(), batch = std::move(batch)]() mutable {
     // The replay thread: only the batch (its own motions, the edit lists'
     // functions, which hold no mutable state) is touched here.
-    for (auto& g : batch.groups) g.made = replay(*g.steps, batch.frame);
+    for (auto& g : batch.groups) g.made = replay(*g.content->live_steps, batch.frame);
     net::post(*self->replay_home_,
               [self, batch = std::move(batch)]() mutable { self->finish_replay(std::move(batch)); });
   });
@@ -177,6 +191,7 @@ void LiveSource::start_replay(ReplayBatch batch) {
 
 void LiveSource::finish_replay(ReplayBatch batch) {
   replaying_ = false;
+  if (replays_total_) *replays_total_ += batch.groups.size();
   for (const auto& g : batch.groups) deliver(g, batch.index, batch.skipped_before);
   if (end_reason_) {
     // Ended: what still waits is skipped rather than replayed (a queue of
@@ -203,7 +218,7 @@ void LiveSource::deliver(const ReplayGroup& g, std::uint64_t index, std::uint64_
     if (!s || s->idle()) continue;
     for (std::uint64_t k = 0; k < skipped_before; ++k) s->live_skipped();
     // A view edited since the replay began shows other edits: it skips this frame.
-    if (!g.made.ok() || s->content()->live_steps != g.steps) {
+    if (!g.made.ok() || !shows(*s->content(), g)) {
       s->live_skipped();
       continue;
     }

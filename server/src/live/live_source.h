@@ -110,6 +110,8 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   // Where edit replays run (`work`) and where their frames come back to
   // (`home`, the control loop). Not set: replays run inline, in push().
   void set_replay(net::any_io_executor work, net::any_io_executor home);
+  // Adds the edit lists it replays to `*total` (on the control loop).
+  void count_replays(std::shared_ptr<std::uint64_t> total) { replays_total_ = std::move(total); }
 
   // A stream that shows this source from now on (Stream::set_live): it gets
   // every frame pushed from now on.
@@ -134,8 +136,10 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   std::uint64_t replay_failures_ = 0;
   // A frame's edited views, for the replay thread: each distinct edit list
   // once, with the streams that show it.
+  // Streams whose views have equal edits (ViewContent::live_key): `content`
+  // is the first one's, whose edits are replayed for all.
   struct ReplayGroup {
-    std::shared_ptr<const std::vector<LiveStep>> steps;
+    std::shared_ptr<const ViewContent> content;
     std::vector<std::weak_ptr<Stream>> streams;
     Result<std::shared_ptr<const Motion>> made = std::shared_ptr<const Motion>();
   };
@@ -148,6 +152,8 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
     // step with frame numbers.
     std::uint64_t skipped_before = 0;
   };
+  // Whether a stream's view `content` shows the edits `g` replays.
+  static bool shows(const ViewContent& content, const ReplayGroup& g);
   void start_replay(ReplayBatch batch);
   void finish_replay(ReplayBatch batch);
   // Hands group `g`'s motion (or its failure) to its streams, after
@@ -168,6 +174,7 @@ class LiveSource : public std::enable_shared_from_this<LiveSource> {
   static void skip(const ReplayBatch& batch);
   RateHold hold_;
   std::uint64_t over_rate_ = 0;
+  std::shared_ptr<std::uint64_t> replays_total_;
   std::string origin_;
   std::unique_ptr<Recording> recording_;
 };

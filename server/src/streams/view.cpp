@@ -18,6 +18,7 @@
 #include "gmr/ops/split_tree.h"
 #include "gmr/ops/strip_dummies.h"
 #include "gmr/retarget/retarget.h"
+#include "live_key.h"
 
 namespace gmr::server {
 
@@ -122,6 +123,10 @@ std::shared_ptr<ViewContent> next_content(const ViewContent& base, std::shared_p
   c->compiled = live_steps ? nullptr : std::move(compiled);
   c->relative_to = relative_to;
   c->skeleton_version = base.skeleton_version + (same ? 0 : 1);
+  if (live_steps == base.live_steps) {
+    c->live_key = base.live_key;
+    c->live_key_hash = base.live_key_hash;
+  }
   c->live_steps = std::move(live_steps);
   c->library_name = base.library_name;
   c->library_version = base.library_version;
@@ -144,9 +149,13 @@ void View::replace(std::shared_ptr<const Motion> motion, int relative_to, std::s
   content_ = next_content(*content_, std::move(motion), relative_to, std::move(compiled), std::move(live_steps));
 }
 
-ViewEdit::ViewEdit(std::string what, LiveStep step, std::shared_ptr<const ViewContent> base,
+ViewEdit::ViewEdit(std::string what, std::string key, LiveStep step, std::shared_ptr<const ViewContent> base,
                    std::shared_ptr<EditReport> report)
-    : what_(std::move(what)), step_(std::move(step)), base_(std::move(base)), report_(std::move(report)) {
+    : what_(std::move(what)),
+      key_(std::move(key)),
+      step_(std::move(step)),
+      base_(std::move(base)),
+      report_(std::move(report)) {
   if (!report_) report_ = std::make_shared<EditReport>();
 }
 
@@ -170,13 +179,18 @@ Result<std::shared_ptr<const ViewContent>> ViewEdit::run() const {
     steps = std::move(more);
   }
   auto content = next_content(base, std::move(next), viewer, {}, std::move(steps));
+  if (content->live_steps) {
+    auto key = std::make_shared<std::string>(base.live_key ? *base.live_key + key_ : key_);
+    content->live_key_hash = std::hash<std::string>{}(*key);
+    content->live_key = std::move(key);
+  }
   if (metres_per_unit_ > 0.0) content->metres_per_unit = metres_per_unit_;
   if (compile && content->compiled) content->compiled->get();
   return std::shared_ptr<const ViewContent>(std::move(content));
 }
 
-ViewEdit View::make_edit(std::string what, LiveStep step, std::shared_ptr<EditReport> report) const {
-  ViewEdit edit(std::move(what), std::move(step), content_, std::move(report));
+ViewEdit View::make_edit(std::string what, std::string key, LiveStep step, std::shared_ptr<EditReport> report) const {
+  ViewEdit edit(std::move(what), std::move(key), std::move(step), content_, std::move(report));
   // Float32 streams played the view: its new float form is compiled with the
   // edit, not on the I/O thread at their next frame.
   edit.compile = content_->compiled && content_->compiled->workspace_floats() > 0;
@@ -201,22 +215,24 @@ Status View::apply(const Result<ViewEdit>& edit) {
 
 Result<ViewEdit> View::edit_shift_root(const std::string& joint) const {
   if (auto j = joint_index(joint); !j.ok()) return j.error();
-  return make_edit("shift root to '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
-    auto j = find_joint(m, joint);
-    if (!j.ok()) return j.error();
-    return gmr::shift_root(m, *j);
-  });
+  return make_edit("shift root to '" + joint + "'", LiveKey("shift root").put(joint).take(),
+                   [joint](const Motion& m) -> Result<Motion> {
+                     auto j = find_joint(m, joint);
+                     if (!j.ok()) return j.error();
+                     return gmr::shift_root(m, *j);
+                   });
 }
 
 Result<ViewEdit> View::edit_split(const std::string& joint) const {
   auto j = joint_index(joint);
   if (!j.ok()) return j.error();
   if (motion().skeleton.is_root(*j)) return make_error("split at '" + joint + "': it is already a root");
-  return make_edit("split at '" + joint + "'", [joint](const Motion& m) -> Result<Motion> {
-    auto at = find_joint(m, joint);
-    if (!at.ok()) return at.error();
-    return split_tree(m, *at);
-  });
+  return make_edit("split at '" + joint + "'", LiveKey("split").put(joint).take(),
+                   [joint](const Motion& m) -> Result<Motion> {
+                     auto at = find_joint(m, joint);
+                     if (!at.ok()) return at.error();
+                     return split_tree(m, *at);
+                   });
 }
 
 Result<ViewEdit> View::edit_join(const std::string& root) const {
@@ -224,7 +240,7 @@ Result<ViewEdit> View::edit_join(const std::string& root) const {
   // The report of the last application: this edit's, read after run().
   auto report = std::make_shared<EditReport>();
   return make_edit(
-      "join '" + root + "'",
+      "join '" + root + "'", LiveKey("join").put(root).take(),
       [root, report](const Motion& m) -> Result<Motion> {
         auto j = find_joint(m, root);
         if (!j.ok()) return j.error();
@@ -268,7 +284,15 @@ Result<ViewEdit> View::edit_retarget(std::shared_ptr<const Motion> rig, std::map
   };
   auto cache = std::make_shared<Cache>();
   cache->plan.retargeter = std::move(first).value();
-  ViewEdit edit = make_edit("retarget", [rig, maps, cache](const Motion& m) -> Result<Motion> {
+  // The plan depends on the rig, the maps and the view's motion (its first
+  // frame too, when that is the source's reference pose).
+  LiveKey key("retarget");
+  key.put_motion(*rig, true).put_motion(motion(), cache->plan.retargeter.plan().source_reference != "rest pose");
+  for (const auto* map : {&maps->target, &maps->source}) {
+    key.put_number(static_cast<double>(map->size()));
+    for (const auto& [role, joint] : *map) key.put(role).put(joint);
+  }
+  ViewEdit edit = make_edit("retarget", key.take(), [rig, maps, cache](const Motion& m) -> Result<Motion> {
     Plan p;
     {
       std::lock_guard lock(cache->mutex);
@@ -304,7 +328,9 @@ Result<ViewEdit> View::edit_set_roots(const std::vector<std::string>& roots) con
   for (const auto& r : roots) {
     if (auto j = joint_index(r); !j.ok()) return j.error();
   }
-  return make_edit("set roots", [roots](const Motion& m) -> Result<Motion> {
+  LiveKey key("set roots");
+  for (const auto& r : roots) key.put(r);
+  return make_edit("set roots", key.take(), [roots](const Motion& m) -> Result<Motion> {
     std::vector<int> idx;
     for (const auto& r : roots) {
       auto j = find_joint(m, r);
@@ -318,7 +344,7 @@ Result<ViewEdit> View::edit_set_roots(const std::vector<std::string>& roots) con
 Result<ViewEdit> View::edit_strip_dummies() const {
   auto report = std::make_shared<EditReport>();
   return make_edit(
-      "strip dummies",
+      "strip dummies", LiveKey("strip dummies").take(),
       [report](const Motion& m) -> Result<Motion> {
         std::vector<RemovedJoint> removed;
         auto stripped = gmr::strip_dummies(m, &removed);

@@ -7,11 +7,13 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <thread>
 
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/server/library.h"
 #include "gmr/server/view.h"
+#include "gmr/skeleton/skeleton.h"
 #include "net_test_util.h"
 
 namespace gmr::test {
@@ -210,6 +212,63 @@ TEST(ViewEdits, AClientThatLeavesMidEditLeavesNothingBehind) {
 // An edit of a view that float32 streams played compiles the new float form
 // with the edit (on the edit thread), not at the streams' next frame on the
 // I/O thread; a view nobody played in float32 leaves it for later.
+// Live views whose edits are the same spell the same key (the source then
+// replays them once a frame for all: LivePublish.RetargetedViewsGetEach...);
+// any difference in an edit, its joint, its rig or their order, another key.
+TEST(ViewEdits, LiveViewsWithTheSameEditsShareAKeyAndOthersDoNot) {
+  const auto walk = long_walk(1);
+  ASSERT_NE(walk, nullptr);
+  auto bigger = std::make_shared<Motion>(*walk);  // the walk's rig, one bone longer
+  {
+    auto joints = bigger->skeleton.joints();
+    joints[static_cast<std::size_t>(bigger->skeleton.find("r_knee"))].offset *= 1.25;
+    bigger->skeleton = Skeleton::create(std::move(joints)).value();
+  }
+  using Edit = std::function<Result<server::ViewEdit>(const server::View&)>;
+  // The key of a fresh live view of the walk after `edits`.
+  auto key = [&](const std::vector<Edit>& edits) -> std::string {
+    server::View v(1, "live", walk, std::weak_ptr<server::LiveSource>());
+    for (const auto& e : edits) {
+      auto edit = e(v);
+      EXPECT_TRUE(edit.ok()) << edit.error().to_string();
+      if (!edit.ok()) return {};
+      auto next = edit->run();
+      EXPECT_TRUE(next.ok()) << next.error().to_string();
+      if (!next.ok()) return {};
+      EXPECT_TRUE(v.commit(*edit, *next).ok());
+    }
+    EXPECT_TRUE(v.live());
+    const auto& c = *v.content();
+    if (!c.live_key) return {};
+    EXPECT_EQ(c.live_key_hash, std::hash<std::string>{}(*c.live_key));
+    return *c.live_key;
+  };
+  const Edit shift_knee = [](const server::View& v) { return v.edit_shift_root("r_knee"); };
+  const Edit shift_other = [](const server::View& v) { return v.edit_shift_root("l_knee"); };
+  const Edit split_knee = [](const server::View& v) { return v.edit_split("r_knee"); };
+  const Edit onto_walk = [&](const server::View& v) { return v.edit_retarget(walk, {}, {}); };
+  const Edit onto_bigger = [&](const server::View& v) { return v.edit_retarget(bigger, {}, {}); };
+  const Edit world = [](const server::View& v) { return v.edit_set_roots({"pelvis"}); };
+
+  EXPECT_EQ(key({}), "");
+  EXPECT_EQ(key({shift_knee}), key({shift_knee}));
+  EXPECT_EQ(key({world, onto_walk}), key({world, onto_walk}));
+  const std::vector<std::string> different = {
+      key({shift_knee}),
+      key({shift_other}),
+      key({split_knee}),
+      key({onto_walk}),
+      key({onto_bigger}),
+      key({shift_knee, shift_other}),
+      key({shift_other, shift_knee}),
+      key({world, onto_walk}),
+  };
+  for (std::size_t i = 0; i < different.size(); ++i) {
+    EXPECT_FALSE(different[i].empty()) << i;
+    for (std::size_t k = 0; k < i; ++k) EXPECT_NE(different[i], different[k]) << k << " and " << i;
+  }
+}
+
 TEST(ViewEdits, TheFloatFormIsCompiledWithTheEditWhenFloatStreamsPlayedTheView) {
   const auto m = long_walk(200);
   const std::string leaf = m->skeleton.joint(static_cast<int>(m->skeleton.size()) - 1).name;

@@ -235,6 +235,7 @@ struct ServerCounters {
   std::uint64_t live_frames_received = 0;   // published frames the server accepted
   std::uint64_t live_frames_refused = 0;    // and refused
   std::uint64_t live_frames_over_rate = 0;  // and dropped: faster than the source's declared rate
+  std::uint64_t live_edit_replays = 0;      // live views' edits replayed, once per frame for equal edits
   std::uint64_t multicast_frames_sent = 0;  // to the multicast group, once each
   std::uint64_t frames_sent_total = 0;      // all connections, open and closed (one request's snapshot)
   std::uint64_t frames_dropped_total = 0;   // all connections, open and closed

@@ -69,6 +69,11 @@ struct ViewContent {
   // order, and `motion` is one frame (the newest when the view last changed).
   // Null for library motions.
   std::shared_ptr<const std::vector<LiveStep>> live_steps;
+  // Those edits spelled out (streams/live_key.h), and its hash: views of one
+  // source with equal keys make equal frames, so the source replays the
+  // edits once for all of them. Null with no edits.
+  std::shared_ptr<const std::string> live_key;
+  std::size_t live_key_hash = 0;
   // The library motion it shows, and which version of it (LibraryEntry::
   // version): a reload that changes or removes it ends its streams
   // (Catalog::stale). Empty for live sources.
@@ -114,10 +119,11 @@ class ViewEdit {
 
  private:
   friend class View;
-  ViewEdit(std::string what, LiveStep step, std::shared_ptr<const ViewContent> base,
+  ViewEdit(std::string what, std::string key, LiveStep step, std::shared_ptr<const ViewContent> base,
            std::shared_ptr<EditReport> report);
 
   std::string what_;
+  std::string key_;  // the step spelled out (ViewContent::live_key)
   LiveStep step_;
   std::size_t written_joints_ = 0;  // joints of the motion it makes, when that may be more than the view's
   double metres_per_unit_ = 0.0;    // the unit of the motion it makes, when it changes it (a retarget)
@@ -187,7 +193,8 @@ class View {
   // Runs and commits `edit`.
   Status apply(const Result<ViewEdit>& edit);
   // An edit applying `step` to the view's motion (`what` prefixes its error).
-  ViewEdit make_edit(std::string what, LiveStep step, std::shared_ptr<EditReport> report = {}) const;
+  // `key` spells out what `step` does to a frame (streams/live_key.h).
+  ViewEdit make_edit(std::string what, std::string key, LiveStep step, std::shared_ptr<EditReport> report = {}) const;
 
   std::uint32_t id_;
   std::string motion_name_;
