@@ -8,9 +8,15 @@ from a joint: every applied frame's Skeleton bone global positions must equal
 conventions and metres, within 1e-4 m; before and after a root change asked
 mid-stream from Godot (the bones rebuilt with the new hierarchy), and, for the
 BVH, after the server was stopped and started again (the link reconnects and
-builds the same view again).
+builds the same view again). And a user's character: a Skeleton with the
+Mixamo rig's bones (names as Godot has them, `mixamorig_Hips`; each bone's
+rest turned its own way) and the link's retarget_onto_skeleton: the bones keep
+their names and parents, their global positions equal `gmr retarget` of the
+motion onto that rig within 2e-5 of its height, and each bone's rest axis
+(pointing at its child at rest) points at its child in every frame; a
+Skeleton that is no humanoid ends the link with the missing roles named.
 
-    live_link_test.py --repo . --bin-dir build/bin
+    live_link_test.py --repo . --bin-dir build/bin --python-dir client/python
 
 Exits 77 (skipped) outside CI when godot3-server, numpy or the corpus is
 missing; under CI=true that is a failure.
@@ -104,12 +110,138 @@ def hostile_messages(godot, project, work):
     return failures
 
 
+def character_bones(np, sk):
+    """The rig `sk` (a gmr_client.Skeleton, rest pose = every rotation zero)
+    as a Godot character's bones: names as Godot has them (':' -> '_'),
+    parents, and each bone's rest in the Skeleton's space: at the joint, its
+    Y axis at its first child (the parent's axes for a leaf), turned about it
+    by 0.3 rad per bone, so no two bones share a rest orientation."""
+    n = len(sk.names)
+    parents = [int(p) for p in sk.parents]
+    origin = np.zeros((n, 3))
+    for j in range(n):
+        origin[j] = (origin[parents[j]] if parents[j] >= 0 else 0) + sk.offsets[j]
+    first_child = [-1] * n
+    for j in range(n - 1, -1, -1):
+        if parents[j] >= 0 and np.linalg.norm(sk.offsets[j]) > 1e-9:
+            first_child[parents[j]] = j
+    bases = [None] * n
+    bones = []
+    for j in range(n):
+        if first_child[j] >= 0:
+            y = sk.offsets[first_child[j]] / np.linalg.norm(sk.offsets[first_child[j]])
+            ref = np.array([0.0, 0.0, 1.0]) if abs(y[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+            x = np.cross(y, ref)
+            x /= np.linalg.norm(x)
+            z = np.cross(x, y)
+            a = 0.3 * j
+            x, z = np.cos(a) * x - np.sin(a) * z, np.sin(a) * x + np.cos(a) * z
+            bases[j] = np.column_stack([x, y, z])
+        else:
+            bases[j] = bases[parents[j]] if parents[j] >= 0 else np.eye(3)
+        b = bases[j]
+        bones.append({"name": godot_name(sk.names[j]), "parent": parents[j],
+                      "rest": [*b[:, 0], *b[:, 1], *b[:, 2], *origin[j]]})
+    return bones, first_child
+
+
+def godot_name(joint):
+    return joint.replace(":", "_").replace("/", "_")
+
+
+def retarget_onto_character(godot, project, work, bin_dir, lib, np):
+    """The motion 02_01 streamed onto a Godot character with the Mixamo rig's
+    bones (tests/godot/retarget_in_godot.gd), and a Skeleton no humanoid
+    naming fits refused. Returns (failures, frames checked)."""
+    import gmr_client
+    rig_file = env.data_dir() / "bvh/mixamo/Beta_jump.bvh"
+    (lib / "rigs").mkdir(exist_ok=True)
+    if not (lib / "rigs/Beta_jump.bvh").exists():
+        os.symlink(rig_file, lib / "rigs/Beta_jump.bvh")
+    on_rig = work / "02_01_on_mixamo.bvh"
+    subprocess.run([str(bin_dir / "gmr"), "retarget", str(lib / "02_01.bvh"), str(on_rig), "--target", str(rig_file)],
+                   check=True, capture_output=True)
+    want, names = env.gmr_positions(bin_dir, on_rig)
+    height = float(np.ptp(want[0][:, 1]))
+    tolerance = 2e-5 * height
+    failures = []
+    checked = 0
+    with env.Server(bin_dir, library=lib, http=True) as server:
+        with gmr_client.Client("127.0.0.1", server.port) as c:
+            sk = c.skeleton("rigs/Beta_jump")
+        bones, first_child = character_bones(np, sk)
+        # Hips, spine and head only (Unity's and Godot's names): close to a
+        # humanoid, so the refusal names the roles it lacks.
+        chain = [{"name": n, "parent": i - 1, "rest": [1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 10.0 * i, 0]}
+                 for i, n in enumerate(["Hips", "Spine", "Head"])]
+        results = {}
+        for label, character in (("Mixamo character", bones), ("a three-bone chain", chain)):
+            bones_file = work / (label.replace(" ", "_") + ".bones.json")
+            bones_file.write_text(json.dumps(character))
+            out = work / (label.replace(" ", "_") + ".json")
+            out.unlink(missing_ok=True)
+            run_env = dict(godot_env(project), GMR_PORT=str(server.http_port), GMR_MOTION="02_01",
+                           GMR_FRAMES=str(FRAMES), GMR_OUT=str(out), GMR_BONES=str(bones_file))
+            run = subprocess.run([godot, "--path", str(project), "-s", "res://retarget_driver.gd"], capture_output=True,
+                                 text=True, timeout=240, env=run_env)
+            log = run.stdout + run.stderr
+            if not out.exists() or "SCRIPT ERROR" in log:
+                failures.append(f"retarget in Godot, {label}: Godot failed ({run.returncode}):\n{log[-3000:]}")
+                continue
+            results[label] = json.loads(out.read_text())
+    refused = results.get("a three-bone chain")
+    if refused is not None and ("the server cannot retarget" not in refused["error"]
+                                or "left_upper_arm" not in refused["error"] or refused["samples"]):
+        failures.append(f"retarget in Godot: a three-bone chain was not refused naming its missing roles: "
+                        f"{refused['error']!r}, {len(refused['samples'])} frames applied")
+    result = results.get("Mixamo character")
+    if result is None:
+        return failures, checked
+    if result["error"]:
+        return failures + [f"retarget in Godot: {result['error']}"], checked
+    if [b[0] for b in result["bones"]] != [b["name"] for b in bones] or \
+            [b[1] for b in result["bones"]] != [b["parent"] for b in bones]:
+        failures.append("retarget in Godot: the character's bones changed (names or parents)")
+    if len(result["samples"]) < FRAMES or result["bad_messages"] != 0:
+        failures.append(f"retarget in Godot: {len(result['samples'])} frames applied, "
+                        f"{result['bad_messages']} bad messages")
+    index = {godot_name(n): k for k, n in enumerate(names)}
+    missing = [b["name"] for b in bones if b["name"] not in index]
+    if missing:
+        return failures + [f"retarget in Godot: gmr retarget's output has no joints {missing[:5]}"], checked
+    worst = worst_angle = 0.0
+    for sample in result["samples"]:
+        poses = {name: np.array([float(v) for v in row]).reshape(4, 3) for name, row in sample["poses"].items()}
+        ref = want[sample["frame"]]
+        for j, b in enumerate(bones):
+            err = float(np.linalg.norm(poses[b["name"]][3] - ref[index[b["name"]]]))
+            worst = max(worst, err)
+            c = first_child[j]
+            if c >= 0:
+                bone = poses[bones[c]["name"]][3] - poses[b["name"]][3]
+                axis = poses[b["name"]][1]
+                cos = float(np.dot(bone, axis) / (np.linalg.norm(bone) * np.linalg.norm(axis)))
+                worst_angle = max(worst_angle, float(np.degrees(np.arccos(min(1.0, max(-1.0, cos))))))
+        checked += 1
+    if worst > tolerance:
+        failures.append(f"retarget in Godot: a bone is {worst:.3g} off gmr retarget (allowed {tolerance:.3g}, "
+                        f"2e-5 of the rig's height)")
+    if worst_angle > 0.01:
+        failures.append(f"retarget in Godot: a bone's rest axis is {worst_angle:.3g} deg off its child")
+    print(f"retarget in Godot: {checked} frames of 02_01 on a Mixamo character ({len(bones)} bones, its own rests): "
+          f"largest difference from gmr retarget {worst:.2g} (rig units, height {height:.4g}), bone axes within "
+          f"{worst_angle:.2g} deg of their children; a three-bone chain refused: {refused and refused['error']!r}")
+    return failures, checked
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repo", required=True)
     ap.add_argument("--bin-dir", required=True)
+    ap.add_argument("--python-dir", required=True, help="the Python client (client/python)")
     ap.add_argument("--keep", help="keep the Godot project and outputs in this folder")
     args = ap.parse_args()
+    sys.path.insert(0, str(pathlib.Path(args.python_dir).resolve()))
     repo = pathlib.Path(args.repo).resolve()
     godot = shutil.which("godot3-server")
     if godot is None:
@@ -125,6 +257,7 @@ def main():
     shutil.copytree(repo / "client/godot", project)
     shutil.copy(repo / "tests/godot/live_link_in_godot.gd", project / "test_driver.gd")
     shutil.copy(repo / "tests/godot/hostile_messages.gd", project / "hostile_messages.gd")
+    shutil.copy(repo / "tests/godot/retarget_in_godot.gd", project / "retarget_driver.gd")
     subprocess.run([str(bin_dir / "gmr"), "demo", str(work / "demo"), "--format", "gmr"], check=True,
                    capture_output=True)
     lib = env.cmu_library(work / "library")
@@ -139,6 +272,8 @@ def main():
         (lib, ("07/07_05-walk", "lfoot", "", 0, "head,rhand"), lib / "07/07_05-walk.amc", [], False),
     ]
     failures = hostile_messages(godot, project, work)
+    failures_retarget, checked_retarget = retarget_onto_character(godot, project, work, bin_dir, lib, np)
+    failures += failures_retarget
     checked = 0
     for library, case, path, unit, restart in cases:
         motion, roots, viewpoint, _, new_roots = case
@@ -208,7 +343,7 @@ def main():
               f"; received {result['frames_received']}, applied {result['frames_applied']}, dropped "
               f"{result['frames_dropped']}; largest difference {worst_case:.2g} m; {last.get('fps', 0):.0f} fps, latency {last.get('latency_ms', 0):.2f} ms")
 
-    env.finish(failures, checked, len(cases) * 2 * FRAMES)
+    env.finish(failures, checked + checked_retarget, len(cases) * 2 * FRAMES + FRAMES)
     print(f"live link in Godot: {len(cases)} motions, {checked} frames checked within {TOLERANCE} m")
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)

@@ -97,9 +97,33 @@ std::string folded(std::string_view name) {
   return s;
 }
 
+// The part of the first joint's name up to and with its first '_' when every
+// joint's name starts with it and goes on after it: "mixamorig_" or "Beta_"
+// where an engine replaced a Mixamo prefix's ':' (Godot refuses ':' in bone
+// names); else empty.
+std::string shared_underscore_prefix(const Skeleton& skeleton) {
+  if (skeleton.empty()) return {};
+  const std::string& first = skeleton.joint(0).name;
+  const auto bar = first.find('_');
+  if (bar == std::string::npos || bar == 0) return {};
+  const std::string prefix = first.substr(0, bar + 1);
+  for (const Joint& j : skeleton.joints()) {
+    if (!j.name.starts_with(prefix) || j.name.size() == prefix.size()) return {};
+  }
+  return prefix;
+}
+
+// Folded names -> joints; with a shared '_' prefix, the names without it
+// too, after every full name (a full name wins: `CC_Base_Hip` is matched
+// whole, never as `Base_Hip`).
 std::map<std::string, int> folded_index(const Skeleton& skeleton) {
   std::map<std::string, int> index;
   for (int j = 0; j < static_cast<int>(skeleton.size()); ++j) index.emplace(folded(skeleton.joint(j).name), j);
+  const std::string prefix = shared_underscore_prefix(skeleton);
+  if (prefix.empty()) return index;
+  for (int j = 0; j < static_cast<int>(skeleton.size()); ++j) {
+    index.emplace(folded(std::string_view(skeleton.joint(j).name).substr(prefix.size())), j);
+  }
   return index;
 }
 

@@ -186,9 +186,9 @@ Result<Plan> make_plan(const Motion& source_motion, const Motion& target_motion,
   const Skeleton& target = target_motion.skeleton;
   const Convention source_convention = source_motion.convention;
   auto sm = map_humanoid(source, options.source_map);
-  if (!sm.ok()) return make_error("the source " + sm.error().message);
+  if (!sm.ok()) return make_error("the source: " + sm.error().message);
   auto tm = map_humanoid(target, options.target_map);
-  if (!tm.ok()) return make_error("the target " + tm.error().message);
+  if (!tm.ok()) return make_error("the target rig: " + tm.error().message);
   plan.report.source = *sm;
   plan.report.target = *tm;
   const HumanoidMap& S = *sm;

@@ -111,6 +111,32 @@ TEST(Humanoid, EveryHumanoidRigOfTheCorpusMapsWithItsNaming) {
   EXPECT_EQ(checked, rigs.size() + test::expected_data_files("bvh/bandai", ".bvh"));
 }
 
+// A Mixamo rig as an engine that refuses ':' in bone names has it
+// (`Beta_Hips`, `mixamorig_Hips`: Godot) maps like the original, joint for
+// joint; a shared prefix never hides a full name.
+TEST(Humanoid, AMixamoPrefixWithAnUnderscoreMapsTheSame) {
+  GMR_REQUIRE_DATA();
+  const Motion m = load("bvh/mixamo/Beta_jump.bvh");
+  auto original = map_humanoid(m.skeleton);
+  ASSERT_TRUE(original.ok()) << original.error().to_string();
+  for (const std::string prefix : {"Beta_", "mixamorig_"}) {
+    SCOPED_TRACE(prefix);
+    auto joints = m.skeleton.joints();
+    for (auto& j : joints) j.name = prefix + j.name.substr(j.name.find(':') + 1);
+    auto renamed = Skeleton::create(std::move(joints));
+    ASSERT_TRUE(renamed.ok());
+    auto map = map_humanoid(*renamed);
+    ASSERT_TRUE(map.ok()) << map.error().to_string();
+    EXPECT_EQ(map->naming, "mixamo");
+    EXPECT_EQ(map->joint, original->joint);
+  }
+  // Not every joint shares the prefix: nothing is stripped, nothing found.
+  auto joints = m.skeleton.joints();
+  for (auto& j : joints) j.name = "Beta_" + j.name.substr(j.name.find(':') + 1);
+  joints.back().name = "tip";
+  EXPECT_FALSE(map_humanoid(*Skeleton::create(std::move(joints))).ok());
+}
+
 // CMU 01_01 (AMC) onto the Character Creator rig that HumanIK retargeted the
 // same take onto: CC frame i >= 1 is AMC frame 2(i - 1) + 3 (PROVENANCE.md).
 // After one global rotation fitted over every limb direction of every frame,

@@ -11,6 +11,11 @@
 # (a root shifted while streaming, here or by anyone holding the view) rebuilds
 # the bones; a lost connection is retried every `reconnect_seconds`.
 #
+# With `retarget_onto_skeleton`, the Skeleton's own bones are the character:
+# the add-on sends them to the server as the rig (docs/retarget.md, "Live"),
+# the server puts the motion on them, and the frames pose those bones, which
+# keep their names, hierarchy and rests (nothing is built or cleared).
+#
 # Everything the server sends is checked before it is used: a message that is
 # not what the protocol says is counted in `bad_messages` and dropped.
 extends Node
@@ -46,6 +51,11 @@ export var loop := true
 export var max_staleness_ms := 100
 export(NodePath) var skeleton_path = NodePath("../Skeleton")
 export var auto_connect := true
+# The motion retargeted onto the Skeleton's own bones (a humanoid: Mixamo,
+# Unreal mannequin, Godot's or Unity's humanoid names, ...; else `rig_map`,
+# role -> bone name, docs/retarget.md "Maps"). No viewpoint with it.
+export var retarget_onto_skeleton := false
+export var rig_map := {}
 export var reconnect_seconds := 2.0
 
 # State, read-only from outside.
@@ -69,6 +79,10 @@ var _view_id := 0
 var _subscription_id := 0
 var _slots := []                  # value slot -> bone index
 var _rest_inverse := []           # bone index -> rest.affine_inverse()
+# Retargeting onto the Skeleton's bones, per joint of the subscription:
+var _bone_of := []                # its bone
+var _joint_parent := []           # its parent joint (-1: a root)
+var _rest_global := []            # its bone's rest in the Skeleton's space
 var _newest = null                # the newest frame not yet applied
 var _retry_in := 0.0
 var _heartbeat_every := 10.0
@@ -257,6 +271,9 @@ func _on_message(m: Dictionary):
 		if handler == "_on_view_edited":
 			last_error = "the server refused an edit: " + text  # the view stays as it was
 			return
+		if handler == "_on_retargeted":
+			# The bones will not become a humanoid by asking again.
+			return _end("the server cannot retarget onto the Skeleton's bones: " + text)
 		_fail("the server refused %s: %s" % [handler.trim_prefix("_on_"), text])
 		if handler in ["_on_view", "_on_view_ready", "_on_subscribed"]:
 			_retry_in = max(reconnect_seconds, 5.0)  # a motion that is not there yet: ask again, slowly
@@ -289,11 +306,84 @@ func _on_view(m: Dictionary):
 		_send({"stripDummies": {"viewId": _view_id}}, "_on_view_ready")
 	if relative_to != "":
 		_send({"setCoordinates": {"viewId": _view_id, "relativeTo": relative_to}}, "_on_view_ready")
+	if retarget_onto_skeleton:
+		var rig = skeleton_rig()
+		if typeof(rig) == TYPE_STRING:
+			return _end(rig)
+		var r := {"viewId": _view_id, "target": rig}
+		if rig_map.size() > 0:
+			r["targetMap"] = rig_map
+		_send({"retarget": r}, "_on_retargeted")
 	_subscribe(0)
 
 
 func _on_view_ready(_m: Dictionary):
 	pass
+
+
+func _on_retargeted(_m: Dictionary):
+	pass
+
+
+# The Skeleton's bones as a gmr rig (the Retarget request's `target`): one
+# joint per bone, parents first, each at its rest position relative to its
+# parent's in the Skeleton's space, with BVH channels; the unit is the
+# Skeleton node's scale in metres. Returns a Dictionary, or a String saying
+# why the bones cannot be a rig.
+func skeleton_rig():
+	var skel := skeleton()
+	if skel == null:
+		return "no Skeleton at %s" % skeleton_path
+	var n := skel.get_bone_count()
+	if n == 0 or n > MAX_JOINTS:
+		return "the Skeleton has %d bones: nothing to retarget onto" % n
+	var scale := skel.global_transform.basis.get_scale()
+	if abs(scale.x - scale.y) > 1e-6 * abs(scale.x) or abs(scale.x - scale.z) > 1e-6 * abs(scale.x) or scale.x <= 0.0:
+		return "the Skeleton is scaled unevenly (%s): apply its scale first" % str(scale)
+	var globals := _rest_globals(skel)
+	var order := _parents_first(skel)
+	var index := {}
+	var joints := []
+	var rot := ["CHANNEL_Z_ROTATION", "CHANNEL_X_ROTATION", "CHANNEL_Y_ROTATION"]
+	for b in order:
+		var p: int = skel.get_bone_parent(b)
+		var head: Vector3 = globals[b].origin - (globals[p].origin if p >= 0 else Vector3())
+		index[b] = joints.size()
+		joints.append({"name": skel.get_bone_name(b), "parent": index[p] if p >= 0 else -1, "softParent": -1,
+				"offset": {"x": head.x, "y": head.y, "z": head.z},
+				"channels": (["CHANNEL_X_POSITION", "CHANNEL_Y_POSITION", "CHANNEL_Z_POSITION"] + rot) if p < 0 else rot})
+	return {"joints": joints, "metresPerUnit": scale.x}
+
+
+# Each bone's rest in the Skeleton's space.
+static func _rest_globals(skel: Skeleton) -> Array:
+	var globals := []
+	globals.resize(skel.get_bone_count())
+	for b in _parents_first(skel):
+		var p: int = skel.get_bone_parent(b)
+		globals[b] = (globals[p] if p >= 0 else Transform()) * skel.get_bone_rest(b)
+	return globals
+
+
+# The bones, every parent before its children (Godot does not require it).
+static func _parents_first(skel: Skeleton) -> Array:
+	var n := skel.get_bone_count()
+	var children := []
+	children.resize(n)
+	for b in range(n):
+		children[b] = []
+	var order := []
+	for b in range(n):
+		var p: int = skel.get_bone_parent(b)
+		if p >= 0 and p < n and p != b:
+			children[p].append(b)
+		else:
+			order.append(b)
+	var k := 0
+	while k < order.size():
+		order += children[order[k]]
+		k += 1
+	return order
 
 
 # After an edit, `roots` names the view's roots as they now are, so a
@@ -321,7 +411,9 @@ func _on_viewpoint(_m: Dictionary):
 
 func _subscribe(start_frame: int):
 	var c := {}
-	if conventions == "godot":
+	if retarget_onto_skeleton:
+		pass  # the rig's own space and unit: the Skeleton's
+	elif conventions == "godot":
 		c["preset"] = "CONVENTION_PRESET_GODOT"
 		if source_metres_per_unit > 0.0:
 			c["sourceMetresPerUnit"] = source_metres_per_unit
@@ -347,6 +439,14 @@ func _on_skeleton_changed(c):
 		return
 	_newest = null  # a frame of the old skeleton
 	_build(c)
+
+
+# Stops for good (no reconnecting): what is wrong is on this side.
+func _end(message: String):
+	last_error = message
+	push_warning("gmr live link: " + message)
+	_drop_socket()
+	_set_state("ended")
 
 
 func _on_ended(e):
@@ -406,6 +506,8 @@ func _build(msg: Dictionary) -> bool:
 	if new_slots.size() == 0:
 		for i in range(joints.size()):
 			new_slots.append(i)
+	if retarget_onto_skeleton:
+		return _bind(skel, msg, joints, parents, new_slots)
 	skel.clear_bones()
 	_rest_inverse = []
 	for i in range(joints.size()):
@@ -423,6 +525,33 @@ func _build(msg: Dictionary) -> bool:
 				+ "source_metres_per_unit, or declare the unit beside the file (X.units)") % motion
 		push_warning("gmr live link: " + last_error)
 	emit_signal("skeleton_built", skeleton_version, bone_count)
+	return true
+
+
+# The subscription's joints are the Skeleton's bones (the rig it was
+# retargeted onto): each joint finds its bone by name; nothing is rebuilt.
+func _bind(skel: Skeleton, msg: Dictionary, joints: Array, parents: Array, slots: Array) -> bool:
+	var globals := _rest_globals(skel)
+	_bone_of = []
+	_rest_global = []
+	for i in range(joints.size()):
+		var b := skel.find_bone(str(joints[i].get("name")))
+		if b < 0:
+			_end("the Skeleton has no bone '%s': the view is not on this Skeleton" % str(joints[i].get("name")))
+			return false
+		_bone_of.append(b)
+		_rest_global.append(globals[b])
+	for i in range(joints.size()):
+		var p: int = parents[i]
+		if skel.get_bone_parent(_bone_of[i]) != (_bone_of[p] if p >= 0 else -1):
+			_end("bone '%s' has another parent in the Skeleton than in the view" % skel.get_bone_name(_bone_of[i]))
+			return false
+	_joint_parent = parents
+	_slots = slots
+	bone_count = skel.get_bone_count()
+	skeleton_version = _int(msg.get("skeletonVersion", 0))
+	metres_per_unit = _num(msg.get("skeleton").get("metresPerUnit", 0.0))
+	emit_signal("skeleton_built", skeleton_version, joints.size())
 	return true
 
 
@@ -450,6 +579,8 @@ func _apply(f: Dictionary):
 			or tra.size() != 3 * n or skel.get_bone_count() != bone_count:
 		bad_messages += 1
 		return
+	var locals := []
+	locals.resize(n)
 	for k in range(n):
 		var b: int = _slots[k]
 		var q := Quat(_num(rot[4 * k]), _num(rot[4 * k + 1]), _num(rot[4 * k + 2]), _num(rot[4 * k + 3]))
@@ -460,15 +591,55 @@ func _apply(f: Dictionary):
 			return
 		if not q.is_normalized():
 			q = q.normalized()
-		var local := Transform(Basis(q), t)
-		# Godot poses a bone relative to its rest: global = parent * rest * pose.
-		skel.set_bone_pose(b, _rest_inverse[b] * local)
+		locals[k] = Transform(Basis(q), t)
+	if retarget_onto_skeleton:
+		_pose_bones(skel, locals)
+	else:
+		for k in range(n):
+			var b: int = _slots[k]
+			# Godot poses a bone relative to its rest: global = parent * rest * pose.
+			skel.set_bone_pose(b, _rest_inverse[b] * locals[k])
 	frame_index = _int(f.get("frameIndex", 0))
 	if f.has("serverSendTimeNs"):
 		latency_ms = _ms_since(f["serverSendTimeNs"])
 	frames_applied += 1
 	_fps_count += 1
 	emit_signal("frame_applied", frame_index)
+
+
+# The rig's frame posing the Skeleton's own bones. The joints' local
+# transforms compose to each joint's place and its turn from the rig's rest;
+# the bone wants that turn on top of its own rest orientation there:
+# global_j = [turn_j * rest_global_j.basis | place_j], and Godot's bone pose
+# is what takes its parent's global and its rest to that:
+# pose_j = rest_j^-1 * global_parent^-1 * global_j.
+func _pose_bones(skel: Skeleton, locals: Array):
+	var n := _bone_of.size()
+	var by_joint := []
+	by_joint.resize(n)
+	for k in range(_slots.size()):
+		by_joint[_slots[k]] = locals[k]
+	var turn := []
+	var place := []
+	var want := []
+	for j in range(n):
+		var l = by_joint[j]
+		if l == null:
+			bad_messages += 1  # a frame without every joint cannot pose the bones
+			return
+		var p: int = _joint_parent[j]
+		if p < 0:
+			turn.append(l.basis)
+			place.append(l.origin)
+		else:
+			turn.append(turn[p] * l.basis)
+			place.append(place[p] + turn[p].xform(l.origin))
+		want.append(Transform(turn[j] * _rest_global[j].basis, place[j]))
+	for j in range(n):
+		var p: int = _joint_parent[j]
+		var b: int = _bone_of[j]
+		var parent_global: Transform = want[p] if p >= 0 else Transform()
+		skel.set_bone_pose(b, skel.get_bone_rest(b).affine_inverse() * parent_global.affine_inverse() * want[j])
 
 
 # A joint's name as a Godot bone name: Godot refuses ':' and '/' in bone names
