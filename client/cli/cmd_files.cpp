@@ -99,16 +99,19 @@ struct ConvertOptions {
   std::string in;
   std::string out;
   std::string asf;
-  double fps = 0.0;          // .amc input: frames per second (0: 120)
-  bool force = false;        // .amc output: replace an .asf beside it that holds another skeleton
-  bool single_root = false;  // .bvh output: a forest as one ROOT
-  std::string model;         // marker input: the skeleton model (built-in name or file)
-  std::string roots;         // marker input with a model: the essential joints, A,B
+  double fps = 0.0;                // .amc input: frames per second (0: 120)
+  bool force = false;              // .amc output: replace an .asf beside it that holds another skeleton
+  bool single_root = false;        // .bvh output: a forest as one ROOT
+  std::string model;               // marker input: the skeleton model (built-in name or file)
+  std::string roots;               // marker input with a model: the essential joints, A,B
+  double calibrate_seconds = 0.0;  // marker input with a model: solve frame by frame (0: the whole take)
 };
 
 void run_convert(const ConvertOptions& o) {
-  if (is_marker_file(o.in)) return run_marker_convert(o.in, o.out, o.model, o.roots);  // cmd_markers.cpp
-  if (!o.model.empty() || !o.roots.empty()) {
+  if (is_marker_file(o.in)) {
+    return run_marker_convert(o.in, o.out, o.model, o.roots, o.calibrate_seconds);  // cmd_markers.cpp
+  }
+  if (!o.model.empty() || !o.roots.empty() || o.calibrate_seconds != 0) {
     throw CommandError("--model and --roots apply to marker files (.c3d, .trc), not to " + o.in);
   }
   Warnings warnings;
@@ -238,6 +241,9 @@ void add_file_commands(CLI::App& app) {
                     "Marker input: the skeleton model that turns markers into a motion (built-in name such as cmu41, "
                     "or a model file; docs/markers.md)");
     cmd->add_option("--roots", o->roots, "Marker input with --model: the essential joints, the motion's roots (A,B)");
+    cmd->add_option("--calibrate-seconds", o->calibrate_seconds,
+                    "Marker input with --model: solve each frame alone, as a live source is, on a calibration of the "
+                    "take's first S seconds (docs/markers.md, \"Frame by frame\"); 0: the whole take at once");
     cmd->callback([o] { run_convert(*o); });
   }
   {

@@ -15,10 +15,12 @@
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
 #include "gmr/markers/c3d.h"
+#include "gmr/markers/marker_frames.h"
 #include "gmr/markers/marker_model.h"
 #include "gmr/markers/marker_solve.h"
 #include "gmr/markers/markers.h"
 #include "gmr/markers/trc.h"
+#include "gmr/ops/set_roots.h"
 
 namespace gmr::cli {
 namespace {
@@ -171,13 +173,13 @@ void run_marker_info(const std::string& file, const std::string& model) {
 }
 
 void run_marker_convert(const std::string& in, const std::string& out, const std::string& model,
-                        const std::string& roots) {
+                        const std::string& roots, double calibrate_seconds) {
   const std::string ext = lower_extension(out);
   if (ext == ".trc") {
-    if (!model.empty() || !roots.empty()) {
+    if (!model.empty() || !roots.empty() || calibrate_seconds > 0) {
       throw CommandError(out +
-                         ": a .trc output keeps the markers; --model and --roots make a motion (.gmr, .gmrb, "
-                         ".bvh, .amc)");
+                         ": a .trc output keeps the markers; --model, --roots and --calibrate-seconds make a motion "
+                         "(.gmr, .gmrb, .bvh, .amc)");
     }
     Warnings warnings;
     const MarkerTrajectories d = take(load_markers(in, &warnings));
@@ -193,8 +195,34 @@ void run_marker_convert(const std::string& in, const std::string& out, const std
   }
   Warnings warnings;
   const MarkerTrajectories d = take(load_markers(in, &warnings));
-  const MarkerSolveResult r = solve(d, model, roots, warnings);
-  check(save_motion(r.motion, out));
+  if (!(calibrate_seconds >= 0) || !std::isfinite(calibrate_seconds)) {
+    throw CommandError("--calibrate-seconds " + std::to_string(calibrate_seconds) + ": give a number of seconds > 0");
+  }
+  if (calibrate_seconds == 0) {
+    const MarkerSolveResult r = solve(d, model, roots, warnings);
+    check(save_motion(r.motion, out));
+    print_warnings(warnings);
+    return;
+  }
+  if (!(d.frame_rate > 0)) throw CommandError(in + ": --calibrate-seconds needs the take's frame rate, which it lacks");
+  const auto frames = static_cast<std::size_t>(std::ceil(calibrate_seconds * d.frame_rate - 1e-9));
+  MarkerFrameCounts counts;
+  Motion motion = take(solve_marker_frames(d, take(find_marker_model(model)), 0, frames, &counts));
+  if (!roots.empty()) {
+    std::vector<int> idx;
+    for (const std::string& r : split_list(roots)) {
+      const int j = motion.skeleton.find(r);
+      if (j < 0) throw CommandError("--roots: unknown joint '" + r + "' (not in marker model " + model + ")");
+      idx.push_back(j);
+    }
+    motion = take(set_roots(motion, idx));
+  }
+  check(save_motion(motion, out));
+  std::fprintf(stderr,
+               "calibrated on frames 0-%zu; solved %zu frames one at a time (%zu refused, repeating the one before), "
+               "%zu part poses held, %zu points left out as outliers, %zu missing\n",
+               std::min(frames, d.frame_count) - 1, counts.solved, counts.refused, counts.held, counts.outliers,
+               counts.missing);
   print_warnings(warnings);
 }
 

@@ -21,7 +21,9 @@ void run_marker_info(const std::string& file, const std::string& model);
 // Converts a marker file: to .trc (atomic write), or with a skeleton model to
 // a motion (.gmr, .gmrb, .bvh, .amc) whose roots are `roots` (A,B; empty:
 // the model's). A motion output without a model is a CommandError.
+// `calibrate_seconds` > 0: solved frame by frame as a live source is, on a
+// calibration of the take's first seconds (gmr/markers/marker_frames.h).
 void run_marker_convert(const std::string& in, const std::string& out, const std::string& model,
-                        const std::string& roots);
+                        const std::string& roots, double calibrate_seconds = 0.0);
 
 }  // namespace gmr::cli

@@ -158,5 +158,28 @@ TEST_F(CliMarkers, ConvertWithAModelWritesAMotionAndInfoReportsTheFit) {
   expect_one_line_error("convert " + c3d + " " + path("w.bvh") + " --model cmu41 --roots nose", "unknown joint 'nose'");
 }
 
+// --calibrate-seconds: each frame solved alone, as a live marker source is,
+// on a calibration of the first seconds; what it did goes to stderr. Another
+// solve than the whole take's, of the same joints, near it.
+TEST_F(CliMarkers, ConvertFrameByFrameOnACalibrationOfTheFirstSeconds) {
+  GMR_REQUIRE_DATA();
+  const std::string c3d = shell_quote(test::data_file("c3d/cmu_02_01.c3d").string());
+  const auto frames = gmr("convert " + c3d + " " + path("live.gmr") + " --model cmu41 --calibrate-seconds 2");
+  ASSERT_EQ(frames.status, 0) << frames.err;
+  EXPECT_THAT(frames.err, HasSubstr("calibrated on frames 0-239; solved 343 frames one at a time (0 refused"));
+  const auto whole = gmr("convert " + c3d + " " + path("whole.gmr") + " --model cmu41");
+  ASSERT_EQ(whole.status, 0) << whole.err;
+  const auto a = gmr("positions " + path("live.gmr") + " --frames 300:301");
+  const auto b = gmr("positions " + path("whole.gmr") + " --frames 300:301");
+  ASSERT_EQ(a.status, 0);
+  ASSERT_EQ(b.status, 0);
+  EXPECT_EQ(lines(a.out), 1 + 21u);
+  EXPECT_NE(a.out, b.out);
+  expect_one_line_error("convert " + c3d + " " + path("w.gmr") + " --model cmu41 --calibrate-seconds -1",
+                        "give a number of seconds > 0");
+  expect_one_line_error("convert " + c3d + " " + path("w.trc") + " --calibrate-seconds 2",
+                        "--calibrate-seconds make a motion");
+}
+
 }  // namespace
 }  // namespace gmr

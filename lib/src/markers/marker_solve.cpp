@@ -1,6 +1,8 @@
 // From raw markers to a GMR motion: part fits, joint centres, local transforms.
 #include "gmr/markers/marker_solve.h"
 
+#include "gmr/markers/marker_frames.h"
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
@@ -70,10 +72,121 @@ double median(std::vector<double> v) {
   return v[mid];
 }
 
+// One frame's fit of a part of 3 or more points: the weighted rigid fit of
+// its layout to the points `world` (NaN: missing) with the outlier rule:
+// while 4 or more points remain and the worst residual exceeds `outlier`, the
+// worst point that is not a joint (`is_joint`) is left out and the fit
+// redone. False when fewer than 3 usable points remain or they are nearly on
+// a line. Adds the points left out to `outliers` and the residuals of those
+// kept to `sum_sq` and `residuals`.
+struct PartFitter {
+  std::vector<Vector3d> local, world;
+  std::vector<double> weights;
+  std::vector<std::size_t> which;
+
+  bool fit(const std::vector<Vector3d>& layout, const std::vector<double>& point_weights,
+           const std::vector<Vector3d>& points, const std::vector<int>& joint_of, double outlier, double min_spread,
+           Pose& pose, std::size_t& outliers, double& sum_sq, std::size_t& residuals) {
+    which.clear();
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      if (finite(points[k])) which.push_back(k);
+    }
+    bool ok = false;
+    while (which.size() >= 3) {
+      local.clear();
+      world.clear();
+      weights.clear();
+      for (std::size_t k : which) {
+        local.push_back(layout[k]);
+        world.push_back(points[k]);
+        weights.push_back(point_weights[k]);
+      }
+      ok = fit_rigid(local, world, weights, min_spread, pose);
+      if (!ok) break;
+      std::size_t worst = 0;
+      double worst_r = -1;
+      for (std::size_t i = 0; i < which.size(); ++i) {
+        const double r = (pose.apply(local[i]) - world[i]).norm();
+        if (r > worst_r) {
+          worst_r = r;
+          worst = i;
+        }
+      }
+      // A joint is never the outlier: it is carried exactly by another part.
+      if (worst_r <= outlier || which.size() == 3 || joint_of[which[worst]] >= 0) break;
+      which.erase(which.begin() + static_cast<std::ptrdiff_t>(worst));
+      ++outliers;
+    }
+    if (!ok) return false;
+    for (std::size_t i = 0; i < which.size(); ++i) {
+      sum_sq += (pose.apply(local[i]) - world[i]).squaredNorm();
+      ++residuals;
+    }
+    return true;
+  }
+};
+
+// A 2-point part (a joint of another part, then a marker) in one frame: the
+// other part's pose turned so that the layout's direction meets the marker,
+// at the joint. False when the marker is missing or on the joint.
+bool fit_two_points(const std::vector<Vector3d>& layout, const Pose& other, const Vector3d& joint,
+                    const Vector3d& marker, Pose& pose) {
+  const Vector3d d = marker - joint;
+  if (!finite(d) || !(d.norm() > 0)) return false;
+  const Vector3d rest = other.q * layout[1].normalized();
+  pose.q = (Quaterniond::FromTwoVectors(rest, d.normalized()) * other.q).normalized();
+  pose.t = joint;
+  return true;
+}
+
+// One frame's channel values of the model's motion from each part's world
+// rotation and each joint's world position: roots their position, then
+// rotations relative to the parent joint's part, as Z X Y Euler angles (the
+// previous frame's, when given, pick the nearest equivalent).
+void write_frame(const Skeleton& skeleton, const MarkerModel& model, const std::vector<Quaterniond>& part_q,
+                 const std::vector<Vector3d>& joint_world, std::vector<Vector3d>& previous, bool first,
+                 std::span<double> values) {
+  static constexpr Axis kOrder[3] = {Axis::kZ, Axis::kX, Axis::kY};
+  for (std::size_t j = 0; j < model.joints.size(); ++j) {
+    const Joint& joint = skeleton.joint(static_cast<int>(j));
+    if (joint.channels.empty()) continue;
+    const ModelJoint& mj = model.joints[j];
+    Matrix3d r = part_q[static_cast<std::size_t>(mj.part)].toRotationMatrix();
+    std::size_t c = static_cast<std::size_t>(skeleton.channel_offset(static_cast<int>(j)));
+    if (mj.parent < 0) {
+      for (int axis = 0; axis < 3; ++axis) values[c++] = joint_world[j](axis);
+    } else {
+      const int parent_part = model.joints[static_cast<std::size_t>(mj.parent)].part;
+      r = part_q[static_cast<std::size_t>(parent_part)].toRotationMatrix().transpose() * r;
+    }
+    const Vector3d angles = decompose_euler(r, kOrder, first ? nullptr : &previous[j]);
+    previous[j] = angles;
+    for (int k = 0; k < 3; ++k) values[c++] = angles(k);
+  }
+}
+
+// What a frame solver keeps of a calibration (MarkerFrameSolver).
+struct FramePart {
+  std::vector<Vector3d> layout;
+  std::vector<int> marker_of, joint_of;  // per point, as Solver::Part's
+  bool fitted_once = false;
+  Pose last;  // the last fitted (or held) pose
+};
+
 class Solver {
  public:
   Solver(const MarkerTrajectories& m, const MarkerModel& model) : m_(m), model_(model) {}
   Result<MarkerSolveResult> run(const MarkerSolveOptions& options);
+  // After run(): each part's layout and points, each joint's place in its part.
+  void keep(std::vector<FramePart>& parts, std::vector<Vector3d>& joint_local) const {
+    parts.assign(parts_.size(), FramePart{});
+    for (std::size_t i = 0; i < parts_.size(); ++i) {
+      parts[i].layout = parts_[i].layout;
+      parts[i].marker_of = parts_[i].marker_of;
+      parts[i].joint_of = parts_[i].joint_of;
+    }
+    joint_local = joint_local_;
+  }
 
  private:
   struct Part {
@@ -307,63 +420,27 @@ Status Solver::solve_part(int index) {
   double sum_sq = 0;
   std::size_t residuals = 0;
   const std::size_t n = mp.points.size();
-  std::vector<Vector3d> local, world;
-  std::vector<double> weights;
-  std::vector<std::size_t> which;
+  PartFitter fitter;
+  std::vector<Vector3d> points(n);
   for (std::size_t f = 0; f < frames; ++f) {
     if (n == 2) {
       const int j0 = p.joint_of[0];
       const Part& q = parts_[static_cast<std::size_t>(model_.joints[static_cast<std::size_t>(j0)].part)];
       const Vector3d a = point(p, 0, f), b = point(p, 1, f);
-      const Vector3d d = b - a;
-      if (!finite(d) || !(d.norm() > 0)) continue;
-      const Vector3d rest = q.poses[f].q * p.layout[1].normalized();
-      p.poses[f].q = (Quaterniond::FromTwoVectors(rest, d.normalized()) * q.poses[f].q).normalized();
-      p.poses[f].t = a;
+      if (!fit_two_points(p.layout, q.poses[f], a, b, p.poses[f])) continue;
       p.state[f] = State::kFitted;
-      const double r = d.norm() - p.layout[1].norm();
+      const double r = (b - a).norm() - p.layout[1].norm();
       sum_sq += r * r;
       ++residuals;
       continue;
     }
-    which.clear();
-    for (std::size_t k = 0; k < n; ++k) {
-      if (finite(point(p, k, f))) which.push_back(k);
+    for (std::size_t k = 0; k < n; ++k) points[k] = point(p, k, f);
+    if (!fitter.fit(p.layout, mp.weights, points, p.joint_of, outlier, min_spread, p.poses[f], fit.outliers, sum_sq,
+                    residuals)) {
+      p.poses[f] = Pose{};
+      continue;
     }
-    Pose pose;
-    bool ok = false;
-    while (which.size() >= 3) {
-      local.clear();
-      world.clear();
-      weights.clear();
-      for (std::size_t k : which) {
-        local.push_back(p.layout[k]);
-        world.push_back(point(p, k, f));
-        weights.push_back(mp.weights[k]);
-      }
-      ok = fit_rigid(local, world, weights, min_spread, pose);
-      if (!ok) break;
-      std::size_t worst = 0;
-      double worst_r = -1;
-      for (std::size_t i = 0; i < which.size(); ++i) {
-        const double r = (pose.apply(local[i]) - world[i]).norm();
-        if (r > worst_r) {
-          worst_r = r;
-          worst = i;
-        }
-      }
-      // A joint is never the outlier: it is carried exactly by another part.
-      if (worst_r <= outlier || which.size() == 3 || p.joint_of[which[worst]] >= 0) break;
-      which.erase(which.begin() + static_cast<std::ptrdiff_t>(worst));
-      ++fit.outliers;
-    }
-    if (!ok) continue;
-    p.poses[f] = pose;
     p.state[f] = State::kFitted;
-    for (std::size_t i = 0; i < which.size(); ++i) {
-      sum_sq += (pose.apply(local[i]) - world[i]).squaredNorm();
-      ++residuals;
-    }
   }
   for (State s : p.state) fit.fitted += s == State::kFitted ? 1 : 0;
   if (fit.fitted == 0) {
@@ -523,26 +600,15 @@ Result<Motion> Solver::build_motion() {
   motion.frame_time = m_.frame_rate > 0 ? 1.0 / m_.frame_rate : 0.0;
   motion.frame_count = frames;
   motion.values.assign(frames * motion.stride(), 0.0);
-  static constexpr Axis kOrder[3] = {Axis::kZ, Axis::kX, Axis::kY};
   std::vector<Vector3d> previous(n, Vector3d::Zero());
+  std::vector<Quaterniond> part_q(parts_.size(), Quaterniond::Identity());
+  std::vector<Vector3d> world(n);
   for (std::size_t f = 0; f < frames; ++f) {
-    std::span<double> values = motion.frame(f);
-    for (std::size_t j = 0; j < n; ++j) {
-      const Joint& joint = motion.skeleton.joint(static_cast<int>(j));
-      if (joint.channels.empty()) continue;
-      const ModelJoint& mj = model_.joints[j];
-      Matrix3d r = parts_[static_cast<std::size_t>(mj.part)].poses[f].q.toRotationMatrix();
-      std::size_t c = static_cast<std::size_t>(motion.skeleton.channel_offset(static_cast<int>(j)));
-      if (mj.parent < 0) {
-        for (int axis = 0; axis < 3; ++axis) values[c++] = joint_world_[j][f](axis);
-      } else {
-        const int parent_part = model_.joints[static_cast<std::size_t>(mj.parent)].part;
-        r = parts_[static_cast<std::size_t>(parent_part)].poses[f].q.toRotationMatrix().transpose() * r;
-      }
-      const Vector3d angles = decompose_euler(r, kOrder, f == 0 ? nullptr : &previous[j]);
-      previous[j] = angles;
-      for (int k = 0; k < 3; ++k) values[c++] = angles(k);
+    for (std::size_t i = 0; i < parts_.size(); ++i) {
+      if (!parts_[i].poses.empty()) part_q[i] = parts_[i].poses[f].q;
     }
+    for (std::size_t j = 0; j < n; ++j) world[j] = joint_world_[j][f];
+    write_frame(motion.skeleton, model_, part_q, world, previous, f == 0, motion.frame(f));
   }
   if (auto s = motion.validate(); !s) return s.error();
   return motion;
@@ -651,6 +717,173 @@ Result<MarkerSolveResult> Solver::run(const MarkerSolveOptions& options) {
 }
 
 }  // namespace
+
+struct MarkerFrameSolver::State {
+  MarkerModel model;
+  std::vector<std::string> names;
+  double unit_mm = 1;
+  Skeleton skeleton;
+  std::vector<FramePart> parts;
+  std::vector<Vector3d> joint_local;
+  MarkerFrameCounts counts;
+  // Per frame, reused.
+  std::vector<Pose> pose;
+  std::vector<char> done;
+  std::vector<Quaterniond> part_q;
+  std::vector<Vector3d> joint_world, points, previous;
+  PartFitter fitter;
+
+  Vector3d marker(std::span<const double> positions, int index) const {
+    const std::size_t i = static_cast<std::size_t>(index) * 3;
+    return {positions[i], positions[i + 1], positions[i + 2]};
+  }
+  // Fits part `i` in this frame (its joint points already placed), or holds
+  // its last pose; false when it has none.
+  bool fit_part(std::size_t i, std::span<const double> positions) {
+    if (done[i]) return true;
+    FramePart& p = parts[i];
+    const ModelPart& mp = model.parts[i];
+    bool ok;
+    if (mp.points.size() == 2) {
+      const int j0 = p.joint_of[0];
+      const std::size_t other = static_cast<std::size_t>(model.joints[static_cast<std::size_t>(j0)].part);
+      if (!fit_part(other, positions)) return false;
+      ok = fit_two_points(p.layout, pose[other], joint_world[static_cast<std::size_t>(j0)],
+                          marker(positions, p.marker_of[1]), pose[i]);
+    } else {
+      points.resize(mp.points.size());
+      for (std::size_t k = 0; k < points.size(); ++k) {
+        points[k] = p.joint_of[k] >= 0 ? joint_world[static_cast<std::size_t>(p.joint_of[k])]
+                                       : marker(positions, p.marker_of[k]);
+      }
+      double sum_sq = 0;
+      std::size_t residuals = 0;
+      ok = fitter.fit(p.layout, mp.weights, points, p.joint_of, model.outlier_mm / unit_mm, 2.0 / unit_mm, pose[i],
+                      counts.outliers, sum_sq, residuals);
+    }
+    if (ok) {
+      p.last = pose[i];
+      p.fitted_once = true;
+    } else {
+      if (!p.fitted_once) return false;
+      pose[i] = p.last;
+      ++counts.held;
+    }
+    done[i] = 1;
+    return true;
+  }
+};
+
+MarkerFrameSolver::MarkerFrameSolver(std::unique_ptr<State> state) : state_(std::move(state)) {}
+MarkerFrameSolver::MarkerFrameSolver(MarkerFrameSolver&&) noexcept = default;
+MarkerFrameSolver& MarkerFrameSolver::operator=(MarkerFrameSolver&&) noexcept = default;
+MarkerFrameSolver::~MarkerFrameSolver() = default;
+
+Result<MarkerFrameSolver> MarkerFrameSolver::calibrate(const MarkerTrajectories& markers, const MarkerModel& model,
+                                                       std::size_t begin, std::size_t end) {
+  end = std::min(end, markers.frame_count);
+  if (begin >= end) {
+    return make_error(ErrorKind::kInvalidArgument, "calibrating markers: frames [" + std::to_string(begin) + ", " +
+                                                       std::to_string(end) + ") hold no frame of the take's " +
+                                                       std::to_string(markers.frame_count));
+  }
+  MarkerTrajectories stretch = markers;
+  stretch.frame_count = end - begin;
+  const std::size_t row = markers.names.size() * 3;
+  stretch.positions.assign(markers.positions.begin() + static_cast<std::ptrdiff_t>(begin * row),
+                           markers.positions.begin() + static_cast<std::ptrdiff_t>(end * row));
+  stretch.residuals.clear();
+  Solver solver(stretch, model);
+  auto solved = solver.run({});
+  if (!solved) return solved.error();
+  auto st = std::make_unique<State>();
+  st->model = model;
+  st->names = markers.names;
+  st->unit_mm = solved->millimetres_per_unit;
+  st->skeleton = solved->motion.skeleton;
+  solver.keep(st->parts, st->joint_local);
+  st->pose.assign(st->parts.size(), Pose{});
+  st->done.assign(st->parts.size(), 0);
+  st->part_q.assign(st->parts.size(), Quaterniond::Identity());
+  st->joint_world.assign(model.joints.size(), Vector3d::Zero());
+  st->previous.assign(model.joints.size(), Vector3d::Zero());
+  return MarkerFrameSolver(std::move(st));
+}
+
+const Skeleton& MarkerFrameSolver::skeleton() const { return state_->skeleton; }
+const std::vector<std::string>& MarkerFrameSolver::marker_names() const { return state_->names; }
+double MarkerFrameSolver::millimetres_per_unit() const { return state_->unit_mm; }
+const MarkerFrameCounts& MarkerFrameSolver::counts() const { return state_->counts; }
+
+Result<std::vector<double>> MarkerFrameSolver::solve(std::span<const double> positions) {
+  State& st = *state_;
+  if (positions.size() != st.names.size() * 3) {
+    ++st.counts.refused;
+    return make_error(ErrorKind::kInvalidArgument,
+                      "a marker frame holds " + std::to_string(positions.size()) + " coordinates; the calibration's " +
+                          std::to_string(st.names.size()) + " markers need " + std::to_string(st.names.size() * 3));
+  }
+  std::size_t missing = 0;
+  for (std::size_t i = 0; i < positions.size(); i += 3) {
+    const double x = positions[i], y = positions[i + 1], z = positions[i + 2];
+    if (std::isnan(x) || std::isnan(y) || std::isnan(z)) {
+      ++missing;
+    } else if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+      ++st.counts.refused;
+      return make_error(ErrorKind::kInvalidArgument, "marker '" + st.names[i / 3] + "' has an infinite coordinate");
+    }
+  }
+  std::fill(st.done.begin(), st.done.end(), 0);
+  for (std::size_t j = 0; j < st.model.joints.size(); ++j) {
+    const std::size_t part = static_cast<std::size_t>(st.model.joints[j].part);
+    if (!st.fit_part(part, positions)) {
+      ++st.counts.refused;
+      return make_error(ErrorKind::kFailedPrecondition, "part '" + st.model.parts[part].name +
+                                                            "' has not been fitted in any frame yet (fewer than 3 "
+                                                            "usable points so far)");
+    }
+    st.joint_world[j] = st.pose[part].apply(st.joint_local[j]);
+  }
+  for (std::size_t i = 0; i < st.parts.size(); ++i) st.part_q[i] = st.pose[i].q;
+  std::vector<double> values(static_cast<std::size_t>(st.skeleton.channel_count()));
+  write_frame(st.skeleton, st.model, st.part_q, st.joint_world, st.previous, st.counts.solved == 0, values);
+  st.counts.missing += missing;
+  ++st.counts.solved;
+  return values;
+}
+
+Result<Motion> solve_marker_frames(const MarkerTrajectories& markers, const MarkerModel& model, std::size_t begin,
+                                   std::size_t end, MarkerFrameCounts* counts) {
+  auto solver = MarkerFrameSolver::calibrate(markers, model, begin, end);
+  if (!solver) return solver.error();
+  Motion motion;
+  motion.skeleton = solver->skeleton();
+  motion.convention = Convention::kPreRotation;
+  motion.frame_time = markers.frame_rate > 0 ? 1.0 / markers.frame_rate : 0.0;
+  motion.frame_count = markers.frame_count;
+  const std::size_t stride = motion.stride();
+  motion.values.assign(markers.frame_count * stride, 0.0);
+  const std::size_t row = markers.names.size() * 3;
+  std::size_t first_solved = markers.frame_count;
+  for (std::size_t f = 0; f < markers.frame_count; ++f) {
+    auto values = solver->solve(std::span<const double>(markers.positions).subspan(f * row, row));
+    if (values) {
+      std::copy(values->begin(), values->end(), motion.frame(f).begin());
+      if (first_solved == markers.frame_count) first_solved = f;
+    } else if (f > 0 && first_solved < f) {
+      std::copy(motion.frame(f - 1).begin(), motion.frame(f - 1).end(), motion.frame(f).begin());
+    }
+  }
+  if (first_solved == markers.frame_count) {
+    return make_error(ErrorKind::kInvalidData, "no frame of the take could be solved");
+  }
+  for (std::size_t f = 0; f < first_solved; ++f) {
+    std::copy(motion.frame(first_solved).begin(), motion.frame(first_solved).end(), motion.frame(f).begin());
+  }
+  if (counts) *counts = solver->counts();
+  if (auto s = motion.validate(); !s) return s.error();
+  return motion;
+}
 
 Result<MarkerSolveResult> solve_markers(const MarkerTrajectories& markers, const MarkerModel& model,
                                         const MarkerSolveOptions& options) {
