@@ -32,6 +32,7 @@
 #include "gmr/core/file_util.h"
 #include "gmr/io/motion_file.h"
 #include "gmr/io/positions_csv.h"
+#include "gmr/markers/markers.h"
 #include "gmr/ops/convert.h"
 #include "gmr/stream/v1/stream.pb.h"
 
@@ -529,11 +530,63 @@ struct PublishCommand {
   bool loop = false;
   std::uint64_t count = 0;  // frames to publish; 0: the file once (or forever with --loop)
   bool record = false;
+  bool markers = false;  // a marker file (.c3d, .trc) as labelled markers, solved by the server
+  std::string model = "cmu41";
+  double calibration_seconds = 2.0;
 };
+
+// Plays a marker file as labelled markers (docs/protocol.md, "Live markers"):
+// the names and the model, then x, y, z per marker each period (a missing
+// point is sent as missing), then Unpublish. The server calibrates on the
+// first seconds and serves the solved skeleton from then on.
+void run_publish_markers(const PublishCommand& o) {
+  Warnings warnings;
+  const MarkerTrajectories d = take(load_markers(o.file, &warnings));
+  print_warnings(warnings);
+  if (d.frame_count == 0) throw CommandError(o.file + ": no frames to publish");
+  const double rate = o.rate > 0 ? o.rate : d.frame_rate > 0 ? d.frame_rate : 120.0;
+  client::MarkerPublishOptions po;
+  po.name = o.name.empty() ? std::filesystem::path(o.file).stem().string() : o.name;
+  po.frame_time = 1.0 / rate;
+  po.model = o.model;
+  po.calibration_seconds = o.calibration_seconds;
+  po.units = d.units.empty() ? "mm" : d.units;
+  auto c = connect(o.server);
+  const client::Publication publication = take(c->publish_markers(d.names, po));
+  std::fprintf(stderr, "publishing %s as live markers '%s': %zu markers, model %s, %.2f Hz%s; served after %.3g s\n",
+               o.file.c_str(), po.name.c_str(), d.marker_count(), po.model.c_str(), rate, o.loop ? ", looping" : "",
+               po.calibration_seconds);
+  const std::uint64_t total = o.loop ? o.count : o.count != 0 ? std::min(o.count, d.frame_count) : d.frame_count;
+  const auto period =
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / rate));
+  const std::size_t row = d.marker_count() * 3;
+  const auto start = std::chrono::steady_clock::now();
+  std::uint64_t sent = 0;
+  for (; total == 0 || sent < total; ++sent) {
+    std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(sent));
+    if (!c->connected())
+      throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
+    const std::size_t f = sent % d.frame_count;
+    if (auto s = c->publish_marker_frame(publication.id, std::span<const double>(d.positions).subspan(f * row, row));
+        !s.ok()) {
+      std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent),
+                   shown(s.error().message).c_str());
+    }
+    for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
+  }
+  check(c->unpublish(publication.id));
+  for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
+  std::fprintf(stderr, "published %llu marker frames of '%s'\n", static_cast<unsigned long long>(sent),
+               po.name.c_str());
+}
 
 // Plays a motion file as a live source: the skeleton (pre-rotation), then one
 // frame per period on a drift-free clock, then Unpublish.
 void run_publish(const PublishCommand& o) {
+  if (o.markers) return run_publish_markers(o);
+  if (is_marker_file(o.file)) {
+    throw CommandError(o.file + ": a marker file is published as labelled markers: add --markers (and --model)");
+  }
   LoadOptions lo;
   lo.asf = o.asf;
   Warnings warnings;
@@ -752,7 +805,8 @@ void add_net_commands(CLI::App& app) {
     auto o = std::make_shared<PublishCommand>();
     CLI::App* cmd = app.add_subcommand(
         "publish",
-        "Play a motion file (BVH, ASF/AMC, .gmr, .gmrb, or the CSV of gmr positions) to a gmr-server as a live source");
+        "Play a motion file (BVH, ASF/AMC, .gmr, .gmrb, or the CSV of gmr positions) to a gmr-server as a live source; "
+        "a marker file (.c3d, .trc) with --markers");
     cmd->add_option("file", o->file, "Motion file")->required()->check(CLI::ExistingFile);
     cmd->add_option("--name", o->name, "The live motion's name on the server (default: the file's stem)");
     cmd->add_option("--asf", o->asf, "Skeleton for an .amc file (default: the single .asf beside it)");
@@ -763,6 +817,15 @@ void add_net_commands(CLI::App& app) {
                     "Publish at most this many frames, then end (without --loop, at most the file's frames: it is "
                     "published once)");
     cmd->add_flag("--record", o->record, "Ask the server to record the source (into its --record-dir) as .gmrb");
+    cmd->add_flag("--markers", o->markers,
+                  "FILE is a marker file (.c3d, .trc): publish its labelled markers; the server solves them into "
+                  "--model's skeleton (docs/markers.md, \"Frame by frame\")");
+    cmd->add_option("--model", o->model, "With --markers: the built-in skeleton model")->capture_default_str();
+    cmd->add_option("--calibration-seconds", o->calibration_seconds,
+                    "With --markers: the first seconds the server calibrates the model on (it serves the source "
+                    "after them)")
+        ->capture_default_str()
+        ->check(CLI::PositiveNumber);
     add_connect_options(*cmd, o->server);
     cmd->footer(
         "The server needs a 'publish' token (--token or GMR_TOKEN; docs/security.md). Subscribers see it "

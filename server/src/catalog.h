@@ -83,6 +83,13 @@ class Catalog final : public LiveDirectory {
   std::uint64_t live_frames_refused() const { return live_frames_refused_; }
   std::uint64_t live_frames_over_rate() const { return live_frames_over_rate_; }
   std::uint64_t live_edit_replays() const { return *live_edit_replays_; }
+  // Live marker sources: points their frames lacked, part poses held.
+  void count_marker_frame(std::uint64_t missing, std::uint64_t held) {
+    live_marker_points_missing_ += missing;
+    live_marker_parts_held_ += held;
+  }
+  std::uint64_t live_marker_points_missing() const { return live_marker_points_missing_; }
+  std::uint64_t live_marker_parts_held() const { return live_marker_parts_held_; }
 
  private:
   std::vector<LibraryEntry> library_;
@@ -100,6 +107,7 @@ class Catalog final : public LiveDirectory {
   std::uint64_t live_frames_over_rate_ = 0;  // faster than the declared rate: dropped (RateHold)
   // Edit lists the sources replayed (LiveSource::count_replays), all sources.
   std::shared_ptr<std::uint64_t> live_edit_replays_ = std::make_shared<std::uint64_t>(0);
+  std::uint64_t live_marker_points_missing_ = 0, live_marker_parts_held_ = 0;
 };
 
 }  // namespace gmr::server

@@ -210,9 +210,7 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.subscriptions = held.subscriptions;
   s.accepted_connections = admission.accepted();
   s.connection_totals = admission.totals_by_transport();
-  if (lanes) {
-    for (std::size_t lane = 0; lane < lanes->size(); ++lane) s.lane_connections.push_back(lanes->connections(lane));
-  }
+  for (std::size_t k = 0; lanes && k < lanes->size(); ++k) s.lane_connections.push_back(lanes->connections(k));
   s.udp_bytes_sent = udp.bytes_sent();
   s.multicast_frames_sent = multicast.frames_sent;
   s.live_sources = catalog.live_sources().size();
@@ -220,6 +218,8 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.live_frames_refused = catalog.live_frames_refused();
   s.live_frames_over_rate = catalog.live_frames_over_rate();
   s.live_edit_replays = catalog.live_edit_replays();
+  s.live_marker_points_missing = catalog.live_marker_points_missing();
+  s.live_marker_parts_held = catalog.live_marker_parts_held();
   s.library_reloads = catalog.reloads();
   s.library_changes = catalog.library_changes();
   s.relay_announces_refused = replicas.announces_refused();

@@ -1,7 +1,7 @@
 // From raw markers to a GMR motion: part fits, joint centres, local transforms.
 #include "gmr/markers/marker_solve.h"
 
-#include "gmr/markers/marker_frames.h"
+#include "part_fit.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -21,18 +21,15 @@ namespace {
 using Eigen::Matrix3d;
 using Eigen::Quaterniond;
 using Eigen::Vector3d;
+using marker_detail::fit_two_points;
+using marker_detail::FramePart;
+using marker_detail::PartFitter;
+using marker_detail::Pose;
+using marker_detail::write_frame;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 bool finite(const Vector3d& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
-
-// A part's pose in one frame: world = q * local + t.
-struct Pose {
-  Quaterniond q = Quaterniond::Identity();
-  Vector3d t = Vector3d::Zero();
-  Vector3d apply(const Vector3d& local) const { return q * local + t; }
-  Vector3d local(const Vector3d& world) const { return q.conjugate() * (world - t); }
-};
 
 enum class State : unsigned char { kNone, kFitted, kInterpolated, kHeld };
 
@@ -71,107 +68,6 @@ double median(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
   return v[mid];
 }
-
-// One frame's fit of a part of 3 or more points: the weighted rigid fit of
-// its layout to the points `world` (NaN: missing) with the outlier rule:
-// while 4 or more points remain and the worst residual exceeds `outlier`, the
-// worst point that is not a joint (`is_joint`) is left out and the fit
-// redone. False when fewer than 3 usable points remain or they are nearly on
-// a line. Adds the points left out to `outliers` and the residuals of those
-// kept to `sum_sq` and `residuals`.
-struct PartFitter {
-  std::vector<Vector3d> local, world;
-  std::vector<double> weights;
-  std::vector<std::size_t> which;
-
-  bool fit(const std::vector<Vector3d>& layout, const std::vector<double>& point_weights,
-           const std::vector<Vector3d>& points, const std::vector<int>& joint_of, double outlier, double min_spread,
-           Pose& pose, std::size_t& outliers, double& sum_sq, std::size_t& residuals) {
-    which.clear();
-    for (std::size_t k = 0; k < points.size(); ++k) {
-      if (finite(points[k])) which.push_back(k);
-    }
-    bool ok = false;
-    while (which.size() >= 3) {
-      local.clear();
-      world.clear();
-      weights.clear();
-      for (std::size_t k : which) {
-        local.push_back(layout[k]);
-        world.push_back(points[k]);
-        weights.push_back(point_weights[k]);
-      }
-      ok = fit_rigid(local, world, weights, min_spread, pose);
-      if (!ok) break;
-      std::size_t worst = 0;
-      double worst_r = -1;
-      for (std::size_t i = 0; i < which.size(); ++i) {
-        const double r = (pose.apply(local[i]) - world[i]).norm();
-        if (r > worst_r) {
-          worst_r = r;
-          worst = i;
-        }
-      }
-      // A joint is never the outlier: it is carried exactly by another part.
-      if (worst_r <= outlier || which.size() == 3 || joint_of[which[worst]] >= 0) break;
-      which.erase(which.begin() + static_cast<std::ptrdiff_t>(worst));
-      ++outliers;
-    }
-    if (!ok) return false;
-    for (std::size_t i = 0; i < which.size(); ++i) {
-      sum_sq += (pose.apply(local[i]) - world[i]).squaredNorm();
-      ++residuals;
-    }
-    return true;
-  }
-};
-
-// A 2-point part (a joint of another part, then a marker) in one frame: the
-// other part's pose turned so that the layout's direction meets the marker,
-// at the joint. False when the marker is missing or on the joint.
-bool fit_two_points(const std::vector<Vector3d>& layout, const Pose& other, const Vector3d& joint,
-                    const Vector3d& marker, Pose& pose) {
-  const Vector3d d = marker - joint;
-  if (!finite(d) || !(d.norm() > 0)) return false;
-  const Vector3d rest = other.q * layout[1].normalized();
-  pose.q = (Quaterniond::FromTwoVectors(rest, d.normalized()) * other.q).normalized();
-  pose.t = joint;
-  return true;
-}
-
-// One frame's channel values of the model's motion from each part's world
-// rotation and each joint's world position: roots their position, then
-// rotations relative to the parent joint's part, as Z X Y Euler angles (the
-// previous frame's, when given, pick the nearest equivalent).
-void write_frame(const Skeleton& skeleton, const MarkerModel& model, const std::vector<Quaterniond>& part_q,
-                 const std::vector<Vector3d>& joint_world, std::vector<Vector3d>& previous, bool first,
-                 std::span<double> values) {
-  static constexpr Axis kOrder[3] = {Axis::kZ, Axis::kX, Axis::kY};
-  for (std::size_t j = 0; j < model.joints.size(); ++j) {
-    const Joint& joint = skeleton.joint(static_cast<int>(j));
-    if (joint.channels.empty()) continue;
-    const ModelJoint& mj = model.joints[j];
-    Matrix3d r = part_q[static_cast<std::size_t>(mj.part)].toRotationMatrix();
-    std::size_t c = static_cast<std::size_t>(skeleton.channel_offset(static_cast<int>(j)));
-    if (mj.parent < 0) {
-      for (int axis = 0; axis < 3; ++axis) values[c++] = joint_world[j](axis);
-    } else {
-      const int parent_part = model.joints[static_cast<std::size_t>(mj.parent)].part;
-      r = part_q[static_cast<std::size_t>(parent_part)].toRotationMatrix().transpose() * r;
-    }
-    const Vector3d angles = decompose_euler(r, kOrder, first ? nullptr : &previous[j]);
-    previous[j] = angles;
-    for (int k = 0; k < 3; ++k) values[c++] = angles(k);
-  }
-}
-
-// What a frame solver keeps of a calibration (MarkerFrameSolver).
-struct FramePart {
-  std::vector<Vector3d> layout;
-  std::vector<int> marker_of, joint_of;  // per point, as Solver::Part's
-  bool fitted_once = false;
-  Pose last;  // the last fitted (or held) pose
-};
 
 class Solver {
  public:
@@ -718,172 +614,101 @@ Result<MarkerSolveResult> Solver::run(const MarkerSolveOptions& options) {
 
 }  // namespace
 
-struct MarkerFrameSolver::State {
-  MarkerModel model;
-  std::vector<std::string> names;
-  double unit_mm = 1;
-  Skeleton skeleton;
-  std::vector<FramePart> parts;
-  std::vector<Vector3d> joint_local;
-  MarkerFrameCounts counts;
-  // Per frame, reused.
-  std::vector<Pose> pose;
-  std::vector<char> done;
-  std::vector<Quaterniond> part_q;
-  std::vector<Vector3d> joint_world, points, previous;
-  PartFitter fitter;
+namespace marker_detail {
 
-  Vector3d marker(std::span<const double> positions, int index) const {
-    const std::size_t i = static_cast<std::size_t>(index) * 3;
-    return {positions[i], positions[i + 1], positions[i + 2]};
+using Eigen::Matrix3d;
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
+
+bool PartFitter::fit(const std::vector<Vector3d>& layout, const std::vector<double>& point_weights,
+                     const std::vector<Vector3d>& points, const std::vector<int>& joint_of, double outlier,
+                     double min_spread, Pose& pose, std::size_t& outliers, double& sum_sq, std::size_t& residuals) {
+  which.clear();
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (finite(points[k])) which.push_back(k);
   }
-  // Fits part `i` in this frame (its joint points already placed), or holds
-  // its last pose; false when it has none.
-  bool fit_part(std::size_t i, std::span<const double> positions) {
-    if (done[i]) return true;
-    FramePart& p = parts[i];
-    const ModelPart& mp = model.parts[i];
-    bool ok;
-    if (mp.points.size() == 2) {
-      const int j0 = p.joint_of[0];
-      const std::size_t other = static_cast<std::size_t>(model.joints[static_cast<std::size_t>(j0)].part);
-      if (!fit_part(other, positions)) return false;
-      ok = fit_two_points(p.layout, pose[other], joint_world[static_cast<std::size_t>(j0)],
-                          marker(positions, p.marker_of[1]), pose[i]);
-    } else {
-      points.resize(mp.points.size());
-      for (std::size_t k = 0; k < points.size(); ++k) {
-        points[k] = p.joint_of[k] >= 0 ? joint_world[static_cast<std::size_t>(p.joint_of[k])]
-                                       : marker(positions, p.marker_of[k]);
+  bool ok = false;
+  while (which.size() >= 3) {
+    local.clear();
+    world.clear();
+    weights.clear();
+    for (std::size_t k : which) {
+      local.push_back(layout[k]);
+      world.push_back(points[k]);
+      weights.push_back(point_weights[k]);
+    }
+    ok = fit_rigid(local, world, weights, min_spread, pose);
+    if (!ok) break;
+    std::size_t worst = 0;
+    double worst_r = -1;
+    for (std::size_t i = 0; i < which.size(); ++i) {
+      const double r = (pose.apply(local[i]) - world[i]).norm();
+      if (r > worst_r) {
+        worst_r = r;
+        worst = i;
       }
-      double sum_sq = 0;
-      std::size_t residuals = 0;
-      ok = fitter.fit(p.layout, mp.weights, points, p.joint_of, model.outlier_mm / unit_mm, 2.0 / unit_mm, pose[i],
-                      counts.outliers, sum_sq, residuals);
     }
-    if (ok) {
-      p.last = pose[i];
-      p.fitted_once = true;
+    // A joint is never the outlier: it is carried exactly by another part.
+    if (worst_r <= outlier || which.size() == 3 || joint_of[which[worst]] >= 0) break;
+    which.erase(which.begin() + static_cast<std::ptrdiff_t>(worst));
+    ++outliers;
+  }
+  if (!ok) return false;
+  for (std::size_t i = 0; i < which.size(); ++i) {
+    sum_sq += (pose.apply(local[i]) - world[i]).squaredNorm();
+    ++residuals;
+  }
+  return true;
+}
+
+// A 2-point part (a joint of another part, then a marker) in one frame: the
+// other part's pose turned so that the layout's direction meets the marker,
+// at the joint. False when the marker is missing or on the joint.
+bool fit_two_points(const std::vector<Vector3d>& layout, const Pose& other, const Vector3d& joint,
+                    const Vector3d& marker, Pose& pose) {
+  const Vector3d d = marker - joint;
+  if (!finite(d) || !(d.norm() > 0)) return false;
+  const Vector3d rest = other.q * layout[1].normalized();
+  pose.q = (Quaterniond::FromTwoVectors(rest, d.normalized()) * other.q).normalized();
+  pose.t = joint;
+  return true;
+}
+
+// One frame's channel values of the model's motion from each part's world
+// rotation and each joint's world position: roots their position, then
+// rotations relative to the parent joint's part, as Z X Y Euler angles (the
+// previous frame's, when given, pick the nearest equivalent).
+void write_frame(const Skeleton& skeleton, const MarkerModel& model, const std::vector<Quaterniond>& part_q,
+                 const std::vector<Vector3d>& joint_world, std::vector<Vector3d>& previous, bool first,
+                 std::span<double> values) {
+  static constexpr Axis kOrder[3] = {Axis::kZ, Axis::kX, Axis::kY};
+  for (std::size_t j = 0; j < model.joints.size(); ++j) {
+    const Joint& joint = skeleton.joint(static_cast<int>(j));
+    if (joint.channels.empty()) continue;
+    const ModelJoint& mj = model.joints[j];
+    Matrix3d r = part_q[static_cast<std::size_t>(mj.part)].toRotationMatrix();
+    std::size_t c = static_cast<std::size_t>(skeleton.channel_offset(static_cast<int>(j)));
+    if (mj.parent < 0) {
+      for (int axis = 0; axis < 3; ++axis) values[c++] = joint_world[j](axis);
     } else {
-      if (!p.fitted_once) return false;
-      pose[i] = p.last;
-      ++counts.held;
+      const int parent_part = model.joints[static_cast<std::size_t>(mj.parent)].part;
+      r = part_q[static_cast<std::size_t>(parent_part)].toRotationMatrix().transpose() * r;
     }
-    done[i] = 1;
-    return true;
+    const Vector3d angles = decompose_euler(r, kOrder, first ? nullptr : &previous[j]);
+    previous[j] = angles;
+    for (int k = 0; k < 3; ++k) values[c++] = angles(k);
   }
-};
+}
 
-MarkerFrameSolver::MarkerFrameSolver(std::unique_ptr<State> state) : state_(std::move(state)) {}
-MarkerFrameSolver::MarkerFrameSolver(MarkerFrameSolver&&) noexcept = default;
-MarkerFrameSolver& MarkerFrameSolver::operator=(MarkerFrameSolver&&) noexcept = default;
-MarkerFrameSolver::~MarkerFrameSolver() = default;
-
-Result<MarkerFrameSolver> MarkerFrameSolver::calibrate(const MarkerTrajectories& markers, const MarkerModel& model,
-                                                       std::size_t begin, std::size_t end) {
-  end = std::min(end, markers.frame_count);
-  if (begin >= end) {
-    return make_error(ErrorKind::kInvalidArgument, "calibrating markers: frames [" + std::to_string(begin) + ", " +
-                                                       std::to_string(end) + ") hold no frame of the take's " +
-                                                       std::to_string(markers.frame_count));
-  }
-  MarkerTrajectories stretch = markers;
-  stretch.frame_count = end - begin;
-  const std::size_t row = markers.names.size() * 3;
-  stretch.positions.assign(markers.positions.begin() + static_cast<std::ptrdiff_t>(begin * row),
-                           markers.positions.begin() + static_cast<std::ptrdiff_t>(end * row));
-  stretch.residuals.clear();
-  Solver solver(stretch, model);
+Result<MarkerSolveResult> solve_keeping(const MarkerTrajectories& markers, const MarkerModel& model,
+                                        std::vector<FramePart>& parts, std::vector<Vector3d>& joint_local) {
+  Solver solver(markers, model);
   auto solved = solver.run({});
-  if (!solved) return solved.error();
-  auto st = std::make_unique<State>();
-  st->model = model;
-  st->names = markers.names;
-  st->unit_mm = solved->millimetres_per_unit;
-  st->skeleton = solved->motion.skeleton;
-  solver.keep(st->parts, st->joint_local);
-  st->pose.assign(st->parts.size(), Pose{});
-  st->done.assign(st->parts.size(), 0);
-  st->part_q.assign(st->parts.size(), Quaterniond::Identity());
-  st->joint_world.assign(model.joints.size(), Vector3d::Zero());
-  st->previous.assign(model.joints.size(), Vector3d::Zero());
-  return MarkerFrameSolver(std::move(st));
+  if (solved) solver.keep(parts, joint_local);
+  return solved;
 }
 
-const Skeleton& MarkerFrameSolver::skeleton() const { return state_->skeleton; }
-const std::vector<std::string>& MarkerFrameSolver::marker_names() const { return state_->names; }
-double MarkerFrameSolver::millimetres_per_unit() const { return state_->unit_mm; }
-const MarkerFrameCounts& MarkerFrameSolver::counts() const { return state_->counts; }
-
-Result<std::vector<double>> MarkerFrameSolver::solve(std::span<const double> positions) {
-  State& st = *state_;
-  if (positions.size() != st.names.size() * 3) {
-    ++st.counts.refused;
-    return make_error(ErrorKind::kInvalidArgument,
-                      "a marker frame holds " + std::to_string(positions.size()) + " coordinates; the calibration's " +
-                          std::to_string(st.names.size()) + " markers need " + std::to_string(st.names.size() * 3));
-  }
-  std::size_t missing = 0;
-  for (std::size_t i = 0; i < positions.size(); i += 3) {
-    const double x = positions[i], y = positions[i + 1], z = positions[i + 2];
-    if (std::isnan(x) || std::isnan(y) || std::isnan(z)) {
-      ++missing;
-    } else if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
-      ++st.counts.refused;
-      return make_error(ErrorKind::kInvalidArgument, "marker '" + st.names[i / 3] + "' has an infinite coordinate");
-    }
-  }
-  std::fill(st.done.begin(), st.done.end(), 0);
-  for (std::size_t j = 0; j < st.model.joints.size(); ++j) {
-    const std::size_t part = static_cast<std::size_t>(st.model.joints[j].part);
-    if (!st.fit_part(part, positions)) {
-      ++st.counts.refused;
-      return make_error(ErrorKind::kFailedPrecondition, "part '" + st.model.parts[part].name +
-                                                            "' has not been fitted in any frame yet (fewer than 3 "
-                                                            "usable points so far)");
-    }
-    st.joint_world[j] = st.pose[part].apply(st.joint_local[j]);
-  }
-  for (std::size_t i = 0; i < st.parts.size(); ++i) st.part_q[i] = st.pose[i].q;
-  std::vector<double> values(static_cast<std::size_t>(st.skeleton.channel_count()));
-  write_frame(st.skeleton, st.model, st.part_q, st.joint_world, st.previous, st.counts.solved == 0, values);
-  st.counts.missing += missing;
-  ++st.counts.solved;
-  return values;
-}
-
-Result<Motion> solve_marker_frames(const MarkerTrajectories& markers, const MarkerModel& model, std::size_t begin,
-                                   std::size_t end, MarkerFrameCounts* counts) {
-  auto solver = MarkerFrameSolver::calibrate(markers, model, begin, end);
-  if (!solver) return solver.error();
-  Motion motion;
-  motion.skeleton = solver->skeleton();
-  motion.convention = Convention::kPreRotation;
-  motion.frame_time = markers.frame_rate > 0 ? 1.0 / markers.frame_rate : 0.0;
-  motion.frame_count = markers.frame_count;
-  const std::size_t stride = motion.stride();
-  motion.values.assign(markers.frame_count * stride, 0.0);
-  const std::size_t row = markers.names.size() * 3;
-  std::size_t first_solved = markers.frame_count;
-  for (std::size_t f = 0; f < markers.frame_count; ++f) {
-    auto values = solver->solve(std::span<const double>(markers.positions).subspan(f * row, row));
-    if (values) {
-      std::copy(values->begin(), values->end(), motion.frame(f).begin());
-      if (first_solved == markers.frame_count) first_solved = f;
-    } else if (f > 0 && first_solved < f) {
-      std::copy(motion.frame(f - 1).begin(), motion.frame(f - 1).end(), motion.frame(f).begin());
-    }
-  }
-  if (first_solved == markers.frame_count) {
-    return make_error(ErrorKind::kInvalidData, "no frame of the take could be solved");
-  }
-  for (std::size_t f = 0; f < first_solved; ++f) {
-    std::copy(motion.frame(first_solved).begin(), motion.frame(first_solved).end(), motion.frame(f).begin());
-  }
-  if (counts) *counts = solver->counts();
-  if (auto s = motion.validate(); !s) return s.error();
-  return motion;
-}
+}  // namespace marker_detail
 
 Result<MarkerSolveResult> solve_markers(const MarkerTrajectories& markers, const MarkerModel& model,
                                         const MarkerSolveOptions& options) {

@@ -43,6 +43,7 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
                    "this connection's role is '" + std::string(role_name(role)) +
                        "': publishing a live source needs a 'publish' token (docs/security.md)"};
   }
+  if (r.has_markers()) return publish_markers(r);
   const ServerConfig& cfg = link_.services.cfg;
   auto checked = check_announcement(r, cfg);
   if (auto* refusal = std::get_if<Refusal>(&checked)) return std::move(*refusal);
@@ -109,7 +110,7 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
                                                 r.metres_per_unit());
   if (recorder) source->record(std::move(recorder));
   const std::uint32_t id = next_publication_++;
-  publications_[id] = Held{source, bytes, rate_mhz};
+  publications_[id] = Held{source, bytes, rate_mhz, nullptr, r.name(), r.frame_time()};
   link_.services.replicas.announce(*source);
   spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", link_.connection_id,
                printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(),
@@ -121,6 +122,101 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
   return out;
 }
 
+// A marker publication: checked now, served once calibrated (marker_frame).
+// Its calibration frames count in the memory budget until then.
+Reply Publications::publish_markers(const pb::Publish& r) {
+  const ServerConfig& cfg = link_.services.cfg;
+  auto made = MarkerFeed::make(r, cfg);
+  if (auto* refusal = std::get_if<Refusal>(&made)) return std::move(*refusal);
+  auto feed = std::make_shared<MarkerFeed>(std::move(std::get<MarkerFeed>(made)));
+  if (link_.services.catalog.find(r.name())) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "a motion named '" + r.name() + "' is already served: publish under another name"};
+  }
+  if (publications_.size() >= cfg.max_publications_per_connection) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "at most " + std::to_string(cfg.max_publications_per_connection) + " live sources per connection"};
+  }
+  if (r.record()) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "recording a marker publication is not offered yet: record a subscription to it (gmr record)"};
+  }
+  Admission& admission = link_.services.admission;
+  const std::uint64_t bytes = feed->held_bytes();
+  const std::uint64_t mine = link_.held_bytes + bytes, all = admission.view_bytes() + bytes;
+  if (mine > cfg.max_view_bytes_per_connection || all > cfg.max_view_bytes) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "the marker calibration holds " + std::to_string(bytes) +
+                       " bytes of frames: above the server's view byte limits (fewer markers, a shorter "
+                       "calibration or a lower rate)"};
+  }
+  const double rate = 1.0 / r.frame_time();
+  const auto rate_mhz = static_cast<std::uint64_t>(std::llround(rate * 1000.0));
+  if (auto refused = admission.commit_rate(rate, rate_mhz, Admission::Asker::kPublication)) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, *refused};
+  }
+  link_.held_bytes = mine;
+  admission.set_view_bytes(all);
+  const std::uint32_t id = next_publication_++;
+  publications_[id] = Held{nullptr, bytes, rate_mhz, feed, r.name(), r.frame_time()};
+  spdlog::info("conn {}: publishes live markers {} ({} markers, model {}, {:.1f} Hz; served after {} frames)",
+               link_.connection_id, printable(r.name(), 200), r.markers().names_size(),
+               printable(r.markers().model(), 64), rate, feed->calibration_frames());
+  pb::ServerMessage out;
+  out.mutable_published()->set_publication_id(id);
+  out.mutable_published()->set_motion(r.name());
+  return out;
+}
+
+Reply Publications::marker_frame(std::uint32_t id, Held& held, const pb::PublishFrame& r) {
+  using Fate = LiveDirectory::FrameFate;
+  MarkerFeed& feed = *held.markers;
+  const MarkerFrameCounts before = feed.counts() ? *feed.counts() : MarkerFrameCounts{};
+  auto taken = feed.take(r);
+  if (!taken.ok()) {
+    link_.services.catalog.count_live_frame(Fate::kRefused);
+    const std::string why = "live markers '" + held.name + "': " + taken.error().message;
+    if (taken.error().kind == ErrorKind::kFailedPrecondition) {  // the calibration failed: nothing to serve
+      end(id, why);
+      return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
+    }
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, why};
+  }
+  if (const MarkerFrameCounts* after = feed.counts()) {
+    link_.services.catalog.count_marker_frame(after->missing - before.missing, after->held - before.held);
+  }
+  switch (*taken) {
+    case MarkerFeed::Taken::kCalibrating:
+    case MarkerFeed::Taken::kSkipped:
+      link_.services.catalog.count_live_frame(Fate::kAccepted);
+      return pb::ServerMessage{};
+    case MarkerFeed::Taken::kCalibrated: {
+      link_.services.catalog.count_live_frame(Fate::kAccepted);
+      if (link_.services.catalog.find(held.name)) {
+        const std::string why = "a motion named '" + held.name + "' appeared while the markers calibrated";
+        end(id, why);
+        return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
+      }
+      // The memory budget now holds the skeleton and its newest frame.
+      Admission& admission = link_.services.admission;
+      const std::uint64_t bytes = LiveSource::held_bytes(feed.skeleton());
+      link_.held_bytes = link_.held_bytes - held.bytes + bytes;
+      admission.release_view_bytes(held.bytes);
+      admission.set_view_bytes(admission.view_bytes() + bytes);
+      held.bytes = bytes;
+      held.source =
+          link_.services.catalog.add_live(held.name, feed.skeleton(), held.frame_time, feed.metres_per_unit());
+      link_.services.replicas.announce(*held.source);
+      spdlog::info("conn {}: live markers {} calibrated on {} frames: served as {} joints", link_.connection_id,
+                   printable(held.name, 200), feed.calibration_frames(), feed.skeleton().size());
+      return pb::ServerMessage{};
+    }
+    case MarkerFeed::Taken::kSolved:
+      break;
+  }
+  return push(*held.source, feed.values(), feed.frames() - 1);
+}
+
 Reply Publications::publish_frame(const pb::PublishFrame& r) {
   using Fate = LiveDirectory::FrameFate;
   auto it = publications_.find(r.publication_id());
@@ -128,9 +224,14 @@ Reply Publications::publish_frame(const pb::PublishFrame& r) {
     link_.services.catalog.count_live_frame(Fate::kRefused);
     return Refusal{pb::ERROR_CODE_NOT_FOUND, "unknown publication " + std::to_string(r.publication_id())};
   }
-  LiveSource& source = *it->second.source;
-  const std::span<const double> values(r.values().data(), static_cast<std::size_t>(r.values_size()));
-  auto pushed = source.push(values);
+  if (it->second.markers) return marker_frame(it->first, it->second, r);
+  return push(*it->second.source,
+              std::span<const double>(r.values().data(), static_cast<std::size_t>(r.values_size())));
+}
+
+Reply Publications::push(LiveSource& source, std::span<const double> values, std::optional<std::uint64_t> index) {
+  using Fate = LiveDirectory::FrameFate;
+  auto pushed = source.push(values, index);
   if (!pushed.ok()) {
     link_.services.catalog.count_live_frame(Fate::kRefused);
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, "live '" + source.name() + "': " + pushed.error().message};
@@ -165,7 +266,13 @@ void Publications::end(std::uint32_t id, const std::string& reason) {
   link_.held_bytes -= it->second.bytes;
   link_.services.admission.release_view_bytes(it->second.bytes);
   link_.services.admission.release_rate(it->second.rate_mhz);
+  const std::string name = it->second.name;
   publications_.erase(it);
+  if (!source) {  // a marker publication that had not calibrated yet
+    spdlog::info("conn {}: live markers {} ended before their calibration: {}", link_.connection_id,
+                 printable(name, 200), reason);
+    return;
+  }
   link_.services.catalog.remove_live(source);
   spdlog::info("conn {}: live {} ended after {} frames: {}", link_.connection_id, printable(source->name(), 200),
                source->frames(), reason);

@@ -1,7 +1,7 @@
 // Publications: the live sources one session publishes (docs/protocol.md,
-// "Live sources"). A connection with a 'publish' role announces a skeleton,
-// then pushes frames; its sources end when it says so or when it goes away,
-// and a recorded one is written to the record directory then.
+// "Live sources"). A connection with a 'publish' role announces a skeleton
+// (or labelled markers and a model: live/marker_feed.h), then pushes frames; its sources end when it says so or when it
+// goes away, and a recorded one is written to the record directory then.
 #pragma once
 
 #include <cstdint>
@@ -11,6 +11,7 @@
 
 #include "gmr/server/auth.h"
 #include "live/live_source.h"
+#include "live/marker_feed.h"
 #include "requests/session_link.h"
 
 namespace gmr::server {
@@ -28,14 +29,21 @@ class Publications {
   std::size_t count() const { return publications_.size(); }
 
  private:
+  struct Held {
+    std::shared_ptr<LiveSource> source;   // null while a marker publication calibrates
+    std::uint64_t bytes = 0;              // LiveSource::held_bytes (or the calibration's), in the memory budget
+    std::uint64_t rate_mhz = 0;           // its declared rate, in the send budget
+    std::shared_ptr<MarkerFeed> markers;  // a marker publication
+    std::string name;
+    double frame_time = 0;
+  };
+  Reply publish_markers(const pb::Publish& r);
+  Reply marker_frame(std::uint32_t id, Held& held, const pb::PublishFrame& r);
+  // Hands `values` to the publication's source (the rate hold, the replicas).
+  Reply push(LiveSource& source, std::span<const double> values, std::optional<std::uint64_t> index = std::nullopt);
   void end(std::uint32_t id, const std::string& reason);
 
   SessionLink& link_;
-  struct Held {
-    std::shared_ptr<LiveSource> source;
-    std::uint64_t bytes = 0;     // LiveSource::held_bytes, in the memory budget
-    std::uint64_t rate_mhz = 0;  // its declared rate, in the send budget
-  };
   std::map<std::uint32_t, Held> publications_;
   std::uint32_t next_publication_ = 1;
   LogLimiter over_rate_log_{1, std::chrono::seconds(10)};

@@ -497,6 +497,34 @@ TEST(CliNet, PublishCountNeverLoopsWithoutLoop) {
   EXPECT_NE(help.out.find("without --loop, at most the file's frames"), std::string::npos) << help.out;
 }
 
+// `gmr publish TAKE.c3d --markers --model cmu41`: the server calibrates on
+// the first seconds, then serves the solved skeleton: gmr query of the live
+// source gives the model's 21 joints. A marker file without --markers is
+// refused with the way to publish it.
+TEST(CliNet, PublishMarkersServesTheSolvedSkeleton) {
+  GMR_REQUIRE_DATA();
+  TestServer s(publish_config());
+  const std::string common = " --token " + std::string(kPublishToken) + " --port " + std::to_string(s.port());
+  const std::string c3d = test::data_file("c3d/cmu_01_01.c3d").string();
+  const CommandRun plain = gmr("publish '" + c3d + "' --count 1" + common);
+  EXPECT_EQ(plain.status, 1);
+  EXPECT_NE(plain.out.find("add --markers"), std::string::npos) << plain.out;
+  CommandRun published;
+  std::thread publisher([&] {
+    published = gmr("publish '" + c3d +
+                    "' --markers --model cmu41 --calibration-seconds 0.5 --name lab --rate 240 "
+                    "--count 600" +
+                    common);
+  });
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  const bool appeared = wait_for_frames(*c, "lab");
+  publisher.join();
+  ASSERT_TRUE(appeared) << "the live marker source never appeared: " << published.out;
+  ASSERT_EQ(published.status, 0) << published.out;
+  EXPECT_NE(published.out.find("published 600 marker frames of 'lab'"), std::string::npos) << published.out;
+}
+
 // The help texts a newcomer reads say what the commands do today.
 TEST(CliNet, HelpTextsNameWhatTheCommandsDo) {
   const CommandRun convert = gmr("convert --help");

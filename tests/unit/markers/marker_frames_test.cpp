@@ -97,10 +97,11 @@ TEST(MarkerFrames, CalibratedOnTheFirstTwoSecondsTheJointsStayNearTheWholeTake) 
     EXPECT_EQ(counts.solved + counts.refused, take.frame_count);
     EXPECT_LE(counts.refused, take.frame_count / 100);
     const auto d = distances(whole->motion, *frames);
-    std::printf("[ figures  ] %s calibrated on %zu frames: joints %.1f mm median, %.1f mm p95 from the whole take's "
-                "solve; %zu frames solved, %zu refused, %zu part poses held, %zu outliers\n",
-                file.c_str(), two_seconds, median(d), quantile95(d), counts.solved, counts.refused, counts.held,
-                counts.outliers);
+    std::printf(
+        "[ figures  ] %s calibrated on %zu frames: joints %.1f mm median, %.1f mm p95 from the whole take's "
+        "solve; %zu frames solved, %zu refused, %zu part poses held, %zu outliers\n",
+        file.c_str(), two_seconds, median(d), quantile95(d), counts.solved, counts.refused, counts.held,
+        counts.outliers);
     EXPECT_LE(median(d), 15.0);
     EXPECT_LE(quantile95(d), 50.0);
     ++takes;
@@ -156,10 +157,11 @@ TEST(MarkerFrames, TenPercentOfMarkersDroppedMoveTheJointsLittleAndAreCounted) {
   EXPECT_EQ(compared + dropped->counts().refused, take.frame_count);
   EXPECT_LE(dropped->counts().refused, 10u);
   EXPECT_EQ(dropped->counts().missing, missing + removed);
-  std::printf("[ figures  ] 01_01 with %zu of %zu points dropped at random: joints %.1f mm median, %.1f mm p95 from "
-              "the full frames; %zu frames refused (a part not fitted yet), %zu part poses held, %zu outliers\n",
-              removed, compared * take.marker_count(), median(d), quantile95(d), dropped->counts().refused,
-              dropped->counts().held, dropped->counts().outliers);
+  std::printf(
+      "[ figures  ] 01_01 with %zu of %zu points dropped at random: joints %.1f mm median, %.1f mm p95 from "
+      "the full frames; %zu frames refused (a part not fitted yet), %zu part poses held, %zu outliers\n",
+      removed, compared * take.marker_count(), median(d), quantile95(d), dropped->counts().refused,
+      dropped->counts().held, dropped->counts().outliers);
   EXPECT_LE(median(d), 10.0);
 }
 

@@ -228,19 +228,21 @@ struct ServerCounters {
   std::uint64_t frames_skipped_total = 0;  // all streams
   std::uint64_t queued_bytes = 0;
   std::uint64_t max_queued_bytes = 0;
-  double committed_frames_per_second = 0;   // all subscriptions' rates together
-  double send_budget = 0;                   // what the server admits (0: no limit)
-  std::uint64_t subscriptions_refused = 0;  // for the send budget
-  std::uint32_t live_sources = 0;           // being published now
-  std::uint64_t live_frames_received = 0;   // published frames the server accepted
-  std::uint64_t live_frames_refused = 0;    // and refused
-  std::uint64_t live_frames_over_rate = 0;  // and dropped: faster than the source's declared rate
-  std::uint64_t live_edit_replays = 0;      // live views' edits replayed, once per frame for equal edits
-  std::uint64_t multicast_frames_sent = 0;  // to the multicast group, once each
-  std::uint64_t frames_sent_total = 0;      // all connections, open and closed (one request's snapshot)
-  std::uint64_t frames_dropped_total = 0;   // all connections, open and closed
-  std::uint32_t io_threads = 0;             // the server's I/O threads (0: a server that does not say)
-  std::uint32_t io_thread = 0;              // this connection's (0: the control loop)
+  double committed_frames_per_second = 0;        // all subscriptions' rates together
+  double send_budget = 0;                        // what the server admits (0: no limit)
+  std::uint64_t subscriptions_refused = 0;       // for the send budget
+  std::uint32_t live_sources = 0;                // being published now
+  std::uint64_t live_frames_received = 0;        // published frames the server accepted
+  std::uint64_t live_frames_refused = 0;         // and refused
+  std::uint64_t live_frames_over_rate = 0;       // and dropped: faster than the source's declared rate
+  std::uint64_t live_edit_replays = 0;           // live views' edits replayed, once per frame for equal edits
+  std::uint64_t live_marker_points_missing = 0;  // marker points live marker sources' frames lacked
+  std::uint64_t live_marker_parts_held = 0;      // and part poses held for want of them
+  std::uint64_t multicast_frames_sent = 0;       // to the multicast group, once each
+  std::uint64_t frames_sent_total = 0;           // all connections, open and closed (one request's snapshot)
+  std::uint64_t frames_dropped_total = 0;        // all connections, open and closed
+  std::uint32_t io_threads = 0;                  // the server's I/O threads (0: a server that does not say)
+  std::uint32_t io_thread = 0;                   // this connection's (0: the control loop)
 };
 
 // A live source this client publishes (docs/protocol.md, "Live sources").
@@ -249,6 +251,17 @@ struct PublishOptions {
   double frame_time = 1.0 / 120;  // seconds per frame: the rate subscribers are told
   double metres_per_unit = 0.0;   // the motion's unit in metres; 0: unknown
   bool record = false;            // the server writes it to its --record-dir when it ends
+};
+
+// A live source of labelled markers (docs/protocol.md, "Live markers"): the
+// server solves each frame into `model`'s skeleton, and serves it once the
+// first `calibration_seconds` of frames calibrated the model.
+struct MarkerPublishOptions {
+  std::string name;
+  double frame_time = 1.0 / 120;
+  std::string model = "cmu41";  // a built-in skeleton model
+  double calibration_seconds = 2.0;
+  std::string units = "mm";  // of the coordinates: mm, cm, m or in
 };
 
 struct Publication {
@@ -354,6 +367,11 @@ class Client {
   // take_errors(). unpublish ends the source; closing the client ends them all.
   Result<Publication> publish(const Skeleton& skeleton, const PublishOptions& options);
   Status publish_frame(std::uint32_t publication, std::span<const double> values);
+  // Labelled markers: publish_markers names them once; each
+  // publish_marker_frame gives x, y, z per marker in that order, NaN for a
+  // marker the frame lacks (sent as missing).
+  Result<Publication> publish_markers(std::span<const std::string> marker_names, const MarkerPublishOptions& options);
+  Status publish_marker_frame(std::uint32_t publication, std::span<const double> positions);
   Status unpublish(std::uint32_t publication);
   // Errors the server sent for requests that get no reply (refused
   // PublishFrame), oldest first, and forgets them; at most 64 are kept.

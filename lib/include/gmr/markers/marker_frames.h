@@ -27,11 +27,11 @@ namespace gmr {
 
 // What solving frames has met so far.
 struct MarkerFrameCounts {
-  std::size_t solved = 0;     // frames solved
-  std::size_t refused = 0;    // frames refused: a part never fitted yet, or a coordinate not finite
-  std::size_t held = 0;       // (frame, part) pairs that held the part's last pose
-  std::size_t outliers = 0;   // (frame, marker) points left out by the outlier rule
-  std::size_t missing = 0;    // (frame, marker) points the frame did not have
+  std::size_t solved = 0;    // frames solved
+  std::size_t refused = 0;   // frames refused: a part never fitted yet, or a coordinate not finite
+  std::size_t held = 0;      // (frame, part) pairs that held the part's last pose
+  std::size_t outliers = 0;  // (frame, marker) points left out by the outlier rule
+  std::size_t missing = 0;   // (frame, marker) points the frame did not have
 };
 
 class MarkerFrameSolver {

@@ -1,0 +1,267 @@
+// Live marker sources (docs/protocol.md, "Live markers"): a publisher sends
+// CMU 01_01's labelled markers and the cmu41 model; the server calibrates on
+// the first two seconds, then serves the solved skeleton as a live source.
+// Subscribers get, frame for frame, the positions of the same take solved
+// frame by frame on the same calibration (gmr convert --calibrate-seconds 2);
+// with markers dropped at random the joints stay near them and the drops are
+// counted; bad announcements and frames are refused and counted.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <mutex>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "gmr/kinematics/forward_kinematics.h"
+#include "gmr/markers/marker_frames.h"
+#include "gmr/markers/marker_model.h"
+#include "gmr/markers/markers.h"
+#include "live_test_util.h"
+#include "net_test_util.h"
+#include "test_data.h"
+
+namespace gmr::test {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+struct Take {
+  MarkerTrajectories markers;
+  std::size_t calibration = 0;  // frames
+  Motion solved;                // frame by frame on that calibration
+};
+
+const Take& take() {
+  static const Take t = [] {
+    Take out;
+    auto m = load_markers(data_file("c3d/cmu_01_01.c3d"));
+    EXPECT_TRUE(m.ok());
+    if (!m.ok()) return out;
+    out.markers = std::move(m).value();
+    out.calibration = static_cast<std::size_t>(2 * out.markers.frame_rate);
+    auto model = builtin_marker_model("cmu41");
+    auto solved = solve_marker_frames(out.markers, *model, 0, out.calibration);
+    EXPECT_TRUE(solved.ok()) << solved.error().to_string();
+    if (solved.ok()) out.solved = std::move(solved).value();
+    return out;
+  }();
+  return t;
+}
+
+// What a subscription received: world positions by frame index.
+struct Received {
+  std::mutex mutex;
+  std::map<std::uint64_t, std::vector<Eigen::Vector3d>> frames;
+  std::vector<std::string> joints;
+  Latch<client::SubscriptionEnd> end;
+};
+
+client::MarkerPublishOptions options(const std::string& name) {
+  client::MarkerPublishOptions o;
+  o.name = name;
+  o.frame_time = 1.0 / take().markers.frame_rate;
+  o.model = "cmu41";
+  o.calibration_seconds = 2.0;
+  o.units = take().markers.units;
+  return o;
+}
+
+std::span<const double> frame_of(std::size_t f) {
+  const std::size_t row = take().markers.marker_count() * 3;
+  return std::span<const double>(take().markers.positions).subspan(f * row, row);
+}
+
+// Publishes frames [begin, end) of the take, one per 2 ms (8 ms in a
+// sanitized build), dropping each present marker with probability `drop`;
+// returns the points sent missing (the take's and the dropped).
+std::size_t publish(client::Client& c, std::uint32_t id, std::size_t begin, std::size_t end, double drop,
+                    std::mt19937& random) {
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const auto period = std::chrono::microseconds(kSlowBuild ? 8000 : 2000);
+  const auto start = std::chrono::steady_clock::now();
+  std::size_t missing = 0;
+  for (std::size_t f = begin; f < end; ++f) {
+    std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(f - begin));
+    std::vector<double> frame(frame_of(f).begin(), frame_of(f).end());
+    for (std::size_t m = 0; m < frame.size() / 3; ++m) {
+      if (std::isnan(frame[3 * m])) {
+        ++missing;
+      } else if (drop > 0 && uniform(random) < drop) {
+        frame[3 * m] = frame[3 * m + 1] = frame[3 * m + 2] = kNaN;
+        ++missing;
+      }
+    }
+    EXPECT_TRUE(c.publish_marker_frame(id, frame).ok());
+  }
+  return missing;
+}
+
+// Waits (a round trip at a time) until the server lists `name`.
+bool listed(client::Client& c, const std::string& name) {
+  for (int i = 0; i < 200; ++i) {
+    auto list = c.list_motions();
+    if (list.ok() && std::ranges::any_of(*list, [&](const auto& m) { return m.name == name; })) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return false;
+}
+
+void subscribe(client::Client& c, const std::string& motion, Received& r) {
+  auto view = c.create_view(motion);
+  ASSERT_TRUE(view.ok()) << view.error().to_string();
+  client::SubscribeOptions so;
+  so.float64 = true;
+  so.max_staleness = std::chrono::milliseconds(0);
+  auto sub = c.subscribe(
+      view->id, so,
+      [&r](const client::ReceivedFrame& f) {
+        std::lock_guard lock(r.mutex);
+        r.frames[f.frame_index] = f.positions;
+      },
+      [&r](const client::SubscriptionEnd& e) { r.end.set(e); });
+  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  std::lock_guard lock(r.mutex);
+  for (int j : sub->joints) r.joints.push_back(sub->skeleton.joint(j).name);
+}
+
+// Per (frame, joint) distances of what arrived from the take solved frame by
+// frame (millimetres).
+std::vector<double> distances(Received& r) {
+  const Motion& want = take().solved;
+  const auto positions = compute_positions(want);
+  const std::size_t n = want.skeleton.size();
+  std::vector<double> d;
+  std::lock_guard lock(r.mutex);
+  for (const auto& [index, got] : r.frames) {
+    EXPECT_LT(index, want.frame_count);
+    EXPECT_EQ(got.size(), r.joints.size());
+    if (index >= want.frame_count || got.size() != r.joints.size()) continue;
+    for (std::size_t k = 0; k < got.size(); ++k) {
+      const int j = want.skeleton.find(r.joints[k]);
+      EXPECT_GE(j, 0) << r.joints[k];
+      if (j >= 0) d.push_back((got[k] - positions[index * n + static_cast<std::size_t>(j)]).norm());
+    }
+  }
+  return d;
+}
+
+double median(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+TEST(LiveMarkers, SubscribersGetTheTakeSolvedFrameByFrameAndDropsAreCounted) {
+  GMR_REQUIRE_DATA();
+  ASSERT_GT(take().solved.frame_count, 0u);
+  const std::size_t calibration = take().calibration, served = 120;
+  Received full, dropped;  // declared before the clients: their callbacks write here
+  TestServer server(live_config());
+  auto pub = connect_as(server, kPublishToken);
+  auto sub = connect_as(server, kControlToken);
+  ASSERT_TRUE(pub && sub);
+  std::mt19937 random(20261127);
+  const std::vector<std::string>& names = take().markers.names;
+  auto a = pub->publish_markers(names, options("lab"));
+  auto b = pub->publish_markers(names, options("lab dropped"));
+  ASSERT_TRUE(a.ok()) << a.error().to_string();
+  ASSERT_TRUE(b.ok()) << b.error().to_string();
+  // Not served while it calibrates.
+  publish(*pub, a->id, 0, calibration - 1, 0.0, random);
+  ASSERT_TRUE(pub->list_motions().ok());
+  EXPECT_FALSE(sub->create_view("lab").ok());
+  publish(*pub, a->id, calibration - 1, calibration, 0.0, random);
+  publish(*pub, b->id, 0, calibration, 0.0, random);
+  ASSERT_TRUE(listed(*sub, "lab") && listed(*sub, "lab dropped"));
+  subscribe(*sub, "lab", full);
+  subscribe(*sub, "lab dropped", dropped);
+  const auto before = sub->stats().value();
+  publish(*pub, a->id, calibration, calibration + served, 0.0, random);
+  const std::size_t missing = publish(*pub, b->id, calibration, calibration + served, 0.1, random);
+  ASSERT_TRUE(pub->unpublish(a->id).ok());
+  ASSERT_TRUE(pub->unpublish(b->id).ok());
+  ASSERT_TRUE(full.end.wait().has_value());
+  ASSERT_TRUE(dropped.end.wait().has_value());
+  EXPECT_TRUE(pub->take_errors().empty());
+  const auto after = sub->stats().value();
+
+  // Every frame arrived or was counted; what arrived is the take solved frame
+  // by frame, within 1 mm.
+  const auto d = distances(full);
+  const std::size_t least = kSlowBuild ? served / 4 : served / 2;
+  {
+    std::lock_guard lock(full.mutex);
+    EXPECT_GE(full.frames.size(), least);
+    EXPECT_EQ(full.joints.size(), take().solved.skeleton.size());
+    for (const auto& [index, _] : full.frames) EXPECT_GE(index, calibration);
+  }
+  ASSERT_FALSE(d.empty());
+  EXPECT_LE(*std::max_element(d.begin(), d.end()), 1.0);
+  // One point in ten dropped: near the full solve, and every missing point
+  // of a solved frame counted.
+  const auto dd = distances(dropped);
+  ASSERT_FALSE(dd.empty());
+  std::printf("[ figures  ] live markers: %zu frames within %.2g mm of the take solved frame by frame; with %zu points "
+              "missing, %zu frames %.1f mm median off it, %llu part poses held\n",
+              d.size() / full.joints.size(), *std::max_element(d.begin(), d.end()), missing,
+              dd.size() / dropped.joints.size(), median(dd),
+              static_cast<unsigned long long>(after.live_marker_parts_held - before.live_marker_parts_held));
+  EXPECT_LE(median(dd), 10.0);
+  std::size_t take_missing = 0;  // in the full publication's served frames
+  for (std::size_t f = calibration; f < calibration + served; ++f) {
+    for (std::size_t m = 0; m < names.size(); ++m) take_missing += std::isnan(frame_of(f)[3 * m]) ? 1 : 0;
+  }
+  EXPECT_LE(after.live_marker_points_missing - before.live_marker_points_missing, take_missing + missing);
+  EXPECT_GE(after.live_marker_points_missing - before.live_marker_points_missing, take_missing + missing / 2);
+}
+
+TEST(LiveMarkers, BadAnnouncementsAndFramesAreRefusedNamingWhatAndCounted) {
+  GMR_REQUIRE_DATA();
+  TestServer server(live_config());
+  auto pub = connect_as(server, kPublishToken);
+  ASSERT_TRUE(pub);
+  std::vector<std::string> names = take().markers.names;
+  // The model needs markers the stream does not name: refused, naming them.
+  std::vector<std::string> fewer;
+  for (const auto& n : names) {
+    if (n.find("LKNE") == std::string::npos && n.find("RFIN") == std::string::npos) fewer.push_back(n);
+  }
+  auto lacking = pub->publish_markers(fewer, options("lacking"));
+  ASSERT_FALSE(lacking.ok());
+  EXPECT_NE(lacking.error().message.find("needs 2 markers the stream does not name: LKNE, RFIN"), std::string::npos)
+      << lacking.error().message;
+  auto unknown = options("unknown model");
+  unknown.model = "cmu99";
+  auto bad_model = pub->publish_markers(names, unknown);
+  ASSERT_FALSE(bad_model.ok());
+  EXPECT_NE(bad_model.error().message.find("cmu41"), std::string::npos) << bad_model.error().message;
+  auto twice = names;
+  twice.push_back(names[0]);
+  EXPECT_FALSE(pub->publish_markers(twice, options("twice")).ok());
+
+  auto p = pub->publish_markers(names, options("bad frames"));
+  ASSERT_TRUE(p.ok()) << p.error().to_string();
+  const auto before = pub->stats().value();
+  std::vector<double> frame(frame_of(0).begin(), frame_of(0).end());
+  frame[4] = std::numeric_limits<double>::infinity();
+  ASSERT_TRUE(pub->publish_marker_frame(p->id, frame).ok());
+  frame[4] = 1e12;  // 1,000 km
+  ASSERT_TRUE(pub->publish_marker_frame(p->id, frame).ok());
+  frame.pop_back();
+  ASSERT_TRUE(pub->publish_marker_frame(p->id, frame).ok());
+  ASSERT_TRUE(pub->list_motions().ok());  // a round trip: the server has read them
+  const auto errors = pub->take_errors();
+  ASSERT_EQ(errors.size(), 3u);
+  EXPECT_NE(errors[0].find("marker \"" + names[1] + "\" has coordinate y = inf"), std::string::npos) << errors[0];
+  EXPECT_NE(errors[1].find("beyond 10 km"), std::string::npos) << errors[1];
+  EXPECT_NE(errors[2].find("need " + std::to_string(3 * names.size())), std::string::npos) << errors[2];
+  EXPECT_EQ(pub->stats().value().live_frames_refused - before.live_frames_refused, 3u);
+}
+
+}  // namespace
+}  // namespace gmr::test
