@@ -12,6 +12,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <iostream>
 #include <memory>
 #include <mutex>
@@ -535,6 +536,28 @@ struct PublishCommand {
   double calibration_seconds = 2.0;
 };
 
+// Sends `total` frames (0: until stopped) one per `frame_time` on a
+// drift-free clock, `send(k)` sending the k-th; a refused frame ends it.
+// Returns the frames sent.
+std::uint64_t play(client::Client& c, std::uint64_t total, double frame_time,
+                   const std::function<Status(std::uint64_t)>& send) {
+  const auto period =
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(frame_time));
+  const auto start = std::chrono::steady_clock::now();
+  std::uint64_t sent = 0;
+  for (; total == 0 || sent < total; ++sent) {
+    std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(sent));
+    if (!c.connected())
+      throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
+    if (auto s = send(sent); !s.ok()) {
+      std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent),
+                   shown(s.error().message).c_str());
+    }
+    for (const auto& e : c.take_errors()) throw CommandError("the server refused a frame: " + e);
+  }
+  return sent;
+}
+
 // Plays a marker file as labelled markers (docs/protocol.md, "Live markers"):
 // the names and the model, then x, y, z per marker each period (a missing
 // point is sent as missing), then Unpublish. The server calibrates on the
@@ -557,23 +580,11 @@ void run_publish_markers(const PublishCommand& o) {
                o.file.c_str(), po.name.c_str(), d.marker_count(), po.model.c_str(), rate, o.loop ? ", looping" : "",
                po.calibration_seconds);
   const std::uint64_t total = o.loop ? o.count : o.count != 0 ? std::min(o.count, d.frame_count) : d.frame_count;
-  const auto period =
-      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / rate));
   const std::size_t row = d.marker_count() * 3;
-  const auto start = std::chrono::steady_clock::now();
-  std::uint64_t sent = 0;
-  for (; total == 0 || sent < total; ++sent) {
-    std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(sent));
-    if (!c->connected())
-      throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
-    const std::size_t f = sent % d.frame_count;
-    if (auto s = c->publish_marker_frame(publication.id, std::span<const double>(d.positions).subspan(f * row, row));
-        !s.ok()) {
-      std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent),
-                   shown(s.error().message).c_str());
-    }
-    for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
-  }
+  const std::uint64_t sent = play(*c, total, 1.0 / rate, [&](std::uint64_t k) {
+    const std::size_t f = k % d.frame_count;
+    return c->publish_marker_frame(publication.id, std::span<const double>(d.positions).subspan(f * row, row));
+  });
   check(c->unpublish(publication.id));
   for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
   std::fprintf(stderr, "published %llu marker frames of '%s'\n", static_cast<unsigned long long>(sent),
@@ -617,20 +628,8 @@ void run_publish(const PublishCommand& o) {
                po.name.c_str(), m.skeleton.size(), m.stride(), 1.0 / frame_time, o.loop ? ", looping" : "");
   // Without --loop the file is published once: --count can only stop it early.
   const std::uint64_t total = o.loop ? o.count : o.count != 0 ? std::min(o.count, m.frame_count) : m.frame_count;
-  const auto period =
-      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(frame_time));
-  const auto start = std::chrono::steady_clock::now();
-  std::uint64_t sent = 0;
-  for (; total == 0 || sent < total; ++sent) {
-    std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(sent));
-    if (!c->connected())
-      throw CommandError("the server closed the connection after " + std::to_string(sent) + " frames");
-    if (auto s = c->publish_frame(id, m.frame(sent % m.frame_count)); !s.ok()) {
-      std::fprintf(stderr, "frame %llu not sent: %s\n", static_cast<unsigned long long>(sent),
-                   shown(s.error().message).c_str());
-    }
-    for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
-  }
+  const std::uint64_t sent =
+      play(*c, total, frame_time, [&](std::uint64_t k) { return c->publish_frame(id, m.frame(k % m.frame_count)); });
   check(c->unpublish(id));
   for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
   std::fprintf(

@@ -11,10 +11,10 @@ namespace gmr {
 
 using Eigen::Quaterniond;
 using Eigen::Vector3d;
+using marker_detail::fit_two_points;
 using marker_detail::FramePart;
 using marker_detail::PartFitter;
 using marker_detail::Pose;
-using marker_detail::fit_two_points;
 using marker_detail::solve_keeping;
 using marker_detail::write_frame;
 

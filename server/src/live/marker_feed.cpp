@@ -17,7 +17,7 @@ namespace gmr::server {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-constexpr double kFarthestMm = 1e7;     // a coordinate beyond 10 km is no marker
+constexpr double kFarthestMm = 1e7;      // a coordinate beyond 10 km is no marker
 constexpr double kMaxCalibrationS = 10;  // the calibration's frames are held until it is made
 
 }  // namespace
@@ -32,8 +32,8 @@ std::variant<MarkerFeed, Refusal> MarkerFeed::make(const pb::Publish& r, const S
   if (r.skeleton().joints_size() > 0) return bad("a marker publication sends markers, not a skeleton");
   if (m.names_size() == 0) return bad("a marker publication names its markers");
   if (static_cast<std::size_t>(m.names_size()) > cfg.max_live_joints) {
-    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, fmt::format("{} markers; a marker publication has at most {}",
-                                                                  m.names_size(), cfg.max_live_joints)};
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   fmt::format("{} markers; a marker publication has at most {}", m.names_size(), cfg.max_live_joints)};
   }
   std::set<std::string> seen;
   for (int i = 0; i < m.names_size(); ++i) {
@@ -106,11 +106,11 @@ Result<MarkerFeed::Taken> MarkerFeed::take(const pb::PublishFrame& frame) {
     const double v = positions_[i];
     if (missing_[i / 3]) continue;
     if (!std::isfinite(v) || std::abs(v) > farthest) {
-      return make_error(ErrorKind::kInvalidArgument,
-                        fmt::format("marker {} has coordinate {} = {}: {}", printable(calibration_.names[i / 3], 64),
-                                    "xyz"[i % 3], v,
-                                    std::isnan(v) ? "not a number (a marker the frame lacks goes in missing_markers)"
-                                                  : "not finite or beyond 10 km"));
+      return make_error(
+          ErrorKind::kInvalidArgument,
+          fmt::format("marker {} has coordinate {} = {}: {}", printable(calibration_.names[i / 3], 64), "xyz"[i % 3], v,
+                      std::isnan(v) ? "not a number (a marker the frame lacks goes in missing_markers)"
+                                    : "not finite or beyond 10 km"));
     }
   }
   ++frames_;
@@ -120,9 +120,8 @@ Result<MarkerFeed::Taken> MarkerFeed::take(const pb::PublishFrame& frame) {
     auto solver = MarkerFrameSolver::calibrate(calibration_, model_, 0, calibration_.frame_count);
     calibration_.positions = {};
     if (!solver.ok()) {
-      return make_error(ErrorKind::kFailedPrecondition,
-                        fmt::format("the calibration on the first {} frames failed: {}", calibration_frames_,
-                                    solver.error().message));
+      return make_error(ErrorKind::kFailedPrecondition, fmt::format("the calibration on the first {} frames failed: {}",
+                                                                    calibration_frames_, solver.error().message));
     }
     solver_.emplace(std::move(solver).value());
     return Taken::kCalibrated;

@@ -37,6 +37,19 @@ std::filesystem::path recording_path(const std::string& dir, const std::string& 
 
 }  // namespace
 
+std::optional<Refusal> Publications::room_for(const std::string& name) const {
+  if (link_.services.catalog.find(name)) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "a motion named '" + name + "' is already served: publish under another name"};
+  }
+  const std::size_t most = link_.services.cfg.max_publications_per_connection;
+  if (publications_.size() >= most) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
+                   "at most " + std::to_string(most) + " live sources per connection"};
+  }
+  return std::nullopt;
+}
+
 Reply Publications::publish(const pb::Publish& r, Role role) {
   if (role < Role::kPublish) {
     return Refusal{pb::ERROR_CODE_PERMISSION_DENIED,
@@ -47,14 +60,7 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
   const ServerConfig& cfg = link_.services.cfg;
   auto checked = check_announcement(r, cfg);
   if (auto* refusal = std::get_if<Refusal>(&checked)) return std::move(*refusal);
-  if (link_.services.catalog.find(r.name())) {
-    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
-                   "a motion named '" + r.name() + "' is already served: publish under another name"};
-  }
-  if (publications_.size() >= cfg.max_publications_per_connection) {
-    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
-                   "at most " + std::to_string(cfg.max_publications_per_connection) + " live sources per connection"};
-  }
+  if (auto refused = room_for(r.name())) return std::move(*refused);
   std::string recording;
   if (r.record()) {
     if (cfg.record_dir.empty()) {
@@ -129,14 +135,7 @@ Reply Publications::publish_markers(const pb::Publish& r) {
   auto made = MarkerFeed::make(r, cfg);
   if (auto* refusal = std::get_if<Refusal>(&made)) return std::move(*refusal);
   auto feed = std::make_shared<MarkerFeed>(std::move(std::get<MarkerFeed>(made)));
-  if (link_.services.catalog.find(r.name())) {
-    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
-                   "a motion named '" + r.name() + "' is already served: publish under another name"};
-  }
-  if (publications_.size() >= cfg.max_publications_per_connection) {
-    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED,
-                   "at most " + std::to_string(cfg.max_publications_per_connection) + " live sources per connection"};
-  }
+  if (auto refused = room_for(r.name())) return std::move(*refused);
   if (r.record()) {
     return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
                    "recording a marker publication is not offered yet: record a subscription to it (gmr record)"};

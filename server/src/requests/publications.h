@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "gmr/server/auth.h"
@@ -37,6 +38,8 @@ class Publications {
     std::string name;
     double frame_time = 0;
   };
+  // A new publication named `name`: the name free, this session under its bound.
+  std::optional<Refusal> room_for(const std::string& name) const;
   Reply publish_markers(const pb::Publish& r);
   Reply marker_frame(std::uint32_t id, Held& held, const pb::PublishFrame& r);
   // Hands `values` to the publication's source (the rate hold, the replicas).

@@ -206,11 +206,11 @@ TEST(LiveMarkers, SubscribersGetTheTakeSolvedFrameByFrameAndDropsAreCounted) {
   // of a solved frame counted.
   const auto dd = distances(dropped);
   ASSERT_FALSE(dd.empty());
-  std::printf("[ figures  ] live markers: %zu frames within %.2g mm of the take solved frame by frame; with %zu points "
-              "missing, %zu frames %.1f mm median off it, %llu part poses held\n",
-              d.size() / full.joints.size(), *std::max_element(d.begin(), d.end()), missing,
-              dd.size() / dropped.joints.size(), median(dd),
-              static_cast<unsigned long long>(after.live_marker_parts_held - before.live_marker_parts_held));
+  std::printf(
+      "[ figures  ] live markers: %zu frames within %.2g mm of the take solved frame by frame; with %zu points "
+      "missing, %zu frames %.1f mm median off it, %llu part poses held\n",
+      d.size() / full.joints.size(), *std::max_element(d.begin(), d.end()), missing, dd.size() / dropped.joints.size(),
+      median(dd), static_cast<unsigned long long>(after.live_marker_parts_held - before.live_marker_parts_held));
   EXPECT_LE(median(dd), 10.0);
   std::size_t take_missing = 0;  // in the full publication's served frames
   for (std::size_t f = calibration; f < calibration + served; ++f) {
