@@ -598,19 +598,29 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
   EXPECT_LT(worst, 1e-9 * skeleton_size(m));
 }
 
-// 02_01's own skeleton (02.asf) is not in the corpus: its AMC is played on
-// subject 12's, whose femur is 336 mm where these markers give 421 mm
-// (docs/markers.md), so joint positions agree only as far as those bones
-// allow (bounds from docs/markers.md's table); bone directions agree as for
-// 01_01.
+// 02_01 against subject 02's own skeleton (02.asf, in the corpus since
+// 2026-11-27; before, the AMC was played on subject 12's, whose femur is
+// 85 mm short). Bounds: what the model reaches today, not issue 37's 30 mm
+// median and 60 mm p95 per joint: the ankles sit 37-40 mm lateral of
+// CMU's (docs/markers.md, "Accuracy on CMU takes"), the other joints within
+// 33 mm (median).
 TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
   GMR_REQUIRE_DATA();
-  const TakeComparison c = compare_take("c3d/cmu_02_01.c3d", {"asfamc/02/02_01.amc", "asfamc/02/12.asf"});
+  const TakeComparison c = compare_take("c3d/cmu_02_01.c3d", {"asfamc/02/02_01.amc", "asfamc/02/02.asf"});
   ASSERT_EQ(c.errors.size(), kComparedJoints.size());
   report("02_01", c);
-  // The C3D's first frame (capture frame 50) is the AMC's frame 2.
-  EXPECT_EQ(c.frame_offset, 1);
-  expect_reached(c, 100.0, 120.0);
+  // The C3D's first frame (capture frame 50) is the AMC's frame 1 or 2 (the
+  // pairing the residual picks).
+  EXPECT_GE(c.frame_offset, 0);
+  EXPECT_LE(c.frame_offset, 1);
+  expect_reached(c, 45.0, 60.0);
+  std::vector<double> medians;
+  for (const JointError& e : c.errors) {
+    if (e.joint != "ltibia" && e.joint != "rtibia") EXPECT_LE(e.median_mm, 35.0) << e.joint;
+    medians.push_back(e.median_mm);
+  }
+  std::sort(medians.begin(), medians.end());
+  EXPECT_LE(medians[medians.size() / 2], 25.0);  // the middle joint
 }
 
 // The same take against subject 02's own limbs. CMU's BVH conversion of
