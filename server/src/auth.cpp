@@ -1,7 +1,6 @@
 #include "gmr/server/auth.h"
 
 #include <openssl/crypto.h>
-#include <openssl/evp.h>
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -10,6 +9,7 @@
 #include <cstdio>
 
 #include "gmr/core/file_util.h"
+#include "transport/digest.h"
 
 namespace gmr::server {
 
@@ -47,13 +47,6 @@ std::string weak_token(std::string_view token) {
     return text;
   }
   return {};
-}
-
-std::array<std::uint8_t, 32> sha256(std::string_view text) {
-  std::array<std::uint8_t, 32> out{};
-  unsigned int n = 0;
-  EVP_Digest(text.data(), text.size(), out.data(), &n, EVP_sha256(), nullptr);
-  return out;
 }
 
 bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r'; }

@@ -2,7 +2,7 @@
 // one live source whose keys are equal make equal frames from each frame the
 // source publishes, so the source replays their edits once for all of them.
 // Each field is length-prefixed: two different edit lists never spell the
-// same key.
+// same text, and ViewEdit keeps its SHA-256 (transport/digest.h).
 #pragma once
 
 #include <string>

@@ -19,6 +19,7 @@
 #include "gmr/ops/strip_dummies.h"
 #include "gmr/retarget/retarget.h"
 #include "live_key.h"
+#include "transport/digest.h"
 
 namespace gmr::server {
 
@@ -180,7 +181,10 @@ Result<std::shared_ptr<const ViewContent>> ViewEdit::run() const {
   }
   auto content = next_content(base, std::move(next), viewer, {}, std::move(steps));
   if (content->live_steps) {
-    auto key = std::make_shared<std::string>(base.live_key ? *base.live_key + key_ : key_);
+    // A digest, not the text: a retarget's key holds the rig's and the
+    // source's joints, and LiveSource compares keys per stream and frame.
+    const auto digest = sha256(base.live_key ? *base.live_key + key_ : key_);
+    auto key = std::make_shared<const std::string>(digest.begin(), digest.end());
     content->live_key_hash = std::hash<std::string>{}(*key);
     content->live_key = std::move(key);
   }

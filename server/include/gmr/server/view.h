@@ -69,9 +69,10 @@ struct ViewContent {
   // order, and `motion` is one frame (the newest when the view last changed).
   // Null for library motions.
   std::shared_ptr<const std::vector<LiveStep>> live_steps;
-  // Those edits spelled out (streams/live_key.h), and its hash: views of one
-  // source with equal keys make equal frames, so the source replays the
-  // edits once for all of them. Null with no edits.
+  // Those edits spelled out (streams/live_key.h) and digested (SHA-256 of
+  // the previous edits' digest and this edit's key), and a hash of it: views
+  // of one source with equal keys make equal frames, so the source replays
+  // the edits once for all of them. Null with no edits.
   std::shared_ptr<const std::string> live_key;
   std::size_t live_key_hash = 0;
   // The library motion it shows, and which version of it (LibraryEntry::
