@@ -1,5 +1,7 @@
 #include "admission.h"
 
+#include <cmath>
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -170,19 +172,41 @@ std::string Admission::admit_anonymous(std::uint64_t id) {
   return {};
 }
 
-std::optional<std::string> Admission::commit_rate(double rate_hz, std::uint64_t rate_mhz, Asker asker) {
-  if (cfg_.send_budget > 0 && static_cast<double>(committed_mhz_ + rate_mhz) > cfg_.send_budget * 1000.0) {
+double Admission::send_cost(SendKind kind) {
+  switch (kind) {
+    case SendKind::kOwnTcp:
+      return 1.0;
+    case SendKind::kOwnUdp:
+      return 0.7;
+    case SendKind::kSharedTcp:
+      return 0.8;
+    case SendKind::kSharedUdp:
+      return 0.5;
+    case SendKind::kMulticast:
+      return 0.005;
+  }
+  return 1.0;
+}
+
+std::uint64_t Admission::cost_mhz(double rate_hz, SendKind kind) {
+  return static_cast<std::uint64_t>(std::llround(rate_hz * send_cost(kind) * 1000.0));
+}
+
+std::optional<std::string> Admission::commit_rate(double rate_hz, std::uint64_t cost_mhz, Asker asker) {
+  if (cfg_.send_budget > 0 && static_cast<double>(committed_mhz_ + cost_mhz) > cfg_.send_budget * 1000.0) {
     ++(asker == Asker::kSubscription ? subscriptions_refused_ : publications_refused_);
-    char text[320];
+    char text[400];
     std::snprintf(text, sizeof text,
                   "the server's subscriptions already ask for %.0f of the %.0f frames/s it can send "
-                  "(--send-budget; live sources count their declared rate); %.1f Hz more would pass it: %s",
+                  "(--send-budget, in own-stream TCP frames; live sources count their declared rate); "
+                  "%.1f Hz more (%.1f of them) would pass it: %s",
                   static_cast<double>(committed_mhz_) / 1000.0, cfg_.send_budget, rate_hz,
+                  static_cast<double>(cost_mhz) / 1000.0,
                   asker == Asker::kSubscription ? "subscribe at a lower rate, or connect to another replica"
                                                 : "publish at a lower rate, or to another replica");
     return std::string(text);
   }
-  committed_mhz_ += rate_mhz;
+  committed_mhz_ += cost_mhz;
   return std::nullopt;
 }
 

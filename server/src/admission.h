@@ -107,12 +107,24 @@ class Admission {
   static constexpr std::size_t kMaxAuthAddresses = 4096;
 
   // --- The send budget (docs/protocol.md, "Admission") --------------------
-  // Commits `rate_hz` (in millihertz, `rate_mhz`) of frames per second, or
-  // says why the budget refuses it (counted). A live source commits its
-  // declared rate (every frame it takes is computed for its views, whoever
-  // watches), which RateHold holds it to.
+  // The budget is in frames/s of own TCP streams (a forward-kinematics run,
+  // an encoding and a TCP send each). Another kind of frame costs a share of
+  // one, measured on the reference machine (issue 39's grid, CPU per
+  // delivered frame at 1,000-10,000 subscribers): an own stream's frame over
+  // UDP about 0.7 of it, a frame of a shared stream someone else's tick
+  // computed 0.8 over TCP and 0.5 over UDP (the send alone), and a
+  // multicast subscriber's share of its stream's one send nearly nothing
+  // (its control connection's bookkeeping).
+  enum class SendKind { kOwnTcp, kOwnUdp, kSharedTcp, kSharedUdp, kMulticast };
+  static double send_cost(SendKind kind);
+  // `rate_hz` frames/s of `kind`, in millihertz of the budget's unit.
+  static std::uint64_t cost_mhz(double rate_hz, SendKind kind);
+  // Commits `cost_mhz` (cost_mhz() of the subscription's `rate_hz`), or says
+  // why the budget refuses it (counted). A live source commits its declared
+  // rate as own frames (every frame it takes is computed for its views,
+  // whoever watches), which RateHold holds it to.
   enum class Asker { kSubscription, kPublication };
-  std::optional<std::string> commit_rate(double rate_hz, std::uint64_t rate_mhz, Asker asker = Asker::kSubscription);
+  std::optional<std::string> commit_rate(double rate_hz, std::uint64_t cost_mhz, Asker asker = Asker::kSubscription);
   void release_rate(std::uint64_t rate_mhz) { committed_mhz_ -= rate_mhz; }
   double committed_frames_per_second() const { return static_cast<double>(committed_mhz_) / 1000.0; }
   std::uint64_t committed_mhz() const { return committed_mhz_; }

@@ -258,10 +258,10 @@ void Server::start() {
     if (!c.ok()) throw std::runtime_error(c.error().to_string() + " (give --send-budget a figure)");
     d.cfg.send_budget = std::floor(c->budget);
     spdlog::info(
-        "send budget {:.0f} frames/s: a frame-sized TCP send costs {:.0f} ns here (the slowest of {} CPUs; "
-        "the fastest {:.0f}) against {:.0f} ns on the reference machine, which held {:.0f} (measured in "
+        "send budget {:.0f} frames/s: a frame-sized TCP send costs {:.0f} ns here (the fastest of {} CPUs; "
+        "the slowest {:.0f}) against {:.0f} ns on the reference machine, which held {:.0f} (measured in "
         "{:.2f} s; --send-budget N to set it)",
-        d.cfg.send_budget, c->ns_per_send, c->cpus, c->fastest_ns_per_send, kReferenceNsPerSend, kReferenceBudget,
+        d.cfg.send_budget, c->fastest_ns_per_send, c->cpus, c->ns_per_send, kReferenceNsPerSend, kReferenceBudget,
         c->seconds);
   }
   d.tls = make_tls_context(d.cfg);

@@ -92,12 +92,6 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   // Its targets hold the connection (targets.h).
   const auto conn = link_.connection();
   if (!conn) return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, "the connection is closing"};
-  // Admission: the rates all subscribers asked for stay within what the
-  // server can send (docs/protocol.md, "Admission"). Committed from here on.
-  const auto rate_mhz = static_cast<std::uint64_t>(std::llround(s.rate * 1000.0));
-  if (auto refused = link_.services.admission.commit_rate(s.rate, rate_mhz)) {
-    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, std::move(*refused)};
-  }
   settings.joints = std::move(joints).value();
   settings.orientations = r.orientations();
   settings.local_transforms = r.local_transforms();
@@ -113,6 +107,16 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   const std::string key = r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
   std::shared_ptr<Stream> stream = key.empty() ? nullptr : link_.services.streams.find_running(key);
   const bool joined = stream != nullptr;
+  // Admission: what all subscriptions cost stays within what the server can
+  // send (docs/protocol.md, "Admission"), each counted by its kind. Committed from here on.
+  using Kind = Admission::SendKind;
+  const Kind kind = use_multicast ? Kind::kMulticast
+                    : joined      ? (use_udp ? Kind::kSharedUdp : Kind::kSharedTcp)
+                                  : (use_udp ? Kind::kOwnUdp : Kind::kOwnTcp);
+  const std::uint64_t rate_mhz = Admission::cost_mhz(s.rate, kind);
+  if (auto refused = link_.services.admission.commit_rate(s.rate, rate_mhz)) {
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, std::move(*refused)};
+  }
   if (!stream) {
     stream = link_.services.streams.create(v->content(), settings, key);
     if (source) stream->set_live();
@@ -120,9 +124,11 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
 
   const std::uint32_t id = next_sub_++;
   std::shared_ptr<SubscriptionTarget> target;
+  std::shared_ptr<MulticastTarget> member;
   if (use_multicast) {
-    target = std::make_shared<MulticastTarget>(self_, conn, id, v->id(), link_.services.udp,
-                                               link_.services.multicast.channel(stream->id()));
+    member = std::make_shared<MulticastTarget>(self_, conn, id, v->id(),
+                                               link_.services.multicast.channel(*stream, link_.services.udp));
+    target = member;
   } else if (use_udp) {
     target = std::make_shared<UdpTarget>(self_, conn, id, v->id(), link_.services.udp, udp_);
   } else {
@@ -130,7 +136,11 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   }
   target->set_max_age(r.max_staleness_ms() == 0 ? std::chrono::milliseconds(cfg.default_max_staleness)
                                                 : std::chrono::milliseconds(r.max_staleness_ms()));
-  stream->add(target, r.max_frames());
+  if (member) {
+    member->channel()->join(member, r.max_frames());
+  } else {
+    stream->add(target, r.max_frames());
+  }
   subs_[id] =
       Subscription{v->id(),        stream,        target,         names, rate_mhz, v->content()->skeleton_version,
                    settings.basis, use_multicast, r.conventions()};
@@ -240,11 +250,22 @@ void Subscriptions::attach_live(LiveSource& source, const std::shared_ptr<Stream
   }
 }
 
+void Subscriptions::remove_target(Subscription& s) {
+  if (!s.multicast) {
+    s.stream->remove(s.target.get());
+    return;
+  }
+  // A member of its stream's channel; the channel leaves the stream with its last member.
+  const auto& channel = static_cast<const MulticastTarget&>(*s.target).channel();
+  channel->leave(static_cast<const MulticastTarget*>(s.target.get()));
+  if (channel->members() == 0) s.stream->remove(channel.get());
+}
+
 void Subscriptions::drop(std::uint32_t id) {
   auto it = subs_.find(id);
   if (it == subs_.end()) return;
   Subscription& s = it->second;
-  s.stream->remove(s.target.get());
+  remove_target(s);
   if (s.stream->idle()) s.stream->stop();
   if (auto c = link_.connection()) c->discard_frames(id);
   link_.services.admission.release_rate(s.rate_mhz);
@@ -313,7 +334,7 @@ void Subscriptions::subscription_ended(std::uint32_t id, std::uint64_t sent, con
   m.mutable_subscription_ended()->set_frames_stale(stale);
   m.mutable_subscription_ended()->set_frames_skipped(s.target->late_skipped());
   m.mutable_subscription_ended()->set_reason(reason);
-  s.stream->remove(s.target.get());
+  remove_target(s);
   link_.services.admission.release_rate(s.rate_mhz);
   subs_.erase(it);
   link_.send(m);

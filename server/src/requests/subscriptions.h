@@ -65,6 +65,8 @@ class Subscriptions final : public SubscriptionEvents {
 
   Subscription* find(std::uint32_t id);
   void drop(std::uint32_t id);
+  // The subscription's target out of its stream (a multicast one out of the stream's channel).
+  void remove_target(Subscription& s);
   // The subscription's stream, now its alone (split off a shared one).
   std::shared_ptr<Stream> detach(Subscription& s);
   // A new stream of live source `source`: fed by it from now on, starting

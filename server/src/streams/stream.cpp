@@ -6,12 +6,13 @@
 #include "gmr/view/engine_pose.h"
 #include "prometheus/histogram.h"
 #include "streams/frame_encoder.h"
+#include "streams/stream_clock.h"
 
 namespace gmr::server {
 
-Stream::Stream(net::io_context& io, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
+Stream::Stream(StreamClock& clock, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
                StreamCounters& counters)
-    : io_(io), id_(id), content_(std::move(content)), settings_(std::move(settings)), counters_(counters), timer_(io) {
+    : clock_(clock), id_(id), content_(std::move(content)), settings_(std::move(settings)), counters_(counters) {
   if (settings_.local_transforms) own_frames_ = own_frame_sources(*content_->motion);
 }
 
@@ -44,11 +45,7 @@ Clock::time_point Stream::due(std::uint64_t tick) const {
 
 void Stream::arm() {
   if (live_) return;  // its source's frames drive it
-  timer_.expires_at(due(tick_));
-  timer_.async_wait([weak = weak_from_this()](const boost::system::error_code& ec) {
-    if (ec) return;
-    if (auto self = weak.lock()) self->on_tick();
-  });
+  clock_.schedule(weak_from_this(), due(tick_), ++armed_);
 }
 
 void Stream::start() {
@@ -61,7 +58,7 @@ void Stream::pause() {
   if (paused_) return;
   paused_ = true;
   pause_pos_ = position(tick_);
-  timer_.cancel();
+  stop();
 }
 
 void Stream::resume() {
@@ -79,7 +76,7 @@ void Stream::seek(std::uint32_t frame) {
     pause_pos_ = pos;
     return;
   }
-  timer_.cancel();
+  stop();
   rebase(Clock::now(), pos);
   arm();
 }
@@ -94,7 +91,7 @@ void Stream::set_content(std::shared_ptr<const ViewContent> content, std::vector
 }
 
 std::shared_ptr<Stream> Stream::split_off(std::uint64_t id, const Target* target) {
-  auto s = std::make_shared<Stream>(io_, id, content_, settings_, counters_);
+  auto s = std::make_shared<Stream>(clock_, id, content_, settings_, counters_);
   s->sequence_ = sequence_;  // the subscriber sees no gap or restart
   s->live_ = live_;
   s->last_frame_ = last_frame_;
@@ -167,7 +164,8 @@ void Stream::on_tick() {
   if (paused_ || targets_.empty()) return;
   saw_dead_ = true;  // not known until mark_ready() runs
   if (counters_.tick_lateness != nullptr) {
-    counters_.tick_lateness->Observe(std::chrono::duration<double>(Clock::now() - due(tick_)).count());
+    // A tick runs up to StreamClock::kGrain early: on time, for lateness.
+    counters_.tick_lateness->Observe(std::max(0.0, std::chrono::duration<double>(Clock::now() - due(tick_)).count()));
   }
   const Schedule& sched = settings_.schedule;
   const double pos = position(tick_);

@@ -6,7 +6,8 @@
 // into the float encoding); float64 streams, and contents that do not
 // compile, the double reference path (gmr::view_frame).
 //
-// Frame k of the schedule is due at base_time + k / rate (drift-free).
+// Frame k of the schedule is due at base_time + k / rate (drift-free); the
+// server's StreamClock (stream_clock.h) runs every stream's ticks on one timer.
 //
 // A live stream (set_live) has no timer and no schedule: its source hands it
 // each published frame (live_frame), with the content its view shows at that
@@ -61,6 +62,7 @@ constexpr double kMinSpeed = 1e-3, kMaxSpeed = 1000.0;
 constexpr double kMinRateHz = 1e-2, kMaxRateHz = 10000.0;
 
 class FkBlocks;
+class StreamClock;
 
 // The server-wide counters streams add to, and the FK blocks they share.
 struct StreamCounters {
@@ -96,7 +98,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   };
   static constexpr std::chrono::milliseconds kCongestedBackoff{20};
 
-  Stream(net::io_context& io, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
+  Stream(StreamClock& clock, std::uint64_t id, std::shared_ptr<const ViewContent> content, Settings settings,
          StreamCounters& counters);
 
   std::uint64_t id() const { return id_; }
@@ -117,7 +119,11 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void pause();
   void resume();
   void seek(std::uint32_t frame);
-  void stop() { timer_.cancel(); }
+  void stop() { ++armed_; }  // its tick waiting on the clock, if any, is cancelled
+  // The clock's call for tick `generation` (a cancelled one does nothing).
+  void on_clock(std::uint64_t generation) {
+    if (generation == armed_) on_tick();
+  }
   void set_content(std::shared_ptr<const ViewContent> content, std::vector<int> joints, const OutputBasis& basis);
   const std::shared_ptr<const ViewContent>& content() const { return content_; }
 
@@ -160,13 +166,13 @@ class Stream : public std::enable_shared_from_this<Stream> {
   // starting one further each time.
   void fan_out(const std::vector<Entry>& targets, const std::shared_ptr<const std::string>& body);
 
-  net::io_context& io_;
+  StreamClock& clock_;
   std::uint64_t id_;
   std::shared_ptr<const ViewContent> content_;
   std::vector<int> own_frames_;  // own_frame_sources of content_'s motion, when local_transforms
   Settings settings_;
   StreamCounters& counters_;
-  net::steady_timer timer_;
+  std::uint64_t armed_ = 0;  // the generation of its tick waiting on the clock
   std::vector<Entry> targets_;
   std::string share_key_;
 

@@ -38,10 +38,15 @@ std::shared_ptr<Stream> StreamRegistry::find_running(const std::string& key) {
   return s && !s->paused() && !s->idle() ? s : nullptr;
 }
 
+std::shared_ptr<Stream> StreamRegistry::find(std::uint64_t id) const {
+  auto it = streams_.find(id);
+  return it == streams_.end() ? nullptr : it->second.lock();
+}
+
 std::shared_ptr<Stream> StreamRegistry::create(std::shared_ptr<const ViewContent> content, Stream::Settings settings,
                                                const std::string& key) {
   prune();
-  auto s = std::make_shared<Stream>(io_, next_id_++, std::move(content), std::move(settings), counters_);
+  auto s = std::make_shared<Stream>(clock_, next_id_++, std::move(content), std::move(settings), counters_);
   streams_[s->id()] = s;
   if (!key.empty()) {
     s->set_share_key(key);
@@ -97,6 +102,7 @@ void StreamRegistry::stop_all() {
   for (auto& [id, w] : streams_) {
     if (auto s = w.lock()) s->stop();
   }
+  clock_.stop();
 }
 
 void StreamRegistry::prune() {

@@ -11,12 +11,13 @@
 #include <vector>
 
 #include "streams/stream.h"
+#include "streams/stream_clock.h"
 
 namespace gmr::server {
 
 class StreamRegistry {
  public:
-  StreamRegistry(net::io_context& io, StreamCounters& counters) : io_(io), counters_(counters) {}
+  StreamRegistry(net::io_context& io, StreamCounters& counters) : clock_(io), counters_(counters) {}
 
   // The key naming everything that shapes a stream's bytes: the motion, its
   // skeleton version and joint structure, the viewpoint, the joints,
@@ -33,6 +34,8 @@ class StreamRegistry {
   // alone on it (then no longer joinable), else a copy that took it over.
   std::shared_ptr<Stream> detach(const std::shared_ptr<Stream>& stream, const Target* target);
 
+  // Stream `id`, while some subscription holds it (null: none).
+  std::shared_ptr<Stream> find(std::uint64_t id) const;
   // Streams some subscription still holds.
   std::size_t live();
   // Streams with at least one target.
@@ -42,12 +45,13 @@ class StreamRegistry {
   // subscribers get SubscriptionEnded with it); returns how many.
   std::size_t end_where(const std::function<std::string(const ViewContent&)>& why);
   void stop_all();
+  const StreamClock& clock() const { return clock_; }
 
  private:
   // Forgets streams no subscription holds any more.
   void prune();
 
-  net::io_context& io_;
+  StreamClock clock_;  // every stream's ticks
   StreamCounters& counters_;
   std::uint64_t next_id_ = 1;
   std::map<std::uint64_t, std::weak_ptr<Stream>> streams_;

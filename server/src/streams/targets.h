@@ -12,7 +12,9 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "transport/outbox.h"
 #include "streams/stream.h"
@@ -82,13 +84,83 @@ class UdpTarget final : public SubscriptionTarget {
   std::shared_ptr<UdpPublisher::Registration> endpoint_;
 };
 
-// One shared stream's frames to the multicast group: once per frame, however
+class MulticastTarget;
+
+// One shared stream's frames to the multicast group, once per frame however
 // many of its subscribers chose multicast (docs/protocol.md, "Multicast").
-struct MulticastChannel {
-  std::shared_ptr<UdpPublisher::Registration> group;
-  std::weak_ptr<const std::string> last;  // the body sent last (owner-compared: never a reused address)
-  std::uint64_t sent = 0, dropped = 0;
-  std::uint64_t* total_sent = nullptr;  // the server's count, all channels
+// The channel is the stream's one target for all of them, so a tick costs
+// the same for one subscriber or ten thousand: it sends once and touches no
+// subscriber. Each subscriber's frames, drops and skips are the channel's
+// since it joined, settled when it leaves or ends; its max_frames is a
+// deadline the channel keeps in order (the earliest checked per frame); and
+// subscribers whose connection went are forgotten by a sweep once a second.
+class MulticastChannel final : public Target {
+ public:
+  MulticastChannel(UdpPublisher& publisher, std::shared_ptr<UdpPublisher::Registration> group,
+                   std::uint64_t* total_sent)
+      : publisher_(publisher), group_(std::move(group)), total_sent_(total_sent) {}
+
+  // `member` gets the channel's frames from the next one on; it ends after
+  // `max_frames` (0: no limit).
+  void join(const std::shared_ptr<MulticastTarget>& member, std::uint64_t max_frames);
+  // `member` leaves (a no-op when it is not a member), its counts settled.
+  void leave(const MulticastTarget* member);
+  std::size_t members() const { return members_.size(); }
+  std::uint64_t sent() const { return sent_; }
+  std::uint64_t dropped() const { return dropped_; }
+
+  // As its stream's target: alive while anyone listens.
+  bool alive() const override { return !members_.empty(); }
+  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  bool congested() const override { return publisher_.congested(*group_); }
+  void skipped(std::uint64_t n) override;
+  void late(std::uint64_t n) override;
+  // The stream ended: every member ends with its own count of frames.
+  void ended(std::uint64_t sent, const std::string& reason) override;
+
+  static constexpr std::chrono::seconds kSweepEvery{1};
+
+ private:
+  using Deadlines = std::multimap<std::uint64_t, MulticastTarget*>;
+  struct Member {
+    std::shared_ptr<MulticastTarget> target;
+    std::uint64_t ticks_at_join = 0, dropped_at_join = 0, late_at_join = 0;
+    std::optional<Deadlines::iterator> deadline;
+  };
+  // Ticks advanced by `n` (each a frame sent, dropped or skipped): members
+  // whose max_frames came end; once a second, members whose connection went
+  // are forgotten.
+  void advance(std::uint64_t n);
+  // Member `slot` out of the channel (swapped with the last), its counts
+  // settled; the target, to end it.
+  std::shared_ptr<MulticastTarget> remove_slot(std::size_t slot);
+
+  UdpPublisher& publisher_;
+  std::shared_ptr<UdpPublisher::Registration> group_;
+  std::uint64_t* total_sent_;  // the server's count, all channels (may be null)
+  std::vector<Member> members_;
+  Deadlines deadlines_;  // tick at which a member's max_frames is reached
+  std::uint64_t ticks_ = 0, sent_ = 0, dropped_ = 0, late_ = 0;
+  Clock::time_point last_sweep_ = Clock::now();
+};
+
+// A subscriber of a shared stream over multicast: a member of the stream's
+// channel, never a target of the stream itself. Its end, skips and drops are
+// its own, told over its connection.
+class MulticastTarget final : public SubscriptionTarget {
+ public:
+  MulticastTarget(std::weak_ptr<SubscriptionEvents> events, std::shared_ptr<Outbox> connection,
+                  std::uint32_t subscription, std::uint32_t view, std::shared_ptr<MulticastChannel> channel)
+      : SubscriptionTarget(std::move(events), std::move(connection), subscription, view),
+        channel_(std::move(channel)) {}
+  // The channel sends; a stream never hands this target a frame.
+  void deliver(std::uint64_t, const std::shared_ptr<const std::string>&) override {}
+  const std::shared_ptr<MulticastChannel>& channel() const { return channel_; }
+
+ private:
+  friend class MulticastChannel;
+  std::shared_ptr<MulticastChannel> channel_;
+  std::size_t slot_ = static_cast<std::size_t>(-1);  // in the channel's members; -1: not a member
 };
 
 // The multicast group (cfg.multicast_group) and each shared stream's channel
@@ -97,28 +169,9 @@ struct MulticastGroup {
   std::shared_ptr<UdpPublisher::Registration> group;  // null: no multicast
   std::map<std::uint64_t, std::weak_ptr<MulticastChannel>> channels;
   std::uint64_t frames_sent = 0;  // all channels
-  // The channel of stream `stream_id` (made when none is open); forgets
-  // channels no subscriber holds any more.
-  std::shared_ptr<MulticastChannel> channel(std::uint64_t stream_id);
-};
-
-// A subscriber of a shared stream over multicast: its frames are the
-// channel's; its end, skips and drops are its own, told over its connection.
-class MulticastTarget final : public SubscriptionTarget {
- public:
-  MulticastTarget(std::weak_ptr<SubscriptionEvents> events, std::shared_ptr<Outbox> connection,
-                  std::uint32_t subscription, std::uint32_t view, UdpPublisher& publisher,
-                  std::shared_ptr<MulticastChannel> channel)
-      : SubscriptionTarget(std::move(events), std::move(connection), subscription, view),
-        publisher_(publisher),
-        channel_(std::move(channel)) {}
-  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
-  bool congested() const override { return publisher_.congested(*channel_->group); }
-  const std::shared_ptr<MulticastChannel>& channel() const { return channel_; }
-
- private:
-  UdpPublisher& publisher_;
-  std::shared_ptr<MulticastChannel> channel_;
+  // `stream`'s channel; made, and added to the stream as its target, when
+  // none is open. Forgets channels no subscriber holds any more.
+  std::shared_ptr<MulticastChannel> channel(Stream& stream, UdpPublisher& publisher);
 };
 
 }  // namespace gmr::server

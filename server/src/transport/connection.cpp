@@ -239,7 +239,7 @@ void Connection::flush() {
 }
 
 void Connection::arm_watchdog() {
-  watchdog_.expires_after(watchdog_period(limits_, established_));
+  watchdog_.expires_at(watchdog_due(limits_, established_, Clock::now()));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     Lock lock(self->m_);
     if (ec || self->stopped_) return;

@@ -56,6 +56,13 @@ std::chrono::milliseconds watchdog_period(const ConnectionLimits& l, bool establ
   return std::max(milliseconds(10), shortest / 4);
 }
 
+Clock::time_point watchdog_due(const ConnectionLimits& l, bool established, Clock::time_point now) {
+  const Clock::duration period = watchdog_period(l, established);
+  const Clock::duration grain = std::max<Clock::duration>(period / 4, std::chrono::milliseconds(1));
+  const auto due = (now + period).time_since_epoch();
+  return Clock::time_point((due + grain - Clock::duration(1)) / grain * grain);
+}
+
 std::string watchdog_verdict(const LinkTimes& t, const ConnectionLimits& lim, Clock::time_point now, std::uint64_t id) {
   if (!t.established && lim.handshake_timeout.count() > 0 && now - t.started > lim.handshake_timeout) {
     log_connection(spdlog::level::warn, "conn {}: no Hello within {} ms", id, lim.handshake_timeout.count());

@@ -91,6 +91,12 @@ struct LinkTimes {
   Clock::time_point last_held;  // its last request or Hello while it held nothing
 };
 std::chrono::milliseconds watchdog_period(const ConnectionLimits& limits, bool established);
+// When a connection's next watchdog tick is due: a period from `now`,
+// rounded up to a multiple of a quarter period (counted from the clock's
+// epoch), so the ticks of many connections with the same limits fall due
+// together: one wake-up of their I/O thread and one timer update serve them
+// all, instead of one each (10,000 idle connections were 8,000 wake-ups a second).
+Clock::time_point watchdog_due(const ConnectionLimits& limits, bool established, Clock::time_point now);
 std::string watchdog_verdict(const LinkTimes& times, const ConnectionLimits& limits, Clock::time_point now,
                              std::uint64_t id);
 // A framed Heartbeat, what the server writes when it wrote nothing for a while.

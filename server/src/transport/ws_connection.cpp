@@ -278,7 +278,7 @@ void WsConnection::close_socket() {
 }
 
 void WsConnection::arm_watchdog() {
-  watchdog_.expires_after(watchdog_period(limits_, established_));
+  watchdog_.expires_at(watchdog_due(limits_, established_, Clock::now()));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     if (ec || self->stopped_) return;
     if (std::string why = self->watchdog_tick(Clock::now()); !why.empty()) {

@@ -14,51 +14,11 @@
 #include "gmr/wire/framing.h"
 #include "gmr/wire/frames.h"
 #include "net_test_util.h"
+#include "recording_outbox.h"
 #include "server_parts.h"
 
 namespace gmr::test {
 namespace {
-
-// An Outbox that keeps what it is given.
-class RecordingOutbox final : public server::Outbox {
- public:
-  explicit RecordingOutbox(std::uint64_t id = 7) : id_(id) {}
-  std::uint64_t id() const override { return id_; }
-  bool stopped() const override { return false; }
-  bool closing() const override { return closing_; }
-  void send(std::string framed) override { replies.push_back(unframe(framed)); }
-  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
-                  std::chrono::steady_clock::duration = {}) override {
-    frames.push_back(unframe(head + *body));
-    keys.push_back(key);
-    return true;
-  }
-  void discard_frames(std::uint32_t) override {}
-  void send_frames_now(std::uint32_t) override {}
-  std::uint64_t end_frames(std::uint32_t) override { return 0; }
-  void close_after_reply() override { closing_ = true; }
-  void stop(const std::string&) override { closing_ = true; }
-  void finish() override { closing_ = true; }
-  void count_udp_frame_sent() override {}
-  void count_udp_frame_dropped() override {}
-  void count_frame_dropped(std::uint64_t) override {}
-  void count_frame_skipped(std::uint64_t) override {}
-  server::ConnectionCounters counters() const override { return {}; }
-
-  std::deque<pb::ServerMessage> replies;
-  std::vector<pb::ServerMessage> frames;
-  std::vector<std::uint32_t> keys;
-
- private:
-  static pb::ServerMessage unframe(const std::string& framed) {
-    pb::ServerMessage m;
-    EXPECT_GE(framed.size(), wire::kLengthPrefixBytes);
-    EXPECT_TRUE(m.ParseFromString(framed.substr(wire::kLengthPrefixBytes)));
-    return m;
-  }
-  std::uint64_t id_;
-  bool closing_ = false;
-};
 
 // The per-address limit counts an IPv6 host's /64 as one address (before:
 // each of its 2^64 addresses had the limit to itself).

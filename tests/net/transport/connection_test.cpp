@@ -14,6 +14,7 @@
 
 #include "gmr/wire/framing.h"
 #include "net_test_util.h"
+#include "transport/link.h"
 
 namespace gmr::test {
 namespace {
@@ -123,6 +124,30 @@ server::ConnectionLimits limits() {
 // I/O thread: the handler holds the connection's reads while it has the
 // request, as RequestHandler::edit_view does) is waiting for the server, not
 // idle, however long that takes; once answered, silence is idleness again.
+// The watchdog's ticks of connections with the same limits fall on the same
+// instants (multiples of a quarter period), a period or at most a quarter
+// more after each asked: 10,000 idle connections wake their I/O thread a few
+// times a second, not 8,000 times.
+TEST(ConnectionWatchdog, TicksOfManyConnectionsFallDueTogether) {
+  server::ConnectionLimits limits;
+  limits.heartbeat_interval = std::chrono::milliseconds(5000);
+  limits.idle_timeout = std::chrono::milliseconds(30000);
+  limits.write_timeout = std::chrono::milliseconds(20000);
+  const auto period = server::watchdog_period(limits, true);
+  const server::Clock::duration grain = server::Clock::duration(period) / 4;
+  std::set<server::Clock::time_point> instants;
+  const auto start = server::Clock::now();
+  for (int i = 0; i < 10000; ++i) {
+    const auto now = start + std::chrono::microseconds(i * 137);  // connections armed over 1.37 s
+    const auto due = server::watchdog_due(limits, true, now);
+    ASSERT_GE(due, now + period);
+    ASSERT_LT(due, now + period + grain);
+    EXPECT_EQ(due.time_since_epoch() % grain, server::Clock::duration::zero());
+    instants.insert(due);
+  }
+  EXPECT_LE(instants.size(), 6u) << "1.37 s of arming falls on a few quarter-period instants";
+}
+
 TEST(Connection, HeldReadsAreNotIdleness) {
   server::ConnectionLimits l = limits();
   l.idle_timeout = std::chrono::milliseconds(200);

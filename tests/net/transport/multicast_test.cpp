@@ -20,6 +20,8 @@
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/view/view.h"
 #include "net_test_util.h"
+#include "recording_outbox.h"
+#include "server_parts.h"
 #include "test_data.h"
 
 namespace gmr::test {
@@ -150,6 +152,122 @@ TEST(Multicast, OneSendPerFrameReachesEverySubscriberWithExactPositions) {
   const auto paused = clients[0]->pause(sub->id);
   ASSERT_FALSE(paused.ok());
   EXPECT_NE(paused.error().message.find("multicast"), std::string::npos);
+}
+
+// However many subscribers a shared stream has over multicast, they are one
+// target of it, their channel: a tick sends once and touches none of them
+// (before, each was a target visited every frame: 10,000 cost a quarter of a
+// core). Each still ends on its own max_frames with its own counts, one that
+// unsubscribes leaves at once, one whose session went is forgotten within
+// the channel's sweep, and the channel leaves the stream with its last member.
+TEST(Multicast, SubscribersAreOneTargetOfTheirStreamAndEachEndsOnItsOwnCount) {
+  if (!in_namespace()) {
+    return run_in_namespace("Multicast.SubscribersAreOneTargetOfTheirStreamAndEachEndsOnItsOwnCount");
+  }
+  spdlog::set_level(spdlog::level::warn);
+  server::ServerConfig cfg;
+  cfg.multicast_group = "239.255.74.1";
+  cfg.multicast_port = 17502;
+  cfg.send_budget = 0;
+  ServerParts parts(cfg, test_library());
+  parts.udp.open(server::net::ip::make_address("127.0.0.1"), 0);
+  parts.multicast.group = parts.udp.open_multicast(cfg.multicast_group, cfg.multicast_port, 1);
+  parts.udp.start();
+#ifdef GMR_SANITIZED
+  constexpr int kSubscribers = 400;
+#else
+  constexpr int kSubscribers = 4000;
+#endif
+  std::vector<RecordedSession> sessions;
+  std::uint64_t stream_id = 0;
+  for (int i = 0; i < kSubscribers; ++i) {
+    RecordedSession s(parts.services, static_cast<std::uint64_t>(i + 1));
+    s.max_frames = i % 4 == 0 ? 10 + static_cast<std::uint64_t>(i % 13) : 0;
+    pb::ClientMessage view;
+    view.mutable_create_view()->set_motion("walk");
+    const auto v = s.ask(view);
+    ASSERT_TRUE(v.has_view()) << v.DebugString();
+    pb::ClientMessage sub;
+    sub.mutable_subscribe()->set_view_id(v.view().view_id());
+    sub.mutable_subscribe()->set_transport(pb::TRANSPORT_MULTICAST);
+    sub.mutable_subscribe()->set_rate_hz(500);
+    sub.mutable_subscribe()->set_loop(true);
+    sub.mutable_subscribe()->set_max_frames(s.max_frames);
+    const auto r = s.ask(sub);
+    ASSERT_TRUE(r.has_subscribed()) << r.DebugString();
+    if (i == 0) stream_id = r.subscribed().stream_id();
+    ASSERT_EQ(r.subscribed().stream_id(), stream_id);
+    sessions.push_back(std::move(s));
+  }
+  const auto stream = parts.streams.find(stream_id);
+  ASSERT_NE(stream, nullptr);
+  EXPECT_EQ(stream->target_count(), 1u) << "the channel is the stream's one target for " << kSubscribers;
+  const auto channel = parts.multicast.channels.at(stream_id).lock();
+  ASSERT_NE(channel, nullptr);
+  EXPECT_EQ(channel->members(), static_cast<std::size_t>(kSubscribers));
+  // Admission counts each its share of the one send (issue 39: before, each counted as an own stream).
+  EXPECT_DOUBLE_EQ(parts.admission.committed_frames_per_second(),
+                   kSubscribers * 500 * server::Admission::send_cost(server::Admission::SendKind::kMulticast));
+
+  // Every member with a max_frames ends on it (the longest is 22 frames).
+  for (int round = 0; round < 200 && parts.multicast.frames_sent + channel->dropped() < 30; ++round) {
+    parts.io.run_for(std::chrono::milliseconds(20));
+  }
+  std::size_t ended = 0;
+  for (const RecordedSession& s : sessions) {
+    const auto e = s.ended();
+    if (s.max_frames == 0) {
+      EXPECT_FALSE(e.has_value()) << "no max_frames: it goes on";
+      continue;
+    }
+    ASSERT_TRUE(e.has_value()) << "a member with max_frames " << s.max_frames << " did not end";
+    EXPECT_EQ(e->frames_sent(), s.max_frames);
+    EXPECT_EQ(e->reason(), "max_frames reached");
+    ++ended;
+  }
+  EXPECT_EQ(ended, static_cast<std::size_t>(kSubscribers / 4));
+  EXPECT_EQ(channel->members(), static_cast<std::size_t>(kSubscribers - kSubscribers / 4));
+  EXPECT_GE(channel->sent(), 22u) << "frames go to the group (dropped " << channel->dropped() << ")";
+  EXPECT_EQ(stream->target_count(), 1u);
+
+  // Half of the others unsubscribe: they leave at once.
+  std::size_t left = 0;
+  for (std::size_t i = 1; i < sessions.size(); i += 4) {
+    pb::ClientMessage un;
+    un.mutable_unsubscribe()->set_subscription_id(1);
+    ASSERT_FALSE(sessions[i].ask(un).has_error());
+    ++left;
+  }
+  const std::size_t members = static_cast<std::size_t>(kSubscribers - kSubscribers / 4) - left;
+  EXPECT_EQ(channel->members(), members);
+  // Others' sessions end without a word (as a dropped connection's handler
+  // goes): they are forgotten by the next sweep.
+  std::size_t gone = 0;
+  for (std::size_t i = 2; i < sessions.size(); i += 4) {
+    sessions[i].handler.reset();
+    ++gone;
+  }
+  EXPECT_EQ(channel->members(), members) << "not on the frame's path";
+  const auto sweep_by = server::Clock::now() + server::MulticastChannel::kSweepEvery + std::chrono::milliseconds(500);
+  while (channel->members() == members && server::Clock::now() < sweep_by) {
+    parts.io.run_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(channel->members(), members - gone);
+  EXPECT_EQ(stream->target_count(), 1u);
+
+  // The last ones leave: so does the channel, and the stream is idle.
+  for (std::size_t i = 3; i < sessions.size(); i += 4) {
+    pb::ClientMessage un;
+    un.mutable_unsubscribe()->set_subscription_id(1);
+    ASSERT_FALSE(sessions[i].ask(un).has_error());
+  }
+  EXPECT_EQ(channel->members(), 0u);
+  EXPECT_TRUE(stream->idle());
+  std::fprintf(stderr, "multicast: %d subscribers, one target; %llu frames sent, %llu dropped\n", kSubscribers,
+               static_cast<unsigned long long>(channel->sent()), static_cast<unsigned long long>(channel->dropped()));
+  for (auto& s : sessions) {
+    if (s.handler) s.handler->on_stop();
+  }
 }
 
 #ifdef GMR_CLI_PATH

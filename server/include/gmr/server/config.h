@@ -186,12 +186,12 @@ struct ServerConfig {
   std::chrono::milliseconds default_max_staleness{100};
   // Admission against what the server can send (docs/protocol.md,
   // "Admission"): the frames per second all subscriptions together may ask
-  // for (each subscriber's rate counts, shared stream or not). A
+  // for, each weighed by what its kind of frame costs (Admission::send_cost). A
   // subscription that would pass it is refused with RESOURCE_EXHAUSTED.
   // 0: no limit (load tests that mean to overload). The default is what one
-  // I/O thread held at p99 <= 2 ms on the reference 2-core machine
-  // (docs/performance.md); measure yours with gmr-load.
-  double send_budget = 30000;
+  // I/O thread held at p99 <= 2 ms on the reference 2-core machine, in own
+  // TCP streams' frames (docs/performance.md); measure yours with gmr-load.
+  double send_budget = 72000;
   // Bytes of float forward kinematics kept for streams to share
   // (docs/performance.md, "FK blocks"): frames are computed 16 at a time, for
   // every stream that plays them; past this the least recently used go.

@@ -1,0 +1,58 @@
+#include "streams/stream_clock.h"
+
+#include "streams/stream.h"
+
+namespace gmr::server {
+
+void StreamClock::schedule(std::weak_ptr<Stream> stream, Clock::time_point due, std::uint64_t generation) {
+  if (stopped_) return;
+  heap_.push(Entry{due, next_order_++, generation, std::move(stream)});
+  if (!in_pass_) arm();  // a pass arms once, at its end
+}
+
+void StreamClock::stop() {
+  stopped_ = true;
+  heap_ = {};
+  timer_.cancel();
+}
+
+void StreamClock::arm() {
+  if (heap_.empty() || (waiting_ && armed_at_ <= heap_.top().due)) return;
+  armed_at_ = heap_.top().due;
+  waiting_ = true;
+  // Setting the expiry cancels a wait already pending: its handler sees
+  // operation_aborted and leaves the state to this one.
+  timer_.expires_at(armed_at_);
+  timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (ec == net::error::operation_aborted) return;
+    waiting_ = false;
+    run_due();
+  });
+}
+
+void StreamClock::run_due() {
+  if (stopped_) return;
+  ++wakeups_;
+  in_pass_ = true;
+  const std::uint64_t pass_end = next_order_;  // ticks scheduled from here on wait for the next pass
+  const Clock::time_point horizon = Clock::now() + kGrain;
+  std::vector<Entry> later;  // due, but scheduled during this pass
+  while (!heap_.empty() && heap_.top().due <= horizon) {
+    Entry e = heap_.top();
+    heap_.pop();
+    if (e.order >= pass_end) {
+      later.push_back(std::move(e));
+      continue;
+    }
+    if (auto s = e.stream.lock()) {
+      ++ticks_;
+      s->on_clock(e.generation);
+    }
+    if (stopped_) return;
+  }
+  in_pass_ = false;
+  for (auto& e : later) heap_.push(std::move(e));
+  arm();
+}
+
+}  // namespace gmr::server
