@@ -9,8 +9,14 @@
 #     MOTION_FILE=../shared/data/bvh/cmu/01_01.bvh  TRANSPORTS="tcp udp"  MODES="own shared"
 #     CLIENTS_PER_PROCESS=(what the open-files limit allows)  LOAD_THREADS=1
 #
-# Writes OUT_DIR/runs/*.json (every run, gmr-load --json), OUT_DIR/grid.csv
-# (one row per point, medians over the repeats) and OUT_DIR/grid.png. No send
+# Each (transport, subscribers) point also runs gmr-floor (bench/floor.cpp) as
+# many times, pinned the same way: the same frames, of the same size (BYTES,
+# default 510: a 01_01 frame at float32 with its head), sent with sendmmsg or
+# writev and nothing else. The CSV gives gmr's CPU per frame as a ratio to it.
+#
+# Writes OUT_DIR/runs/*.json (every run, gmr-load --json; the floor's in
+# runs/floor/), OUT_DIR/grid.csv (one row per point, medians over the
+# repeats) and OUT_DIR/grid.png. No send
 # budget (--send-budget 0): the grid means to find where the server stops
 # keeping up. The full grid takes about 45 minutes and both cores; it is a
 # benchmark, not a CI step.
@@ -25,10 +31,12 @@ motion_file=${MOTION_FILE:-../shared/data/bvh/cmu/01_01.bvh}
 load_threads=${LOAD_THREADS:-1}
 transports=${TRANSPORTS:-tcp udp}
 modes=${MODES:-own shared}
+bytes=${BYTES:-510}
 bin="$build/bin"
 here=$(dirname "$0")
 
-[ -x "$bin/gmr-server" ] && [ -x "$bin/gmr-load" ] || { echo "server bench: build gmr-server and gmr-load in $build first" >&2; exit 1; }
+[ -x "$bin/gmr-server" ] && [ -x "$bin/gmr-load" ] && [ -x "$bin/gmr-floor" ] ||
+  { echo "server bench: build gmr-server, gmr-load and gmr-floor in $build first" >&2; exit 1; }
 [ -f "$motion_file" ] || { echo "server bench: no $motion_file (../shared/data, or set MOTION_FILE)" >&2; exit 1; }
 [ "$(nproc)" -ge 2 ] || { echo "server bench: needs two CPUs (server on 0, load on 1)" >&2; exit 1; }
 # A gmr-load client holds two sockets (its TCP connection and a UDP socket,
@@ -41,7 +49,7 @@ clients_per_process() {
   echo $(( ($(ulimit -n) - 200) / 2 ))
 }
 
-mkdir -p "$out/runs"
+mkdir -p "$out/runs/floor"
 library=$(mktemp -d)
 ln -s "$(realpath "$motion_file")" "$library/"
 motion=$(basename "$motion_file"); motion=${motion%.*}
@@ -61,6 +69,10 @@ trap cleanup EXIT
 
 for n in $subscribers; do
   for transport in $transports; do
+    for rep in $(seq "$repeats"); do
+      "$bin/gmr-floor" --transport "$transport" --sockets "$n" --rate "$rate" --bytes "$bytes" --seconds "$seconds" \
+        --send-cpu 0 --receive-cpu 1 --json "$out/runs/floor/$transport-$n-$rep.json" | sed "s/^/floor $transport-$n-$rep: /"
+    done
     for mode in $modes; do
       for rep in $(seq "$repeats"); do
         name="$transport-$mode-$n-$rep"

@@ -27,7 +27,20 @@ def load(runs_dir):
     return points
 
 
-def row(key, runs):
+def floors(runs_dir):
+    """gmr-floor's median ns per frame by (transport, subscribers)."""
+    found = {}
+    floor_dir = os.path.join(runs_dir, "floor")
+    if os.path.isdir(floor_dir):
+        for name in sorted(os.listdir(floor_dir)):
+            if name.endswith(".json"):
+                transport, subscribers, _repeat = name[:-5].split("-")
+                with open(os.path.join(floor_dir, name)) as f:
+                    found.setdefault((transport, int(subscribers)), []).append(json.load(f)["ns_per_frame"])
+    return {k: statistics.median(v) for k, v in found.items()}
+
+
+def row(key, runs, floor_ns=None):
     transport, mode, subscribers = key
     med = lambda f: statistics.median(f(r) for r in runs)
     window = lambda r: r["seconds"] or 1.0
@@ -49,6 +62,8 @@ def row(key, runs):
         "server_cores": round(med(server_cores), 3),
         "server_ns_per_frame": round(med(server_ns)),
         "load_cores": round(med(load_cores), 3),
+        "floor_ns_per_frame": round(floor_ns) if floor_ns else "",
+        "floor_ratio": round(med(server_ns) / floor_ns, 2) if floor_ns else "",
         "setup_s": round(med(lambda r: r["setup_seconds"]), 2),
         "repeats": len(runs),
     }
@@ -99,7 +114,8 @@ def main():
     points = load(runs_dir)
     if not points:
         sys.exit(f"summarize: no results in {runs_dir}")
-    rows = [row(k, v) for k, v in sorted(points.items())]
+    floor = floors(runs_dir)
+    rows = [row(k, v, floor.get((k[0], k[2]))) for k, v in sorted(points.items())]
     partial = out_csv + ".partial"
     with open(partial, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
@@ -110,7 +126,9 @@ def main():
     for r in rows:
         print(f'{r["transport"]:3} {r["stream"]:6} {r["subscribers"]:6}: {r["delivered_fps"]:>9} of {r["expected_fps"]:>9} '
               f'frames/s, lost {r["lost_pct"]}%, p99 {r["p99_ms"]} ms, p99.9 {r["p999_ms"]} ms, '
-              f'server {r["server_ns_per_frame"]} ns/frame, load {r["load_cores"]} cores')
+              f'server {r["server_ns_per_frame"]} ns/frame'
+              + (f' ({r["floor_ratio"]}x the floor\'s {r["floor_ns_per_frame"]})' if r["floor_ratio"] != "" else "")
+              + f', load {r["load_cores"]} cores')
     print(f"wrote {out_csv} and {out_png}")
 
 

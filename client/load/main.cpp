@@ -78,16 +78,26 @@ struct ClientRun {
   bool seen = false;
   // The server's per-connection counters at the window's start.
   gmr::client::ServerCounters before;
+  // This subscriber's own tail (report.h, "one sample per subscriber").
+  std::mutex tail_mutex;
+  gmr::load::CoarseHistogram latency, server_wait;
 
   void on_frame(const gmr::client::ReceivedFrame& f) {
     if (g_measuring.load(std::memory_order_relaxed)) {
       if (seen && f.sequence > last_sequence + 1)
         gaps.fetch_add(f.sequence - last_sequence - 1, std::memory_order_relaxed);
       frames.fetch_add(1, std::memory_order_relaxed);
-      ThreadHistogram& h = this_threads_histogram();
-      std::lock_guard lock(h.mutex);
-      h.histogram.add(f.receive_time_ns - f.server_send_time_ns);
-      if (f.server_write_time_ns != 0) h.server_wait.add(f.server_write_time_ns - f.server_send_time_ns);
+      const std::int64_t latency_ns = f.receive_time_ns - f.server_send_time_ns;
+      const std::int64_t wait_ns = f.server_write_time_ns - f.server_send_time_ns;
+      {
+        ThreadHistogram& h = this_threads_histogram();
+        std::lock_guard lock(h.mutex);
+        h.histogram.add(latency_ns);
+        if (f.server_write_time_ns != 0) h.server_wait.add(wait_ns);
+      }
+      std::lock_guard lock(tail_mutex);
+      latency.add(latency_ns);
+      if (f.server_write_time_ns != 0) server_wait.add(wait_ns);
     }
     seen = true;
     last_sequence = f.sequence;
@@ -207,6 +217,11 @@ int main(int argc, char** argv) {
   app.add_option("--rate", rate, "Output rate in Hz (0: the motion's rate)")->capture_default_str();
   app.add_flag("--udp", udp, "Frames over UDP");
   app.add_flag("--shared", shared, "All clients join one shared stream (one FK and encoding per tick)");
+  bool multicast = false;
+  app.add_flag("--multicast", multicast,
+               "All clients join one shared stream over the server's multicast group (gmr-server "
+               "--multicast-group): the server sends each frame once; frames count as delivered where the group "
+               "reaches the clients, and the server's CPU is per frame sent to the group");
   app.add_flag("--orientations", orientations, "Send orientations too");
   app.add_flag("--float64", float64, "Send float64 numbers");
   unsigned threads = 2;
@@ -256,7 +271,8 @@ int main(int argc, char** argv) {
   so.loop = true;
   so.rate_hz = rate;
   so.udp = udp;
-  so.shared = shared;
+  so.shared = shared || multicast;
+  so.multicast = multicast;
   so.orientations = orientations;
   so.float64 = float64;
   so.max_staleness = std::chrono::milliseconds(max_staleness_ms);
@@ -381,8 +397,8 @@ int main(int argc, char** argv) {
   LoadResult result;
   result.clients = runs.size();
   result.motion = motion;
-  result.udp = udp;
-  result.shared = shared;
+  result.transport = multicast ? "multicast" : udp ? "udp" : "tcp";
+  result.shared = shared || multicast;
   result.rate_hz = runs.front()->rate_hz;
   result.threads = threads;
   result.setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_started).count();
@@ -428,6 +444,15 @@ int main(int argc, char** argv) {
   result.cpu_system_seconds = cpu_seconds(usage_after.ru_stime) - cpu_seconds(usage_before.ru_stime);
   if (server_cpu_before >= 0 && server_cpu_after >= 0) result.server_cpu_seconds = server_cpu_after - server_cpu_before;
   for (const auto& r : runs) {
+    std::lock_guard lock(r->tail_mutex);
+    if (r->latency.count() > 0) {
+      result.subscriber_p99_latency.add(static_cast<std::int64_t>(r->latency.quantile_ns(0.99)));
+    }
+    if (r->server_wait.count() > 0) {
+      result.subscriber_p99_server_wait.add(static_cast<std::int64_t>(r->server_wait.quantile_ns(0.99)));
+    }
+  }
+  for (const auto& r : runs) {
     result.frames += r->frames.load();
     result.gaps += r->gaps.load();
     result.stale += r->client->counters().frames_stale;
@@ -449,6 +474,7 @@ int main(int argc, char** argv) {
     result.server_encoded = after.frames_encoded - before.frames_encoded;
     result.server_late_total = after.frames_skipped_total - before.frames_skipped_total;
     result.server_io_threads = after.io_threads;
+    result.server_multicast_sent = after.multicast_frames_sent - before.multicast_frames_sent;
   } else {
     std::printf("gmr-load: the server's figures below are missing: %s\n", stats_refused.c_str());
   }
@@ -457,8 +483,9 @@ int main(int argc, char** argv) {
     return true;
   });
   std::printf("policy           %s\n",
-              udp ? "UDP: a frame is dropped whole when its connection has too many datagrams in flight; "
-                    "a client drops a frame with a lost fragment"
-                  : "TCP: bounded queue per client, latest-frame-wins per subscription, drop counter");
+              multicast ? "multicast: each frame sent once to the group; a client drops a frame with a lost fragment"
+              : udp     ? "UDP: a frame is dropped whole when its connection has too many datagrams in flight; "
+                          "a client drops a frame with a lost fragment"
+                        : "TCP: bounded queue per client, latest-frame-wins per subscription, drop counter");
   return finish(result, json, png);
 }

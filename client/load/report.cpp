@@ -54,6 +54,33 @@ void Histogram::set(std::size_t bucket, std::uint64_t n) {
   if (n > 0) max_ = std::max(max_, bucket_high(bucket) - 1);
 }
 
+void CoarseHistogram::add(std::int64_t ns) {
+  std::size_t b = 0;
+  if (ns >= 1024) {
+    const auto v = static_cast<std::uint64_t>(ns);
+    const int octave = 63 - std::countl_zero(v);  // >= 10
+    const auto sub = static_cast<std::size_t>((v >> (octave - 2)) & 3);
+    b = std::min(kBuckets - 1, 1 + 4 * static_cast<std::size_t>(octave - 10) + sub);
+  }
+  ++counts_[b];
+  ++count_;
+}
+
+double CoarseHistogram::quantile_ns(double q) const {
+  if (count_ == 0) return 0.0;
+  const auto rank = static_cast<std::uint64_t>(std::ceil(std::clamp(q, 0.0, 1.0) * count_));
+  std::uint64_t seen = 0;
+  for (std::size_t b = 0; b < kBuckets; ++b) {
+    seen += counts_[b];
+    if (seen >= std::max<std::uint64_t>(rank, 1)) {
+      if (b == 0) return 1024.0;
+      const std::size_t octave = 10 + (b - 1) / 4, sub = (b - 1) % 4;
+      return std::ldexp(static_cast<double>(5 + sub) / 4.0, static_cast<int>(octave));
+    }
+  }
+  return std::ldexp(1.0, 36);
+}
+
 double Histogram::quantile_ns(double q) const {
   if (count_ == 0) return 0;
   if (q >= 1) return static_cast<double>(max_);
@@ -101,7 +128,7 @@ std::string to_json(const LoadResult& r) {
   j["processes"] = r.processes;
   j["clients"] = r.clients;
   j["motion"] = r.motion;
-  j["transport"] = r.udp ? "udp" : "tcp";
+  j["transport"] = r.transport;
   j["shared"] = r.shared;
   j["rate_hz"] = r.rate_hz;
   j["seconds"] = r.seconds;
@@ -116,11 +143,17 @@ std::string to_json(const LoadResult& r) {
     j["server"] = {{"frames_sent", r.server_sent},       {"frames_dropped", r.server_dropped},
                    {"frames_skipped", r.server_skipped}, {"frames_computed", r.server_computed},
                    {"frames_encoded", r.server_encoded}, {"frames_skipped_total", r.server_late_total},
-                   {"io_threads", r.server_io_threads}};
+                   {"io_threads", r.server_io_threads},  {"multicast_frames_sent", r.server_multicast_sent}};
   }
   if (r.server_cpu_seconds >= 0) j["server_cpu_seconds"] = r.server_cpu_seconds;
   j["latency_ns"] = histogram_json(r.latency);
   if (r.server_wait.count() > 0) j["server_wait_ns"] = histogram_json(r.server_wait);
+  if (r.subscriber_p99_latency.count() > 0) {
+    j["subscriber_p99_latency_ns"] = histogram_json(r.subscriber_p99_latency);
+  }
+  if (r.subscriber_p99_server_wait.count() > 0) {
+    j["subscriber_p99_server_wait_ns"] = histogram_json(r.subscriber_p99_server_wait);
+  }
   // Derived, for scripts (from_json reads the buckets back instead).
   j["delivered_per_second"] = r.seconds > 0 ? static_cast<double>(r.frames) / r.seconds : 0.0;
   j["expected_per_second"] = r.rate_hz * static_cast<double>(r.clients);
@@ -141,7 +174,10 @@ LoadResult from_json(const std::string& text, const std::string& label) {
     r.processes = j.at("processes").get<int>();
     r.clients = j.at("clients").get<std::uint64_t>();
     r.motion = j.at("motion").get<std::string>();
-    r.udp = j.at("transport").get<std::string>() == "udp";
+    r.transport = j.at("transport").get<std::string>();
+    if (r.transport != "tcp" && r.transport != "udp" && r.transport != "multicast") {
+      throw std::runtime_error("unknown transport '" + r.transport.substr(0, 32) + "'");
+    }
     r.shared = j.at("shared").get<bool>();
     r.rate_hz = j.at("rate_hz").get<double>();
     r.seconds = j.at("seconds").get<double>();
@@ -162,10 +198,17 @@ LoadResult from_json(const std::string& text, const std::string& label) {
       r.server_encoded = s.at("frames_encoded").get<std::uint64_t>();
       r.server_late_total = s.at("frames_skipped_total").get<std::uint64_t>();
       r.server_io_threads = s.value("io_threads", 0u);
+      r.server_multicast_sent = s.value("multicast_frames_sent", std::uint64_t{0});
     }
     r.server_cpu_seconds = j.value("server_cpu_seconds", -1.0);
     read_histogram(j.at("latency_ns"), "latency", r.latency);
     if (j.contains("server_wait_ns")) read_histogram(j.at("server_wait_ns"), "server wait", r.server_wait);
+    if (j.contains("subscriber_p99_latency_ns")) {
+      read_histogram(j.at("subscriber_p99_latency_ns"), "subscriber p99 latency", r.subscriber_p99_latency);
+    }
+    if (j.contains("subscriber_p99_server_wait_ns")) {
+      read_histogram(j.at("subscriber_p99_server_wait_ns"), "subscriber p99 server wait", r.subscriber_p99_server_wait);
+    }
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(label + ": " + e.what());
   } catch (const std::runtime_error& e) {
@@ -181,12 +224,14 @@ LoadResult merge(const std::vector<LoadResult>& runs) {
   m.clients = m.frames = m.gaps = m.stale = 0;
   m.latency = Histogram{};
   m.server_wait = Histogram{};
+  m.subscriber_p99_latency = Histogram{};
+  m.subscriber_p99_server_wait = Histogram{};
   m.cpu_user_seconds = m.cpu_system_seconds = 0;
   m.threads = 0;
   m.server_sent = m.server_dropped = m.server_skipped = 0;
   m.have_server = true;
   for (const LoadResult& r : runs) {
-    if (r.udp != m.udp || r.shared != m.shared || r.motion != m.motion) {
+    if (r.transport != m.transport || r.shared != m.shared || r.motion != m.motion) {
       throw std::runtime_error("the runs measured different things (motion, transport or sharing differ)");
     }
     m.processes += r.processes;
@@ -196,6 +241,8 @@ LoadResult merge(const std::vector<LoadResult>& runs) {
     m.stale += r.stale;
     m.latency.add(r.latency);
     m.server_wait.add(r.server_wait);
+    m.subscriber_p99_latency.add(r.subscriber_p99_latency);
+    m.subscriber_p99_server_wait.add(r.subscriber_p99_server_wait);
     m.cpu_user_seconds += r.cpu_user_seconds;
     m.cpu_system_seconds += r.cpu_system_seconds;
     m.threads += r.threads;
@@ -209,6 +256,7 @@ LoadResult merge(const std::vector<LoadResult>& runs) {
     m.server_encoded = std::max(m.server_encoded, r.server_encoded);
     m.server_late_total = std::max(m.server_late_total, r.server_late_total);
     m.server_io_threads = std::max(m.server_io_threads, r.server_io_threads);
+    m.server_multicast_sent = std::max(m.server_multicast_sent, r.server_multicast_sent);
     m.server_cpu_seconds = std::max(m.server_cpu_seconds, r.server_cpu_seconds);
   }
   return m;
@@ -226,6 +274,10 @@ std::string format(const char* fmt, auto... args) {
 
 double ms(double ns) { return ns / 1e6; }
 
+const char* transport_name(const LoadResult& r) {
+  return r.transport == "udp" ? "UDP" : r.transport == "multicast" ? "multicast" : "TCP";
+}
+
 }  // namespace
 
 std::string describe(const LoadResult& r) {
@@ -237,7 +289,7 @@ std::string describe(const LoadResult& r) {
   out += format("gmr-load: %llu clients%s, motion %s, %s, %.1f Hz each, %s, %.1f s measured\n",
                 static_cast<unsigned long long>(r.clients),
                 r.processes > 1 ? format(" in %d processes", r.processes).c_str() : "", r.motion.c_str(),
-                r.udp ? "UDP" : "TCP", r.rate_hz, r.shared ? "one shared stream" : "one stream per client", r.seconds);
+                transport_name(r), r.rate_hz, r.shared ? "one shared stream" : "one stream per client", r.seconds);
   out += format("set-up           %.2f s\n", r.setup_seconds);
   out += format("delivered        %.0f of %.0f frames/s expected (%.2f%%), %.1f/s per client\n", got, expected,
                 expected > 0 ? 100.0 * got / expected : 0.0, got / clients);
@@ -256,6 +308,17 @@ std::string describe(const LoadResult& r) {
         "the fan-out and the I/O thread's queue)\n",
         ms(r.server_wait.quantile_ns(0.5)), ms(r.server_wait.quantile_ns(0.99)), ms(r.server_wait.quantile_ns(0.999)),
         ms(static_cast<double>(r.server_wait.max())));
+  }
+  if (r.subscriber_p99_latency.count() > 0) {
+    auto tail = [](const Histogram& h) {
+      return format("median %.3f ms, worst 1%% %.3f ms, worst %.3f ms", ms(h.quantile_ns(0.5)), ms(h.quantile_ns(0.99)),
+                    ms(static_cast<double>(h.max())));
+    };
+    out += format("per subscriber   p99 latency of each subscriber: %s\n", tail(r.subscriber_p99_latency).c_str());
+    if (r.subscriber_p99_server_wait.count() > 0) {
+      out +=
+          format("                 p99 wait in the server of each: %s\n", tail(r.subscriber_p99_server_wait).c_str());
+    }
   }
   // The distribution in powers of two of milliseconds, with a bar.
   if (r.latency.count() > 0) {
@@ -288,9 +351,16 @@ std::string describe(const LoadResult& r) {
   } else {
     out += "server, window   (the server's counters were not available)\n";
   }
+  if (r.have_server && r.server_multicast_sent > 0) {
+    out += format("multicast        %llu frames sent to the group (once each, for all %llu clients)\n",
+                  static_cast<unsigned long long>(r.server_multicast_sent), static_cast<unsigned long long>(r.clients));
+  }
   if (r.server_cpu_seconds >= 0) {
-    out += format("server CPU       %.2f cores, %.0f ns per delivered frame%s\n", r.server_cpu_seconds / window,
-                  r.frames > 0 ? 1e9 * r.server_cpu_seconds / static_cast<double>(r.frames) : 0.0,
+    // Multicast: per frame sent to the group (the clients may not be where the group is routed).
+    const auto per = r.transport == "multicast" ? r.server_multicast_sent : r.frames;
+    out += format("server CPU       %.3f cores, %.0f ns per %s frame%s\n", r.server_cpu_seconds / window,
+                  per > 0 ? 1e9 * r.server_cpu_seconds / static_cast<double>(per) : 0.0,
+                  r.transport == "multicast" ? "multicast" : "delivered",
                   r.server_io_threads > 0 ? format(", on %u I/O threads", r.server_io_threads).c_str() : "");
   }
   return out;
@@ -327,7 +397,7 @@ std::string plot(const LoadResult& r, const std::string& png) {
   quoted += "'";
   const std::string title =
       format("gmr-load: %llu clients, %s%s, %.0f Hz; p50 %.2f ms, p99 %.2f ms, p99.9 %.2f ms",
-             static_cast<unsigned long long>(r.clients), r.udp ? "UDP" : "TCP", r.shared ? " shared" : "", r.rate_hz,
+             static_cast<unsigned long long>(r.clients), transport_name(r), r.shared ? " shared" : "", r.rate_hz,
              ms(r.latency.quantile_ns(0.5)), ms(r.latency.quantile_ns(0.99)), ms(r.latency.quantile_ns(0.999)));
   const std::string script = "set terminal pngcairo size 960,600 font ',11'\nset output " + quoted + "\nset title '" +
                              title +

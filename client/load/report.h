@@ -39,12 +39,28 @@ class Histogram {
   std::int64_t max_ = 0;
 };
 
+// A coarse latency histogram, small enough for one per subscriber (420
+// bytes): 4 buckets per power of two from 1 us (each within about 19% of
+// its value) up to about 70 s; below 1 us, one bucket.
+class CoarseHistogram {
+ public:
+  static constexpr std::size_t kBuckets = 1 + 4 * 26;
+  void add(std::int64_t ns);
+  std::uint32_t count() const { return count_; }
+  // The upper edge of the bucket that holds rank q (0..1) of the samples.
+  double quantile_ns(double q) const;
+
+ private:
+  std::array<std::uint32_t, kBuckets> counts_{};
+  std::uint32_t count_ = 0;
+};
+
 // One gmr-load run, or several merged.
 struct LoadResult {
   int processes = 1;
   std::uint64_t clients = 0;
   std::string motion;
-  bool udp = false;
+  std::string transport = "tcp";  // "tcp", "udp" or "multicast" (frames to the server's group)
   bool shared = false;
   double rate_hz = 0;  // per client
   double seconds = 0;  // the measured window
@@ -57,6 +73,11 @@ struct LoadResult {
   // carry a write stamp: how long a frame waited in the server after its
   // encoding (behind the fan-out to other subscribers and the lane's queue).
   Histogram server_wait;
+  // One sample per subscriber: its own p99 latency, and its own p99 wait in
+  // the server (the tail each subscriber sees, where the histograms above mix
+  // all subscribers' frames: a subscriber always last in a fan-out shows here).
+  Histogram subscriber_p99_latency;
+  Histogram subscriber_p99_server_wait;
   // Of this process (merged: summed).
   double cpu_user_seconds = 0;
   double cpu_system_seconds = 0;
@@ -66,7 +87,8 @@ struct LoadResult {
   bool have_server = false;
   std::uint64_t server_sent = 0, server_dropped = 0, server_skipped = 0;
   std::uint64_t server_computed = 0, server_encoded = 0, server_late_total = 0;
-  std::uint32_t server_io_threads = 0;  // its I/O threads (0: it did not say)
+  std::uint32_t server_io_threads = 0;      // its I/O threads (0: it did not say)
+  std::uint64_t server_multicast_sent = 0;  // frames it sent to its multicast group
   // The server process's CPU over the window, when gmr-load was told its pid.
   double server_cpu_seconds = -1;
 };

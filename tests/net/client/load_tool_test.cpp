@@ -55,11 +55,30 @@ TEST(LoadHistogram, BucketsTileTheLineAndQuantilesAreWithinABucket) {
   EXPECT_EQ(h.at(0), 1u);
 }
 
+// The per-subscriber histogram: 4 buckets per octave from 1 us, so a
+// quantile's upper edge is within 25% above the sample it stands for.
+TEST(LoadHistogram, ACoarseHistogramsQuantilesAreWithinItsBucket) {
+  load::CoarseHistogram h;
+  EXPECT_EQ(h.quantile_ns(0.99), 0.0);
+  std::vector<std::int64_t> samples;
+  for (std::int64_t ns = 1500; ns < 5'000'000'000; ns = ns * 11 / 10) samples.push_back(ns);
+  for (auto ns : samples) h.add(ns);
+  EXPECT_EQ(h.count(), samples.size());
+  for (double q : {0.1, 0.5, 0.9, 0.99, 1.0}) {
+    const auto want = static_cast<double>(samples[static_cast<std::size_t>(std::ceil(q * samples.size())) - 1]);
+    EXPECT_GE(h.quantile_ns(q), want) << q;
+    EXPECT_LE(h.quantile_ns(q), 1.26 * want) << q;
+  }
+  load::CoarseHistogram small;
+  small.add(300);
+  EXPECT_EQ(small.quantile_ns(0.5), 1024.0) << "under 1 us: one bucket";
+}
+
 TEST(LoadReport, JsonRoundTripsAndMergeAddsRuns) {
   load::LoadResult a;
   a.clients = 10;
   a.motion = "walk";
-  a.udp = true;
+  a.transport = "udp";
   a.rate_hz = 120;
   a.seconds = 2;
   a.frames = 2400;
@@ -68,10 +87,13 @@ TEST(LoadReport, JsonRoundTripsAndMergeAddsRuns) {
   a.server_sent = 2403;
   a.server_encoded = 240;
   for (int i = 0; i < 2400; ++i) a.latency.add(100'000 + i * 100);
+  for (int i = 0; i < 10; ++i) a.subscriber_p99_latency.add(300'000 + i * 10'000);
   const load::LoadResult back = load::from_json(load::to_json(a), "a.json");
+  EXPECT_EQ(back.subscriber_p99_latency.count(), 10u);
+  EXPECT_NEAR(back.subscriber_p99_latency.quantile_ns(0.5), a.subscriber_p99_latency.quantile_ns(0.5), 1.0);
   EXPECT_EQ(back.clients, 10u);
   EXPECT_EQ(back.frames, 2400u);
-  EXPECT_TRUE(back.udp);
+  EXPECT_EQ(back.transport, "udp");
   EXPECT_EQ(back.latency.count(), 2400u);
   EXPECT_NEAR(back.latency.quantile_ns(0.5), a.latency.quantile_ns(0.5), 1.0);
   load::LoadResult b = a;
@@ -86,6 +108,7 @@ TEST(LoadReport, JsonRoundTripsAndMergeAddsRuns) {
   EXPECT_EQ(m.server_sent, 2403u);  // the server's, seen from both: the largest
   EXPECT_EQ(m.server_encoded, 250u);
   EXPECT_EQ(m.latency.count(), 4800u);
+  EXPECT_EQ(m.subscriber_p99_latency.count(), 20u) << "one sample per subscriber of either run";
   b.shared = true;
   EXPECT_THROW(load::merge({a, b}), std::runtime_error);
   EXPECT_THROW(load::from_json("{\"format\": \"other\"}", "x.json"), std::runtime_error);
@@ -155,6 +178,11 @@ TEST(LoadTool, MeasuresAWindowWritesJsonMergesAndPlots) {
   EXPECT_EQ(waits, frames);
   EXPECT_LE(j["server_wait_ns"]["max"].get<std::int64_t>(), j["latency_ns"]["max"].get<std::int64_t>());
   EXPECT_NE(r.out.find("in the server"), std::string::npos) << r.out;
+  // Each subscriber's own p99, one sample per subscriber that got frames.
+  std::uint64_t subscribers = 0;
+  for (const auto& b : j["subscriber_p99_server_wait_ns"]["buckets"]) subscribers += b[1].get<std::uint64_t>();
+  EXPECT_EQ(subscribers, 20u);
+  EXPECT_NE(r.out.find("p99 latency of each subscriber: median"), std::string::npos) << r.out;
   EXPECT_GE(j["server_cpu_seconds"].get<double>(), 0.0);
   // Two processes' results, merged.
   const ToolRun m = run("--merge " + json.string() + " " + json.string() + " --json " + merged.string());

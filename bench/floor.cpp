@@ -1,0 +1,265 @@
+// gmr-floor: the kernel's floor for what gmr-server sends. It sends the same
+// number of frames of the same size to the same number of sockets, at the
+// same rate, with nothing else to do: UDP with sendmmsg (one call per batch
+// of up to 1,024 datagrams), TCP with one writev per connection and tick.
+// A child process, pinned to another CPU, drains every socket (epoll), as
+// gmr-load does. The sender's CPU per frame is what no server can beat on
+// this machine; bench/server/run.sh divides gmr's by it (docs/performance.md,
+// "The floor").
+//
+//   gmr-floor --transport udp|tcp --sockets N [--rate 120] [--bytes 510]
+//             [--seconds 10] [--warmup 2] [--send-cpu 0] [--receive-cpu 1] [--json FILE]
+//
+// Prints one line; --json writes {"transport", "sockets", "rate_hz", "bytes",
+// "frames", "seconds", "cpu_seconds", "ns_per_frame", "late_ticks"}.
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sched.h>
+#include <signal.h>
+#include <sys/epoll.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
+#include <sys/uio.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+[[noreturn]] void fail(const std::string& what) {
+  throw std::runtime_error(what + ": " + std::strerror(errno));
+}
+
+void pin(int cpu) {
+  if (cpu < 0) return;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  CPU_SET(cpu, &set);
+  if (::sched_setaffinity(0, sizeof set, &set) != 0) fail("sched_setaffinity to CPU " + std::to_string(cpu));
+}
+
+double cpu_seconds() {
+  rusage u{};
+  ::getrusage(RUSAGE_SELF, &u);
+  auto s = [](const timeval& t) { return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_usec) * 1e-6; };
+  return s(u.ru_utime) + s(u.ru_stime);
+}
+
+sockaddr_in loopback(std::uint16_t port) {
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(port);
+  return a;
+}
+
+std::uint16_t bound_port(int fd) {
+  sockaddr_in a{};
+  socklen_t n = sizeof a;
+  if (::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n) != 0) fail("getsockname");
+  return ntohs(a.sin_port);
+}
+
+// The receiving side: reads every socket until the parent closes the pipe.
+[[noreturn]] void drain(const std::vector<int>& fds, int stop_fd, int cpu) {
+  pin(cpu);
+  const int ep = ::epoll_create1(0);
+  for (int fd : fds) {
+    epoll_event e{};
+    e.events = EPOLLIN;
+    e.data.fd = fd;
+    ::epoll_ctl(ep, EPOLL_CTL_ADD, fd, &e);
+  }
+  epoll_event e{};
+  e.events = EPOLLIN;
+  e.data.fd = stop_fd;
+  ::epoll_ctl(ep, EPOLL_CTL_ADD, stop_fd, &e);
+  std::vector<epoll_event> ready(1024);
+  std::vector<char> buf(1 << 16);
+  for (;;) {
+    const int n = ::epoll_wait(ep, ready.data(), static_cast<int>(ready.size()), -1);
+    for (int i = 0; i < n; ++i) {
+      const int fd = ready[static_cast<std::size_t>(i)].data.fd;
+      if (fd == stop_fd) ::_exit(0);
+      while (::recv(fd, buf.data(), buf.size(), MSG_DONTWAIT) > 0) {
+      }
+    }
+  }
+}
+
+struct Result {
+  std::uint64_t frames = 0, late_ticks = 0;
+  double seconds = 0, cpu = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"gmr-floor: the kernel's cost of sending what gmr-server sends, with nothing else to do"};
+  std::string transport = "udp", json;
+  int sockets = 1000, send_cpu = 0, receive_cpu = 1;
+  double rate = 120, seconds = 10, warmup = 2;
+  std::size_t bytes = 510;  // a CMU 01_01 frame at float32 with its head, as gmr sends it
+  app.add_option("--transport", transport, "udp (sendmmsg) or tcp (writev)")->check(CLI::IsMember({"udp", "tcp"}));
+  app.add_option("--sockets", sockets, "Receiving sockets (subscribers)")->check(CLI::Range(1, 30000));
+  app.add_option("--rate", rate, "Frames per second to each socket")->check(CLI::Range(1.0, 10000.0));
+  app.add_option("--bytes", bytes, "Bytes per frame (a datagram, or a TCP message)")->check(CLI::Range(1, 65000));
+  app.add_option("--seconds", seconds, "Measured window")->check(CLI::PositiveNumber);
+  app.add_option("--warmup", warmup, "Seconds sent before the window")->check(CLI::NonNegativeNumber);
+  app.add_option("--send-cpu", send_cpu, "CPU the sender is pinned to (-1: none)");
+  app.add_option("--receive-cpu", receive_cpu, "CPU the receiver is pinned to (-1: none)");
+  app.add_option("--json", json, "Also write the result as JSON");
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    const bool udp = transport == "udp";
+    rlimit lim{};
+    ::getrlimit(RLIMIT_NOFILE, &lim);
+    lim.rlim_cur = lim.rlim_max;
+    ::setrlimit(RLIMIT_NOFILE, &lim);
+    // Both ends, made before the fork; each side closes the other's.
+    std::vector<int> send_fds, receive_fds;
+    std::vector<sockaddr_in> to;
+    int udp_sender = -1;
+    if (udp) {
+      udp_sender = ::socket(AF_INET, SOCK_DGRAM, 0);
+      if (udp_sender < 0) fail("socket");
+      const int sndbuf = 8 << 20;
+      ::setsockopt(udp_sender, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
+      for (int i = 0; i < sockets; ++i) {
+        const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+        if (fd < 0) fail("socket " + std::to_string(i));
+        const auto a = loopback(0);
+        if (::bind(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) fail("bind");
+        receive_fds.push_back(fd);
+        to.push_back(loopback(bound_port(fd)));
+      }
+    } else {
+      const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
+      const auto a = loopback(0);
+      if (listener < 0 || ::bind(listener, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0 ||
+          ::listen(listener, 4096) != 0) {
+        fail("listen");
+      }
+      const auto at = loopback(bound_port(listener));
+      const int one = 1;
+      for (int i = 0; i < sockets; ++i) {
+        const int w = ::socket(AF_INET, SOCK_STREAM, 0);
+        if (w < 0 || ::connect(w, reinterpret_cast<const sockaddr*>(&at), sizeof at) != 0) fail("connect");
+        ::setsockopt(w, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+        const int r = ::accept(listener, nullptr, nullptr);
+        if (r < 0) fail("accept");
+        send_fds.push_back(w);
+        receive_fds.push_back(r);
+      }
+      ::close(listener);
+    }
+    int stop[2];
+    if (::pipe(stop) != 0) fail("pipe");
+    const pid_t child = ::fork();
+    if (child < 0) fail("fork");
+    if (child == 0) {
+      ::close(stop[1]);
+      for (int fd : send_fds) ::close(fd);
+      drain(receive_fds, stop[0], receive_cpu);
+    }
+    ::close(stop[0]);
+    for (int fd : receive_fds) ::close(fd);
+    pin(send_cpu);
+
+    // gmr's frame: a small head (ids, stamp) and the shared body, as two
+    // pieces, the way the server hands them to the kernel.
+    const std::string head(std::min<std::size_t>(24, bytes / 2), 'h');
+    const std::string body(bytes - head.size(), 'b');
+    constexpr std::size_t kBatch = 1024;
+    std::vector<mmsghdr> msgs(kBatch);
+    std::vector<iovec> iovs(2 * kBatch);
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate));
+    Result r;
+    auto tick = [&] {
+      if (udp) {
+        for (std::size_t first = 0; first < to.size(); first += kBatch) {
+          const std::size_t n = std::min(kBatch, to.size() - first);
+          for (std::size_t i = 0; i < n; ++i) {
+            iovs[2 * i] = {const_cast<char*>(head.data()), head.size()};
+            iovs[2 * i + 1] = {const_cast<char*>(body.data()), body.size()};
+            msgs[i] = {};
+            msgs[i].msg_hdr.msg_name = &to[first + i];
+            msgs[i].msg_hdr.msg_namelen = sizeof(sockaddr_in);
+            msgs[i].msg_hdr.msg_iov = &iovs[2 * i];
+            msgs[i].msg_hdr.msg_iovlen = 2;
+          }
+          for (std::size_t done = 0; done < n;) {
+            const int k = ::sendmmsg(udp_sender, msgs.data() + done, static_cast<unsigned>(n - done), 0);
+            if (k < 0 && errno == EINTR) continue;
+            if (k <= 0) break;  // the socket buffer is full: the rest of this tick is dropped, as gmr drops
+            done += static_cast<std::size_t>(k);
+            r.frames += static_cast<std::uint64_t>(k);
+          }
+        }
+      } else {
+        iovec v[2] = {{const_cast<char*>(head.data()), head.size()}, {const_cast<char*>(body.data()), body.size()}};
+        for (int fd : send_fds) {
+          if (::writev(fd, v, 2) == static_cast<ssize_t>(bytes)) ++r.frames;
+        }
+      }
+    };
+    // Every frame is due at start + k / rate, as gmr's streams are.
+    auto run = [&](double s, bool measured) {
+      const auto start = Clock::now();
+      const auto end = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+      for (std::uint64_t k = 0;; ++k) {
+        const auto due = start + k * period;
+        if (due >= end) break;
+        const auto now = Clock::now();
+        if (now < due) {
+          std::this_thread::sleep_until(due);
+        } else if (measured && now - due > period) {
+          ++r.late_ticks;
+        }
+        tick();
+      }
+    };
+    run(warmup, false);
+    r = Result{};
+    const double cpu0 = cpu_seconds();
+    const auto t0 = Clock::now();
+    run(seconds, true);
+    r.cpu = cpu_seconds() - cpu0;
+    r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+    ::close(stop[1]);
+    ::waitpid(child, nullptr, 0);
+
+    const double ns = r.frames > 0 ? 1e9 * r.cpu / static_cast<double>(r.frames) : 0.0;
+    std::printf("gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes: %llu frames in %.2f s, %.3f cores, %.0f ns per "
+                "frame, %llu late ticks\n",
+                transport.c_str(), sockets, rate, bytes, static_cast<unsigned long long>(r.frames), r.seconds,
+                r.cpu / r.seconds, ns, static_cast<unsigned long long>(r.late_ticks));
+    if (!json.empty()) {
+      std::ofstream out(json + ".partial");
+      out << "{\"transport\": \"" << transport << "\", \"sockets\": " << sockets << ", \"rate_hz\": " << rate
+          << ", \"bytes\": " << bytes << ", \"frames\": " << r.frames << ", \"seconds\": " << r.seconds
+          << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns << ", \"late_ticks\": " << r.late_ticks
+          << "}\n";
+      out.close();
+      if (!out || std::rename((json + ".partial").c_str(), json.c_str()) != 0) fail("cannot write " + json);
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "gmr-floor: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
