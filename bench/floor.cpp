@@ -39,9 +39,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-[[noreturn]] void fail(const std::string& what) {
-  throw std::runtime_error(what + ": " + std::strerror(errno));
-}
+[[noreturn]] void fail(const std::string& what) { throw std::runtime_error(what + ": " + std::strerror(errno)); }
 
 void pin(int cpu) {
   if (cpu < 0) return;
@@ -244,10 +242,11 @@ int main(int argc, char** argv) {
     ::waitpid(child, nullptr, 0);
 
     const double ns = r.frames > 0 ? 1e9 * r.cpu / static_cast<double>(r.frames) : 0.0;
-    std::printf("gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes: %llu frames in %.2f s, %.3f cores, %.0f ns per "
-                "frame, %llu late ticks\n",
-                transport.c_str(), sockets, rate, bytes, static_cast<unsigned long long>(r.frames), r.seconds,
-                r.cpu / r.seconds, ns, static_cast<unsigned long long>(r.late_ticks));
+    std::printf(
+        "gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes: %llu frames in %.2f s, %.3f cores, %.0f ns per "
+        "frame, %llu late ticks\n",
+        transport.c_str(), sockets, rate, bytes, static_cast<unsigned long long>(r.frames), r.seconds,
+        r.cpu / r.seconds, ns, static_cast<unsigned long long>(r.late_ticks));
     if (!json.empty()) {
       std::ofstream out(json + ".partial");
       out << "{\"transport\": \"" << transport << "\", \"sockets\": " << sockets << ", \"rate_hz\": " << rate

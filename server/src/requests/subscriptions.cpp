@@ -350,7 +350,7 @@ void Subscriptions::drop_view(std::uint32_t view_id) {
 
 void Subscriptions::clear() {
   for (auto& [id, sub] : subs_) {
-    sub.stream->remove(sub.target.get());
+    remove_target(sub);
     link_.services.admission.release_rate(sub.rate_mhz);
   }
   subs_.clear();

@@ -60,7 +60,7 @@ class StreamClock {
   net::steady_timer timer_;
   std::priority_queue<Entry, std::vector<Entry>, std::greater<>> heap_;
   std::uint64_t next_order_ = 0;
-  bool waiting_ = false;       // an async_wait is pending for armed_at_
+  bool waiting_ = false;  // an async_wait is pending for armed_at_
   Clock::time_point armed_at_{};
   bool stopped_ = false;
   bool in_pass_ = false;  // run_due() is running ticks
