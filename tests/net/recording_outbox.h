@@ -79,6 +79,14 @@ struct RecordedSession {
     box->replies.pop_back();
     return r;
   }
+  // A view of library motion `motion`: its id (0, and a failure, when refused).
+  std::uint32_t create_view(const std::string& motion) {
+    pb::ClientMessage m;
+    m.mutable_create_view()->set_motion(motion);
+    const pb::ServerMessage r = ask(m);
+    EXPECT_TRUE(r.has_view()) << r.DebugString();
+    return r.view().view_id();
+  }
   // The SubscriptionEnded it was sent for `subscription`, if any.
   std::optional<pb::SubscriptionEnded> ended(std::uint32_t subscription = 1) const {
     for (const auto& r : box->replies) {

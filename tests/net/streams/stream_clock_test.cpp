@@ -43,12 +43,10 @@ TEST(StreamClock, OwnStreamsShareWakeUpsAndEachGetsEveryFrameInOrder) {
   std::vector<RecordedSession> sessions;
   for (int i = 0; i < kStreams; ++i) {
     RecordedSession s(parts.services, static_cast<std::uint64_t>(i + 1));
-    pb::ClientMessage view;
-    view.mutable_create_view()->set_motion("walk");
-    const auto v = s.ask(view);
-    ASSERT_TRUE(v.has_view()) << v.DebugString();
+    const std::uint32_t view = s.create_view("walk");
+    ASSERT_NE(view, 0u);
     // Rates differ, so ticks fall at every phase.
-    const auto r = s.ask(own_subscription(v.view().view_id(), 100.0 + i % 7, kFrames));
+    const auto r = s.ask(own_subscription(view, 100.0 + i % 7, kFrames));
     ASSERT_TRUE(r.has_subscribed()) << r.DebugString();
     ASSERT_FALSE(r.subscribed().joined_running()) << "own streams";
     sessions.push_back(std::move(s));
@@ -95,11 +93,9 @@ TEST(StreamClock, PausedStreamsTickNoMoreUntilResumed) {
   spdlog::set_level(spdlog::level::warn);
   ServerParts parts(server::ServerConfig{}, test_library());
   RecordedSession s(parts.services, 1);
-  pb::ClientMessage view;
-  view.mutable_create_view()->set_motion("walk");
-  const auto v = s.ask(view);
-  ASSERT_TRUE(v.has_view());
-  ASSERT_TRUE(s.ask(own_subscription(v.view().view_id(), 200, 0)).has_subscribed());
+  const std::uint32_t view = s.create_view("walk");
+  ASSERT_NE(view, 0u);
+  ASSERT_TRUE(s.ask(own_subscription(view, 200, 0)).has_subscribed());
   run_for(parts, 100);
   const std::size_t before = s.box->frames.size();
   EXPECT_GT(before, 5u);
