@@ -3,7 +3,8 @@
 // the conversion to protobuf's JSON mapping that a WebSocket JSON subscriber
 // (the browser viewer) costs per frame (docs/protocol.md, "WebSocket"): by
 // protobuf's MessageToJsonString, and by the server's frame_to_json.
-// A frame of 38 joints (CMU's BVH skeleton with its end sites), float64.
+// A frame of 38 joints (CMU's BVH skeleton with its end sites), float64;
+// the body also as a pb::Frame serialized (what encode_frame_body did once).
 #include <benchmark/benchmark.h>
 #include <google/protobuf/util/json_util.h>
 
@@ -46,9 +47,26 @@ void BM_EncodeBody(benchmark::State& state) {
 }
 BENCHMARK(BM_EncodeBody)->Name("frame/encode_body_f64");
 
+// The same body through a pb::Frame, as encode_frame_body did before it
+// wrote the fields itself (the reference for its figure).
+void BM_EncodeBodyByProtobuf(benchmark::State& state) {
+  const std::vector<double> p = positions();
+  for (auto _ : state) {
+    ::gmr::stream::v1::Frame f;
+    f.set_skeleton_version(3);
+    f.set_frame_index(1234);
+    f.set_motion_time(10.28);
+    f.set_sequence(99999);
+    f.set_server_send_time_ns(1795000000000000000);
+    f.mutable_positions_f64()->Add(p.begin(), p.end());
+    benchmark::DoNotOptimize(f.SerializeAsString());
+  }
+}
+BENCHMARK(BM_EncodeBodyByProtobuf)->Name("frame/encode_body_f64_through_protobuf");
+
 void BM_Head(benchmark::State& state) {
   const std::string b = body();
-  for (auto _ : state) benchmark::DoNotOptimize(wire::frame_head_for(1, 2, 3, b.size(), false));
+  for (auto _ : state) benchmark::DoNotOptimize(wire::frame_head_for(1, 2, 3, b.size(), false).size());
 }
 BENCHMARK(BM_Head)->Name("frame/subscriber_head");
 

@@ -38,7 +38,7 @@ class NullOutbox final : public server::Outbox {
   bool stopped() const override { return false; }
   bool closing() const override { return closing_; }
   void send(std::string framed) override { require(framed.size() >= 4, "a reply is framed"); }
-  bool push_frame(std::uint32_t, std::string head, std::shared_ptr<const std::string> body,
+  bool push_frame(std::uint32_t, const gmr::wire::FrameHead& head, std::shared_ptr<const std::string> body,
                   std::chrono::steady_clock::duration) override {
     require(body != nullptr && head.size() + body->size() >= 4, "a frame is framed");
     return true;

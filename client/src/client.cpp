@@ -134,7 +134,7 @@ Result<std::unique_ptr<Client>> Client::connect(const ClientOptions& options) {
   }
   d.open = true;
   const auto remote = d.socket.tcp().remote_endpoint(ec);
-  net::post(d.strand, [impl = c->impl_] { impl->read_prefix(); });
+  net::post(d.strand, [impl = c->impl_] { impl->read_more(); });
 
   pb::ClientMessage hello;
   hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);

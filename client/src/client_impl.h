@@ -156,8 +156,11 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   std::deque<std::string> write_queue;
   std::atomic<std::size_t> write_queue_bytes{0};  // also read by callers of send()
   bool writing = false;
-  std::array<std::uint8_t, wire::kLengthPrefixBytes> prefix{};
-  std::string body;
+  // What the server sent and was not handled yet: in_[0, in_end_), whole
+  // messages handled as they arrive, so one read takes what came (many
+  // frames at once under load) rather than two reads a message.
+  std::string in_;
+  std::size_t in_end_ = 0;
   std::array<char, 2048> udp_buffer{};
   udp::endpoint udp_sender;
   wire::Reassembler reassembler;
@@ -166,7 +169,10 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   // a non-empty queue past options.max_write_queue_bytes.
   bool send(std::string framed);
   void write_next();
-  void read_prefix();
+  // Reads what the server sent, and handles each whole message.
+  void read_more();
+  // Handles the whole messages in in_ and keeps the rest; false when the link failed.
+  bool take_messages();
   void read_udp();
   // Joins `group` (address:port) on the interface of the TCP connection; on the strand.
   Status join_multicast(const std::string& group);

@@ -1,5 +1,8 @@
 #include "client_impl.h"
 
+#include <array>
+#include <cstring>
+
 namespace gmr::client {
 
 bool Client::Impl::send(std::string framed) {
@@ -35,25 +38,63 @@ void Client::Impl::write_next() {
                      });
 }
 
-void Client::Impl::read_prefix() {
-  socket.async_read(net::buffer(prefix), [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
-    if (ec) {
-      return self->fail(asio::TlsSocket::peer_closed(ec) ? std::string("the server closed the connection")
-                                                         : "read failed: " + ec.message());
+namespace {
+// Bytes of room a read gets at least; a message longer than what is held
+// makes room for itself (within max_message_bytes). Once a long message is
+// through, a buffer past kKeptReadBuffer is given back.
+constexpr std::size_t kReadChunk = 4096;
+constexpr std::size_t kKeptReadBuffer = 64 * 1024;
+}  // namespace
+
+void Client::Impl::read_more() {
+  if (in_.size() - in_end_ < kReadChunk) in_.resize(in_end_ + kReadChunk);
+  socket.async_read_some(net::buffer(in_.data() + in_end_, in_.size() - in_end_),
+                         [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
+                           if (ec) {
+                             return self->fail(asio::TlsSocket::peer_closed(ec)
+                                                   ? std::string("the server closed the connection")
+                                                   : "read failed: " + ec.message());
+                           }
+                           self->in_end_ += n;
+                           if (self->take_messages()) self->read_more();
+                         });
+}
+
+bool Client::Impl::take_messages() {
+  std::size_t at = 0;
+  std::uint32_t next = 0;  // the length of the message at `at`, once its prefix is in
+  bool whole = false;
+  for (;;) {
+    if (in_end_ - at < wire::kLengthPrefixBytes) break;
+    std::array<std::uint8_t, wire::kLengthPrefixBytes> prefix{};
+    std::memcpy(prefix.data(), in_.data() + at, prefix.size());
+    next = wire::read_length_prefix(prefix);
+    if (auto s = wire::check_length(next, options.max_message_bytes); !s.ok()) {
+      fail("bad length prefix from the server: " + s.error().message);
+      return false;
     }
-    const std::uint32_t n = wire::read_length_prefix(self->prefix);
-    if (auto s = wire::check_length(n, self->options.max_message_bytes); !s.ok()) {
-      return self->fail("bad length prefix from the server: " + s.error().message);
+    whole = in_end_ - at - wire::kLengthPrefixBytes >= next;
+    if (!whole) break;
+    pb::ServerMessage m;
+    if (!m.ParseFromArray(in_.data() + at + wire::kLengthPrefixBytes, static_cast<int>(next))) {
+      fail("the server sent a message that does not parse");
+      return false;
     }
-    self->body.resize(n);
-    self->socket.async_read(net::buffer(self->body), [self](const boost::system::error_code& ec2, std::size_t) {
-      if (ec2) return self->fail("read failed: " + ec2.message());
-      pb::ServerMessage m;
-      if (!m.ParseFromString(self->body)) return self->fail("the server sent a message that does not parse");
-      self->on_message(m, false);
-      self->read_prefix();
-    });
-  });
+    at += wire::kLengthPrefixBytes + next;
+    on_message(m, false);
+    if (!open) return false;
+  }
+  // What is left (part of a message) moves to the front.
+  std::memmove(in_.data(), in_.data() + at, in_end_ - at);
+  in_end_ -= at;
+  if (in_end_ >= wire::kLengthPrefixBytes && !whole) {
+    // A message longer than the buffer: room for all of it.
+    const std::size_t need = wire::kLengthPrefixBytes + next;
+    if (in_.size() < need) in_.resize(need);
+  } else if (in_end_ == 0 && in_.size() > kKeptReadBuffer) {
+    std::string().swap(in_);
+  }
+  return true;
 }
 
 void Client::Impl::arm_heartbeat() {

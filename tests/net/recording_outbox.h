@@ -25,9 +25,9 @@ class RecordingOutbox final : public server::Outbox {
   bool stopped() const override { return false; }
   bool closing() const override { return closing_; }
   void send(std::string framed) override { replies.push_back(unframe(framed)); }
-  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+  bool push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
                   std::chrono::steady_clock::duration = {}) override {
-    frames.push_back(unframe(head + *body));
+    frames.push_back(unframe(std::string(head.view()) + *body));
     keys.push_back(key);
     return true;
   }

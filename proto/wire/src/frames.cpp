@@ -1,55 +1,127 @@
 #include "gmr/wire/frames.h"
 
+#include <algorithm>
+#include <bit>
+#include <cstring>
+
 #include "gmr/wire/framing.h"
 
 namespace gmr::wire {
 namespace pb = ::gmr::stream::v1;
 namespace {
 
-void put_varint(std::string& out, std::uint64_t v) {
+// Appends `v` as a varint at `out`; returns the end.
+char* put_varint(char* out, std::uint64_t v) {
   while (v >= 0x80) {
-    out.push_back(static_cast<char>(static_cast<std::uint8_t>(v) | 0x80));
+    *out++ = static_cast<char>(static_cast<std::uint8_t>(v) | 0x80);
     v >>= 7;
   }
-  out.push_back(static_cast<char>(v));
+  *out++ = static_cast<char>(v);
+  return out;
 }
 
-// Field tags: (number << 3) | wire type (0 varint, 2 length-delimited).
+std::size_t varint_size(std::uint64_t v) {
+  std::size_t n = 1;
+  for (; v >= 0x80; v >>= 7) ++n;
+  return n;
+}
+
+// Field tags: (number << 3) | wire type (0 varint, 1 64-bit, 2 length-delimited).
 constexpr std::uint64_t tag(int number, int wire_type) { return (static_cast<std::uint64_t>(number) << 3) | wire_type; }
 
-std::string frame_ids(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id) {
-  std::string ids;
-  ids.reserve(24);
-  put_varint(ids, tag(pb::Frame::kViewIdFieldNumber, 0));
-  put_varint(ids, view_id);
-  put_varint(ids, tag(pb::Frame::kSubscriptionIdFieldNumber, 0));
-  put_varint(ids, subscription_id);
-  put_varint(ids, tag(pb::Frame::kStreamIdFieldNumber, 0));
-  put_varint(ids, stream_id);
-  return ids;
+}  // namespace
+
+namespace {
+
+// The body's fields as protobuf writes them (by field number; zeros and empty
+// lists left out; packed lists little-endian), into `out`, or only counted
+// when `out` is null: a frame is encoded per stream tick, and building a
+// pb::Frame to serialize it copies every value and allocates three times.
+class BodyWriter {
+ public:
+  explicit BodyWriter(char* out) : p_(out) {}
+  std::size_t size() const { return n_; }
+
+  void varint_field(int number, std::uint64_t v) {
+    if (v == 0) return;
+    varint(tag(number, 0));
+    varint(v);
+  }
+  void double_field(int number, double v) {
+    std::uint64_t raw = 0;
+    std::memcpy(&raw, &v, sizeof raw);
+    if (raw == 0) return;  // +0.0 only, as protobuf
+    varint(tag(number, 1));
+    bytes(&raw, sizeof raw);
+  }
+  template <class T>
+  void packed_field(int number, std::span<const T> v) {
+    if (v.empty()) return;
+    varint(tag(number, 2));
+    varint(v.size_bytes());
+    bytes(v.data(), v.size_bytes());
+  }
+
+ private:
+  void varint(std::uint64_t v) {
+    if (p_ != nullptr) p_ = put_varint(p_, v);
+    n_ += varint_size(v);
+  }
+  void bytes(const void* data, std::size_t n) {
+    if (p_ != nullptr) {
+      std::memcpy(p_, data, n);
+      p_ += n;
+    }
+    n_ += n;
+  }
+
+  char* p_;
+  std::size_t n_ = 0;
+};
+
+void write_body(BodyWriter& w, const FrameContent& c) {
+  static_assert(std::endian::native == std::endian::little, "packed floats are copied as they are in memory");
+  w.varint_field(pb::Frame::kSkeletonVersionFieldNumber, c.skeleton_version);
+  w.varint_field(pb::Frame::kFrameIndexFieldNumber, c.frame_index);
+  w.double_field(pb::Frame::kMotionTimeFieldNumber, c.motion_time);
+  w.varint_field(pb::Frame::kSequenceFieldNumber, c.sequence);
+  w.varint_field(pb::Frame::kServerSendTimeNsFieldNumber, static_cast<std::uint64_t>(c.server_send_time_ns));
+  if (c.float64) {
+    w.packed_field(pb::Frame::kPositionsF64FieldNumber, c.positions_f64);
+    w.packed_field(pb::Frame::kOrientationsF64FieldNumber, c.orientations_f64);
+    w.packed_field(pb::Frame::kLocalRotationsF64FieldNumber, c.local_rotations_f64);
+    w.packed_field(pb::Frame::kLocalTranslationsF64FieldNumber, c.local_translations_f64);
+  } else {
+    w.packed_field(pb::Frame::kPositionsFieldNumber, c.positions);
+    w.packed_field(pb::Frame::kOrientationsFieldNumber, c.orientations);
+    w.packed_field(pb::Frame::kLocalRotationsFieldNumber, c.local_rotations);
+    w.packed_field(pb::Frame::kLocalTranslationsFieldNumber, c.local_translations);
+  }
 }
 
 }  // namespace
 
 std::string encode_frame_body(const FrameContent& c) {
-  pb::Frame f;
-  f.set_skeleton_version(c.skeleton_version);
-  f.set_frame_index(c.frame_index);
-  f.set_motion_time(c.motion_time);
-  f.set_sequence(c.sequence);
-  f.set_server_send_time_ns(c.server_send_time_ns);
-  if (c.float64) {
-    f.mutable_positions_f64()->Add(c.positions_f64.begin(), c.positions_f64.end());
-    f.mutable_orientations_f64()->Add(c.orientations_f64.begin(), c.orientations_f64.end());
-    f.mutable_local_rotations_f64()->Add(c.local_rotations_f64.begin(), c.local_rotations_f64.end());
-    f.mutable_local_translations_f64()->Add(c.local_translations_f64.begin(), c.local_translations_f64.end());
-  } else {
-    f.mutable_positions()->Add(c.positions.begin(), c.positions.end());
-    f.mutable_orientations()->Add(c.orientations.begin(), c.orientations.end());
-    f.mutable_local_rotations()->Add(c.local_rotations.begin(), c.local_rotations.end());
-    f.mutable_local_translations()->Add(c.local_translations.begin(), c.local_translations.end());
-  }
-  return f.SerializeAsString();
+  // write_body writes the fields in field-number order, as protobuf does.
+  using F = pb::Frame;
+  static_assert(F::kSkeletonVersionFieldNumber < F::kFrameIndexFieldNumber &&
+                F::kFrameIndexFieldNumber < F::kMotionTimeFieldNumber &&
+                F::kMotionTimeFieldNumber < F::kSequenceFieldNumber &&
+                F::kSequenceFieldNumber < F::kServerSendTimeNsFieldNumber &&
+                F::kServerSendTimeNsFieldNumber < F::kPositionsFieldNumber &&
+                F::kPositionsFieldNumber < F::kOrientationsFieldNumber &&
+                F::kOrientationsFieldNumber < F::kLocalRotationsFieldNumber &&
+                F::kLocalRotationsFieldNumber < F::kLocalTranslationsFieldNumber &&
+                F::kServerSendTimeNsFieldNumber < F::kPositionsF64FieldNumber &&
+                F::kPositionsF64FieldNumber < F::kOrientationsF64FieldNumber &&
+                F::kOrientationsF64FieldNumber < F::kLocalRotationsF64FieldNumber &&
+                F::kLocalRotationsF64FieldNumber < F::kLocalTranslationsF64FieldNumber);
+  BodyWriter count(nullptr);
+  write_body(count, c);
+  std::string out(count.size(), '\0');
+  BodyWriter writer(out.data());
+  write_body(writer, c);
+  return out;
 }
 
 void set_write_stamp(char* value, std::int64_t ns) {
@@ -57,32 +129,44 @@ void set_write_stamp(char* value, std::int64_t ns) {
   for (int i = 0; i < 8; ++i, v >>= 8) value[i] = static_cast<char>(v & 0xff);  // fixed64: little-endian
 }
 
-void set_write_stamp(std::string& head, std::int64_t ns) { set_write_stamp(head.data() + head.size() - 8, ns); }
-
-std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
-                           std::size_t body_size, bool length_prefix) {
-  static_assert(pb::Frame::kServerWriteTimeNsFieldNumber < 16, "the stamp's tag is one byte");
-  std::string ids = frame_ids(view_id, subscription_id, stream_id);
-  put_varint(ids, tag(pb::Frame::kServerWriteTimeNsFieldNumber, 1));  // 64-bit
-  ids.append(8, '\0');
-  std::string head;
-  head.reserve(kLengthPrefixBytes + 12 + ids.size());
-  if (length_prefix) head.resize(kLengthPrefixBytes);
-  put_varint(head, tag(pb::ServerMessage::kFrameFieldNumber, 2));
-  put_varint(head, ids.size() + body_size);
-  head += ids;
+FrameHead frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
+                         std::size_t body_size, bool length_prefix) {
+  static_assert(pb::Frame::kViewIdFieldNumber < 16 && pb::Frame::kSubscriptionIdFieldNumber < 16 &&
+                    pb::Frame::kStreamIdFieldNumber < 16 && pb::Frame::kServerWriteTimeNsFieldNumber < 16,
+                "each id's tag is one byte");
+  static_assert(pb::ServerMessage::kFrameFieldNumber < 2048, "ServerMessage.frame's tag is at most two bytes");
+  const std::size_t ids_size =
+      3 + varint_size(view_id) + varint_size(subscription_id) + varint_size(stream_id) + kWriteStampBytes;
+  FrameHead head;
+  char* const begin = head.bytes_.data();
+  char* p = begin + (length_prefix ? kLengthPrefixBytes : 0);
+  p = put_varint(p, tag(pb::ServerMessage::kFrameFieldNumber, 2));
+  p = put_varint(p, ids_size + body_size);
+  p = put_varint(p, tag(pb::Frame::kViewIdFieldNumber, 0));
+  p = put_varint(p, view_id);
+  p = put_varint(p, tag(pb::Frame::kSubscriptionIdFieldNumber, 0));
+  p = put_varint(p, subscription_id);
+  p = put_varint(p, tag(pb::Frame::kStreamIdFieldNumber, 0));
+  p = put_varint(p, stream_id);
+  p = put_varint(p, tag(pb::Frame::kServerWriteTimeNsFieldNumber, 1));  // 64-bit
+  std::fill_n(p, 8, '\0');
+  p += 8;
+  head.size_ = static_cast<std::uint8_t>(p - begin);
   if (length_prefix) {
     write_length_prefix(
-        static_cast<std::uint32_t>(head.size() - kLengthPrefixBytes + body_size),
-        std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(head.data()), kLengthPrefixBytes));
+        static_cast<std::uint32_t>(head.size_ - kLengthPrefixBytes + body_size),
+        std::span<std::uint8_t, kLengthPrefixBytes>(reinterpret_cast<std::uint8_t*>(begin), kLengthPrefixBytes));
   }
   return head;
 }
 
 std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
                               std::string_view body, std::int64_t write_ns) {
-  std::string out = frame_head_for(view_id, subscription_id, stream_id, body.size(), false);
-  set_write_stamp(out, write_ns);
+  FrameHead head = frame_head_for(view_id, subscription_id, stream_id, body.size(), false);
+  head.set_write_stamp(write_ns);
+  std::string out;
+  out.reserve(head.size() + body.size());
+  out.append(head.view());
   out.append(body);
   return out;
 }

@@ -34,8 +34,8 @@ void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std
 void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
   // The head and the shared body go into the datagrams as they are: no copy
   // of the whole message per subscriber.
-  if (!publisher_.send_frame(endpoint_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), false),
-                             *body)) {
+  if (!publisher_.send_frame(
+          endpoint_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), false).view(), *body)) {
     ++dropped_;
     connection_->count_udp_frame_dropped();
     return;
@@ -70,7 +70,7 @@ void MulticastChannel::leave(const MulticastTarget* member) {
 }
 
 void MulticastChannel::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
-  if (publisher_.send_frame(group_, wire::frame_head_for(0, 0, stream_id, body->size(), false), *body)) {
+  if (publisher_.send_frame(group_, wire::frame_head_for(0, 0, stream_id, body->size(), false).view(), *body)) {
     ++sent_;
     if (total_sent_ != nullptr) ++*total_sent_;
   } else {

@@ -6,9 +6,7 @@
 #include <array>
 #include <optional>
 
-#include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
-#include "prometheus/histogram.h"
 #include "transport/connection_log.h"
 
 namespace gmr::server {
@@ -18,7 +16,6 @@ namespace {
 // bytes arrive (at most kBodyChunk): the buffer is never more than about
 // twice what arrived, whatever length the prefix announced.
 constexpr std::size_t kFirstChunk = 4096;
-constexpr std::size_t kBodyChunk = 256 * 1024;
 }  // namespace
 
 Connection::Connection(net::io_context& io, tcp::socket socket, std::uint64_t id, const ConnectionLimits& limits,
@@ -65,6 +62,12 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
     Lock lock(self->m_);
     if (self->stopped_) return;
     tune_socket(self->socket_.tcp(), self->limits_, self->id_);
+    // A write is tried at once and must not block the lane (flush).
+    boost::system::error_code ec;
+    if (self->socket_.tcp().non_blocking(true, ec); ec) {
+      self->stop("the socket cannot be made non-blocking: " + ec.message());
+      return;
+    }
     self->last_read_ = self->last_write_ = Clock::now();
     log_connection(spdlog::level::info, "conn {}: connected from {}{}", self->id_, self->peer_,
                    self->socket_.tls() ? " (TLS)" : "");
@@ -135,107 +138,6 @@ void Connection::finish() {
   frames_.clear();
   account();
   request_flush();
-}
-
-void Connection::request_flush() {
-  if (writing_ || stopped_) return;
-  if (on_lane()) {
-    flush();
-    return;
-  }
-  // Once per wake of the lane: what else arrives meanwhile goes in the same
-  // write. Only the control loop asks from off the lane.
-  if (flush_posted_) return;
-  flush_posted_ = true;
-  flush_asked_ = Clock::now();
-  auto self = shared_from_this();
-  if (threads_ != nullptr) {
-    threads_->defer(lane_, LaneTask{[](void* c) { static_cast<Connection*>(c)->deferred_flush(); }, this, self});
-    return;
-  }
-  net::post(io_, [self] { self->deferred_flush(); });
-}
-
-void Connection::deferred_flush() {
-  Lock lock(m_);
-  flush_posted_ = false;
-  flush();
-}
-
-void Connection::flush() {
-  if (writing_ || stopped_ || !secured_) return;
-  if (replies_.empty() && frames_.empty()) {
-    if (close_after_flush_) stop("closed by the server");
-    return;
-  }
-  // One gathered write: every waiting reply, then every waiting frame (its
-  // own head, then the shared body).
-  std::vector<net::const_buffer> buffers;
-  hold_.clear();
-  hold_heads_.clear();
-  in_flight_bytes_ = 0;
-  for (auto& r : replies_) {
-    buffers.push_back(net::buffer(*r));
-    in_flight_bytes_ += r->size();
-    hold_.push_back(std::move(r));
-  }
-  replies_.clear();
-  reply_bytes_ = 0;
-  // Frames still within their subscriber's staleness bound, each its own
-  // head then the shared body (hold_heads_ is reserved: buffers point into it).
-  const std::size_t first_frame = hold_.size();
-  hold_heads_.reserve(frames_.count());
-  // Every frame of this write is stamped with the same time: now.
-  const std::int64_t now = now_ns();
-  frames_.drain(Clock::now(), counters_, [&](std::uint32_t, PendingFrame& f) {
-    oldest_frame_in_flight_ = std::min(oldest_frame_in_flight_, f.pushed_at);
-    wire::set_write_stamp(f.head, now);
-    hold_heads_.push_back(std::move(f.head));
-    in_flight_bytes_ += hold_heads_.back().size() + f.body->size();
-    hold_.push_back(std::move(f.body));
-    ++counters_.frames_sent;
-  });
-  for (std::size_t i = first_frame, head = 0; i < hold_.size(); ++i, ++head) {
-    buffers.push_back(net::buffer(hold_heads_[head]));
-    buffers.push_back(net::buffer(*hold_[i]));
-  }
-  writing_frames_ = !hold_heads_.empty();
-  if (!writing_frames_) oldest_frame_in_flight_ = Clock::time_point::max();
-  if (buffers.empty()) {  // every waiting frame was stale
-    account();
-    if (close_after_flush_) stop("closed by the server");
-    return;
-  }
-  writing_ = true;
-  write_started_ = Clock::now();
-  if (socket_.tls()) {
-    // TLS writes one buffer at a time: given in one piece, the bytes go out
-    // in full records rather than one record (and one send) per buffer.
-    tls_out_.clear();
-    tls_out_.reserve(in_flight_bytes_);
-    for (const auto& b : buffers) tls_out_.append(static_cast<const char*>(b.data()), b.size());
-    buffers.assign(1, net::buffer(tls_out_));
-    hold_.clear();  // the copy is what is in flight now
-    hold_heads_.clear();
-  }
-  account();
-  socket_.async_write(buffers, [self = shared_from_this()](const boost::system::error_code& ec, std::size_t n) {
-    Lock lock(self->m_);
-    self->writing_ = false;
-    self->hold_.clear();
-    self->hold_heads_.clear();
-    if (self->tls_out_.capacity() > kBodyChunk) std::string().swap(self->tls_out_);
-    self->in_flight_bytes_ = 0;
-    self->account();
-    if (ec) {
-      self->counters_.bytes_sent += n;
-      if (ec != net::error::operation_aborted) self->stop("write failed: " + ec.message());
-      return;
-    }
-    self->wrote(n);
-    self->resume_reading();
-    self->flush();
-  });
 }
 
 void Connection::arm_watchdog() {

@@ -111,7 +111,17 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   void hand_over(std::string body);
   void handed_back();
   void flush();
+  // The write in flight goes on asynchronously (gather_: what is left of it;
+  // `already`: bytes of it written at once).
+  void write_rest(std::size_t already);
+  // The write in flight completed (`ec`, `n` bytes of it written); the next
+  // one starts.
+  void wrote_all(const boost::system::error_code& ec, std::size_t n);
   void arm_watchdog();
+
+  // Request bodies are read in chunks of at most this; a TLS write's copy
+  // past it is given back.
+  static constexpr std::size_t kBodyChunk = 256 * 1024;
 
   net::io_context& io_;
   net::io_context* control_;  // where the Handler and on_closed run
@@ -129,8 +139,11 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   std::size_t body_reserved_ = 0;  // BufferBudget::reserved for the body being read
   bool body_waiting_ = false;      // announced, but the budget cannot take it yet
 
-  std::vector<std::shared_ptr<const std::string>> hold_;  // what the write in flight points into
-  std::vector<std::string> hold_heads_;
+  // The write in flight: its buffers, and what they point into. Kept from
+  // one write to the next (cleared, not freed), so a write allocates nothing.
+  std::vector<net::const_buffer> gather_;
+  std::vector<std::shared_ptr<const std::string>> hold_;
+  std::vector<wire::FrameHead> hold_heads_;
   std::string tls_out_;   // with TLS: the write in flight in one piece (one record per 16 KiB, not per buffer)
   bool secured_ = false;  // the TLS handshake is done (or there is no TLS): writing may start
   net::steady_timer watchdog_;

@@ -9,26 +9,31 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
-#include <deque>
 #include <map>
 #include <memory>
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
+#include "gmr/wire/frame_head.h"
 #include "transport/outbox.h"
 
 namespace gmr::server {
 
 struct PendingFrame {
   using Clock = std::chrono::steady_clock;
-  std::string head;                                       // this client's length prefix and ids
+  std::uint32_t key = 0;
+  wire::FrameHead head;                                   // this client's length prefix and ids
   std::shared_ptr<const std::string> body;                // shared by every subscriber of the stream
   Clock::time_point stale_at = Clock::time_point::max();  // not written after this
   Clock::time_point pushed_at{};
   std::uint64_t size() const { return head.size() + body->size(); }
 };
 
+// The frames are one vector in the order they were pushed (a connection holds
+// a few at a time: per_key per subscription while a write is in flight), so
+// queueing and writing them allocates nothing once it has grown.
 class FrameQueue {
  public:
   using Clock = std::chrono::steady_clock;
@@ -36,59 +41,48 @@ class FrameQueue {
   FrameQueue(std::size_t per_key, std::size_t max_bytes)
       : per_key_(std::max<std::size_t>(1, per_key)), max_bytes_(max_bytes) {}
 
-  // Queues `f` for `key`. `writing`: a write is in flight, behind which
+  // Queues `f` (for its key). `writing`: a write is in flight, behind which
   // frames wait for the client to read (the per-key and byte bounds apply).
   // Without one the frame goes out with the next write, soon (at once, or
   // when its I/O thread takes the write the control loop handed it): it is
   // kept whatever the per-key bound, within twice the byte bound.
   // `over_budget`: the server-wide buffer budget is exceeded (a frame that
   // would wait is dropped). False when a frame was dropped (counted in `c`).
-  bool push(std::uint32_t key, PendingFrame f, bool writing, bool over_budget, ConnectionCounters& c) {
+  bool push(PendingFrame f, bool writing, bool over_budget, ConnectionCounters& c) {
     const std::uint64_t size = f.size();
     if (writing && over_budget) {
       ++c.frames_dropped;
       return false;
     }
     bool kept_all = true;
-    auto& queue = frames_[key];
-    if (writing && queue.size() >= per_key_) {
-      pop_front(queue, c);
+    if (writing && count(f.key) >= per_key_) {
+      drop_oldest(f.key, c);
       kept_all = false;
     }
     if (!writing && max_bytes_ != 0 && bytes_ + size > 2 * max_bytes_) {
       // A lane that does not come round (a starved thread): bounded all the same.
-      if (queue.empty()) frames_.erase(key);
       ++c.frames_dropped;
       return false;
     }
     if (writing && max_bytes_ != 0) {
       // The oldest of this key give way; a frame that would still not fit
       // beside the other keys' frames is dropped.
-      while (!queue.empty() && bytes_ + size > max_bytes_) {
-        pop_front(queue, c);
-        kept_all = false;
-      }
+      while (bytes_ + size > max_bytes_ && drop_oldest(f.key, c)) kept_all = false;
       if (bytes_ != 0 && bytes_ + size > max_bytes_) {
-        if (queue.empty()) frames_.erase(key);
         ++c.frames_dropped;
         return false;
       }
     }
     bytes_ += size;
-    queue.push_back(std::move(f));
+    frames_.push_back(std::move(f));
     return kept_all;
   }
 
   std::uint64_t bytes() const { return bytes_; }
-  std::size_t count() const {
-    std::size_t n = 0;
-    for (const auto& [key, queue] : frames_) n += queue.size();
-    return n;
-  }
+  std::size_t count() const { return frames_.size(); }
   bool empty() const { return frames_.empty(); }
   bool waiting(std::uint32_t key) const {
-    auto it = frames_.find(key);
-    return it != frames_.end() && !it->second.empty();
+    return std::any_of(frames_.begin(), frames_.end(), [key](const PendingFrame& f) { return f.key == key; });
   }
   std::uint64_t stale_dropped(std::uint32_t key) const {
     auto it = stale_.find(key);
@@ -97,30 +91,29 @@ class FrameQueue {
   // Forgets the frames of `key` and its stale count.
   void discard(std::uint32_t key) {
     stale_.erase(key);
-    if (auto it = frames_.find(key); it != frames_.end()) {
-      for (const auto& f : it->second) bytes_ -= f.size();
-      frames_.erase(it);
-    }
+    take(key);
   }
   // Removes and returns the frames of `key`, oldest first.
-  std::deque<PendingFrame> take(std::uint32_t key) {
-    std::deque<PendingFrame> out;
-    if (auto it = frames_.find(key); it != frames_.end()) {
-      out = std::move(it->second);
-      for (const auto& f : out) bytes_ -= f.size();
-      frames_.erase(it);
+  std::vector<PendingFrame> take(std::uint32_t key) {
+    std::vector<PendingFrame> out;
+    auto kept = frames_.begin();
+    for (auto& f : frames_) {
+      if (f.key == key) {
+        bytes_ -= f.size();
+        out.push_back(std::move(f));
+      } else {
+        *kept++ = std::move(f);
+      }
     }
+    frames_.erase(kept, frames_.end());
     return out;
   }
-  // Empties the queue: `write(key, frame)` for each frame still fresh at
-  // `now`, in key order, oldest first; stale ones are counted.
+  // Empties the queue: `write(frame)` for each frame still fresh at `now`,
+  // in the order they were pushed; stale ones are counted.
   template <class Write>
   void drain(Clock::time_point now, ConnectionCounters& c, Write&& write) {
-    for (auto& [key, queue] : frames_) {
-      for (auto& f : queue) {
-        if (!fresh(key, f, now, c)) continue;
-        write(key, f);
-      }
+    for (auto& f : frames_) {
+      if (fresh(f, now, c)) write(f);
     }
     clear();
   }
@@ -129,16 +122,19 @@ class FrameQueue {
   // take turns. Stale frames met on the way are dropped and counted.
   std::optional<PendingFrame> pop_next(std::uint32_t& cursor, Clock::time_point now, ConnectionCounters& c) {
     while (!frames_.empty()) {
-      auto it = frames_.lower_bound(cursor);
-      if (it == frames_.end()) it = frames_.begin();
-      auto& queue = it->second;
-      PendingFrame f = std::move(queue.front());
-      queue.pop_front();
+      // The smallest key at or after the cursor, else the smallest of all;
+      // the first of its frames is its oldest.
+      auto next = frames_.end(), first = frames_.begin();
+      for (auto it = frames_.begin(); it != frames_.end(); ++it) {
+        if (it->key < first->key) first = it;
+        if (it->key >= cursor && (next == frames_.end() || it->key < next->key)) next = it;
+      }
+      if (next == frames_.end()) next = first;
+      PendingFrame f = std::move(*next);
+      frames_.erase(next);
       bytes_ -= f.size();
-      const std::uint32_t key = it->first;
-      if (queue.empty()) frames_.erase(it);
-      cursor = key + 1;
-      if (fresh(key, f, now, c)) return f;
+      cursor = f.key + 1;
+      if (fresh(f, now, c)) return f;
     }
     return std::nullopt;
   }
@@ -148,23 +144,31 @@ class FrameQueue {
   }
 
  private:
-  void pop_front(std::deque<PendingFrame>& queue, ConnectionCounters& c) {
-    bytes_ -= queue.front().size();
-    queue.pop_front();
+  std::size_t count(std::uint32_t key) const {
+    return static_cast<std::size_t>(
+        std::count_if(frames_.begin(), frames_.end(), [key](const PendingFrame& f) { return f.key == key; }));
+  }
+  // Drops the oldest frame of `key` (counted); false when it has none.
+  bool drop_oldest(std::uint32_t key, ConnectionCounters& c) {
+    auto it = std::find_if(frames_.begin(), frames_.end(), [key](const PendingFrame& f) { return f.key == key; });
+    if (it == frames_.end()) return false;
+    bytes_ -= it->size();
+    frames_.erase(it);
     ++c.frames_dropped;
+    return true;
   }
   // False (counted) when `f` waited past its subscriber's staleness bound.
-  bool fresh(std::uint32_t key, const PendingFrame& f, Clock::time_point now, ConnectionCounters& c) {
+  bool fresh(const PendingFrame& f, Clock::time_point now, ConnectionCounters& c) {
     if (f.stale_at >= now) return true;
     ++c.frames_dropped;
     ++c.frames_stale;
-    ++stale_[key];
+    ++stale_[f.key];
     return false;
   }
 
   std::size_t per_key_;
   std::size_t max_bytes_;
-  std::map<std::uint32_t, std::deque<PendingFrame>> frames_;  // per key, oldest first
+  std::vector<PendingFrame> frames_;  // oldest first
   std::uint64_t bytes_ = 0;
   std::map<std::uint32_t, std::uint64_t> stale_;  // per key: frames dropped for their age
 };

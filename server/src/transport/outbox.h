@@ -10,6 +10,8 @@
 #include <memory>
 #include <string>
 
+#include "gmr/wire/frame_head.h"
+
 namespace gmr::server {
 
 struct ConnectionCounters {
@@ -58,7 +60,7 @@ class Outbox {
   // waiting and the oldest was dropped to make room (counted). A frame still
   // waiting `max_age` after this call is dropped instead of written (counted,
   // and in end_frames(key)'s answer); zero: no limit.
-  virtual bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+  virtual bool push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
                           std::chrono::steady_clock::duration max_age = {}) = 0;
   // True while frames for `key` cannot go out soon: its share of frames is
   // waiting behind a write that has been in flight for a while (the client

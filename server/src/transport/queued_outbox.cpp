@@ -85,7 +85,7 @@ void QueuedOutbox::send(std::string framed) {
   request_flush();
 }
 
-bool QueuedOutbox::push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+bool QueuedOutbox::push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
                               Clock::duration max_age) {
   Lock lock(m_);
   if (stopped_ || close_after_flush_) return true;
@@ -93,7 +93,7 @@ bool QueuedOutbox::push_frame(std::uint32_t key, std::string head, std::shared_p
   // within this connection's bounds and the server's budget.
   const Clock::time_point now = Clock::now();
   const Clock::time_point stale_at = max_age > Clock::duration::zero() ? now + max_age : Clock::time_point::max();
-  const bool kept_all = frames_.push(key, PendingFrame{std::move(head), std::move(body), stale_at, now}, frames_wait(),
+  const bool kept_all = frames_.push(PendingFrame{key, head, std::move(body), stale_at, now}, frames_wait(),
                                      budget_ != nullptr && budget_->over(), counters_);
   note_queue();
   account();
@@ -121,8 +121,10 @@ void QueuedOutbox::discard_frames(std::uint32_t key) {
 }
 
 std::string QueuedOutbox::stamped(PendingFrame& f, std::int64_t write_time_ns) {
-  std::string framed = std::move(f.head);
-  wire::set_write_stamp(framed, write_time_ns);
+  f.head.set_write_stamp(write_time_ns);
+  std::string framed;
+  framed.reserve(f.size());
+  framed.append(f.head.view());
   framed += *f.body;
   ++counters_.frames_sent;
   return framed;

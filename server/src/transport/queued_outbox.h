@@ -43,7 +43,7 @@ class QueuedOutbox : public Outbox {
   bool stopped() const override { return stopped_.load(std::memory_order_acquire); }
   bool closing() const override;
   void send(std::string framed) override;
-  bool push_frame(std::uint32_t key, std::string head, std::shared_ptr<const std::string> body,
+  bool push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
                   Clock::duration max_age = {}) override;
   bool congested(std::uint32_t key) const override;
   void discard_frames(std::uint32_t key) override;

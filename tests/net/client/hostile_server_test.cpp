@@ -7,6 +7,7 @@
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
+#include <netinet/tcp.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -53,13 +54,15 @@ const char* name_of(AfterHello a) {
 
 // A server on 127.0.0.1 that speaks just enough of the protocol: Hello, then
 // `after`; with kServe, each request goes to `answer`, whose messages are
-// sent in order (request ids are the answer's to set). Connections are served
-// one at a time, each until the client goes or `stop()`.
+// sent in order (request ids are the answer's to set): each in a send of its
+// own, or with `cut` all of an answer's bytes in sends of `cut` bytes.
+// Connections are served one at a time, each until the client goes or `stop()`.
 class FakeServer {
  public:
   using Answer = std::function<std::vector<pb::ServerMessage>(const pb::ClientMessage&)>;
 
-  explicit FakeServer(AfterHello after, Answer answer = {}) : after_(after), answer_(std::move(answer)) {
+  explicit FakeServer(AfterHello after, Answer answer = {}, std::size_t cut = 0)
+      : after_(after), answer_(std::move(answer)), cut_(cut) {
     listen_fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
     sockaddr_in addr{};
     addr.sin_family = AF_INET;
@@ -151,9 +154,18 @@ class FakeServer {
         }
         break;
       case AfterHello::kServe:
+        if (cut_ != 0) {
+          const int on = 1;  // each cut goes out as it is sent
+          ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &on, sizeof on);
+        }
         for (pb::ClientMessage m; read_message(fd, m);) {
           if (m.has_heartbeat()) continue;
-          for (const auto& out : answer_(m)) send_bytes(fd, wire::frame_message(out).value());
+          std::string bytes;
+          for (const auto& out : answer_(m)) {
+            if (cut_ == 0) send_bytes(fd, wire::frame_message(out).value());
+            bytes += wire::frame_message(out).value();
+          }
+          for (std::size_t at = 0; cut_ != 0 && at < bytes.size(); at += cut_) send_bytes(fd, bytes.substr(at, cut_));
         }
         break;
     }
@@ -162,6 +174,7 @@ class FakeServer {
 
   AfterHello after_;
   Answer answer_;
+  std::size_t cut_;
   int listen_fd_ = -1;
   std::uint16_t port_ = 0;
   std::thread thread_;
@@ -322,6 +335,59 @@ TEST(HostileServer, FramesWhoseValuesDoNotFitTheSubscriptionAreDroppedAndCounted
   std::lock_guard lock(mutex);
   EXPECT_EQ(sizes, (std::vector<std::size_t>{4, 4}));  // the frames of 0, 1 and 5 positions never arrive
   EXPECT_EQ((*c)->counters().frames_malformed, 3u);
+}
+
+// The client reads what arrived and takes every whole message from it: many
+// messages in one read, a message over several, one longer than a read (5 KB
+// in small cuts, 200 KB past the kept buffer in large ones), in every cut.
+TEST(HostileServer, MessagesArriveWholeHoweverTheBytesAreCut) {
+  int cuts = 0;
+  for (const std::size_t cut :
+       {std::size_t{0}, std::size_t{1}, std::size_t{3}, std::size_t{1000}, std::size_t{65536}}) {
+    SCOPED_TRACE("cut " + std::to_string(cut));
+    const std::string long_source(cut != 0 && cut < 1000 ? 5'000 : 200'000, 's');
+    const std::vector<int> frames(40, 4);
+    auto answer = stream_server("Hips", {0, 1, 2, 3}, frames);
+    FakeServer server(
+        AfterHello::kServe,
+        [&](const pb::ClientMessage& m) {
+          auto out = answer(m);
+          if (m.has_list_motions()) out[0].mutable_motions()->mutable_motions(0)->set_source(long_source);
+          return out;
+        },
+        cut);
+    auto c = client::Client::connect(options_for(server.port()));
+    ASSERT_TRUE(c.ok()) << c.error().to_string();
+    auto motions = (*c)->list_motions();
+    ASSERT_TRUE(motions.ok()) << motions.error().to_string();
+    ASSERT_EQ(motions->size(), 1u);
+    EXPECT_EQ(motions->front().source, long_source);
+    auto v = (*c)->create_view("m");
+    ASSERT_TRUE(v.ok()) << v.error().to_string();
+    std::mutex mutex;
+    std::vector<std::uint64_t> indices;
+    Latch<client::SubscriptionEnd> ended;
+    client::SubscribeOptions o;
+    o.float64 = true;
+    o.max_staleness = std::chrono::milliseconds(0);
+    auto sub = (*c)->subscribe(
+        v->id, o,
+        [&](const client::ReceivedFrame& f) {
+          std::lock_guard lock(mutex);
+          EXPECT_EQ(f.positions.size(), 4u);
+          EXPECT_EQ(f.positions[3], Eigen::Vector3d(9, 10, 11));
+          indices.push_back(f.frame_index);
+        },
+        [&](const client::SubscriptionEnd& e) { ended.set(e); });
+    ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+    ASSERT_TRUE(ended.wait(std::chrono::seconds(20)).has_value());
+    std::lock_guard lock(mutex);
+    ASSERT_EQ(indices.size(), frames.size());
+    for (std::size_t k = 0; k < indices.size(); ++k) EXPECT_EQ(indices[k], k);
+    EXPECT_EQ((*c)->counters().frames_malformed, 0u);
+    ++cuts;
+  }
+  EXPECT_EQ(cuts, 5);
 }
 
 TEST(HostileServer, ASubscriptionNamingAJointPastTheSkeletonIsRefused) {

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <random>
 
 #include "gmr/demo/demo_library.h"
@@ -183,25 +184,33 @@ TEST(FrameEncoding, SharedBodyPlusSubscriberHeadDecodesToTheFrame) {
       c.orientations = qf;
     }
     const std::string body = gmr::wire::encode_frame_body(c);
-    for (std::uint32_t view : {1u, 300u, 70000u}) {
-      std::string head = gmr::wire::frame_head_for(view, view + 1, 5, body.size(), true);
+    // Ids of every varint length, up to the largest (the head's longest).
+    struct Ids {
+      std::uint32_t view, subscription;
+      std::uint64_t stream;
+    };
+    constexpr std::uint32_t kMax32 = std::numeric_limits<std::uint32_t>::max();
+    for (const Ids& ids : {Ids{1, 2, 5}, Ids{300, 301, 5}, Ids{70000, 70001, 1u << 20},
+                           Ids{kMax32, kMax32, std::numeric_limits<std::uint64_t>::max()}}) {
+      gmr::wire::FrameHead head = gmr::wire::frame_head_for(ids.view, ids.subscription, ids.stream, body.size(), true);
+      ASSERT_LE(head.size(), gmr::wire::FrameHead::kCapacity);
       // The head ends with the write stamp, filled in as the frame leaves.
-      const std::int64_t written = 1'700'000'000'123'456'789 + view;
-      gmr::wire::set_write_stamp(head, written);
-      const std::string whole = head + body;
+      const std::int64_t written = 1'700'000'000'123'456'789 + ids.view;
+      head.set_write_stamp(written);
+      const std::string whole = std::string(head.view()) + body;
       std::array<std::uint8_t, gmr::wire::kLengthPrefixBytes> prefix{};
       std::copy_n(whole.begin(), prefix.size(), prefix.begin());
       ASSERT_EQ(gmr::wire::read_length_prefix(prefix), whole.size() - prefix.size());
       const std::string out = whole.substr(prefix.size());
-      EXPECT_EQ(out, gmr::wire::frame_message_for(view, view + 1, 5, body, written));
+      EXPECT_EQ(out, gmr::wire::frame_message_for(ids.view, ids.subscription, ids.stream, body, written));
       pb::ServerMessage m;
       ASSERT_TRUE(m.ParseFromString(out));
       ASSERT_TRUE(m.has_frame());
       auto f = gmr::wire::decode_frame(m.frame());
       ASSERT_TRUE(f.ok()) << f.error().to_string();
-      EXPECT_EQ(f->view_id, view);
-      EXPECT_EQ(f->subscription_id, view + 1);
-      EXPECT_EQ(f->stream_id, 5u);
+      EXPECT_EQ(f->view_id, ids.view);
+      EXPECT_EQ(f->subscription_id, ids.subscription);
+      EXPECT_EQ(f->stream_id, ids.stream);
       EXPECT_EQ(f->skeleton_version, 3u);
       EXPECT_EQ(f->frame_index, 17u);
       EXPECT_EQ(f->motion_time, 17 / 120.0);
@@ -218,6 +227,61 @@ TEST(FrameEncoding, SharedBodyPlusSubscriberHeadDecodesToTheFrame) {
       EXPECT_EQ(f->orientations[1].x(), 0.0);
     }
   }
+}
+
+// encode_frame_body writes the fields itself: byte for byte what protobuf
+// writes for the same Frame, zeros and empty lists left out, in both
+// precisions, with and without orientations and local transforms.
+TEST(FrameEncoding, TheBodyIsWhatProtobufWrites) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> value(-1e4, 1e4);
+  int cases = 0;
+  for (int k = 0; k < 64; ++k) {
+    const bool float64 = (k & 1) != 0, orientations = (k & 2) != 0, locals = (k & 4) != 0, zeros = (k & 8) != 0;
+    const std::size_t joints = zeros ? 0 : static_cast<std::size_t>(1 + k % 31);
+    std::vector<double> p(3 * joints), q(orientations ? 4 * joints : 0), lr(locals ? 4 * joints : 0),
+        lt(locals ? 3 * joints : 0);
+    for (auto* v : {&p, &q, &lr, &lt}) {
+      for (auto& x : *v) x = value(rng);
+    }
+    const std::vector<float> pf(p.begin(), p.end()), qf(q.begin(), q.end()), lrf(lr.begin(), lr.end()),
+        ltf(lt.begin(), lt.end());
+    gmr::wire::FrameContent c;
+    c.skeleton_version = zeros ? 0 : static_cast<std::uint32_t>(k * 1000);
+    c.frame_index = zeros ? 0 : (std::uint64_t{1} << (k % 64));
+    c.motion_time = zeros ? 0.0 : value(rng);
+    c.sequence = zeros ? 0 : std::numeric_limits<std::uint64_t>::max() - static_cast<std::uint64_t>(k);
+    c.server_send_time_ns = zeros ? 0 : (k % 3 == 0 ? -123456789 : 1'700'000'000'000'000'000 + k);
+    c.float64 = float64;
+    pb::Frame expected;
+    expected.set_skeleton_version(c.skeleton_version);
+    expected.set_frame_index(c.frame_index);
+    expected.set_motion_time(c.motion_time);
+    expected.set_sequence(c.sequence);
+    expected.set_server_send_time_ns(c.server_send_time_ns);
+    if (float64) {
+      c.positions_f64 = p;
+      c.orientations_f64 = q;
+      c.local_rotations_f64 = lr;
+      c.local_translations_f64 = lt;
+      expected.mutable_positions_f64()->Add(p.begin(), p.end());
+      expected.mutable_orientations_f64()->Add(q.begin(), q.end());
+      expected.mutable_local_rotations_f64()->Add(lr.begin(), lr.end());
+      expected.mutable_local_translations_f64()->Add(lt.begin(), lt.end());
+    } else {
+      c.positions = pf;
+      c.orientations = qf;
+      c.local_rotations = lrf;
+      c.local_translations = ltf;
+      expected.mutable_positions()->Add(pf.begin(), pf.end());
+      expected.mutable_orientations()->Add(qf.begin(), qf.end());
+      expected.mutable_local_rotations()->Add(lrf.begin(), lrf.end());
+      expected.mutable_local_translations()->Add(ltf.begin(), ltf.end());
+    }
+    EXPECT_EQ(gmr::wire::encode_frame_body(c), expected.SerializeAsString()) << "case " << k;
+    ++cases;
+  }
+  EXPECT_EQ(cases, 64);
 }
 
 TEST(FrameDecoding, RefusesCountsThatDoNotFormWholeValues) {

@@ -39,6 +39,10 @@ class TlsSocket {
     std::visit([&](auto& s) { boost::asio::async_read(s, buffers, std::forward<Handler>(handler)); }, s_);
   }
   template <class Buffers, class Handler>
+  void async_read_some(const Buffers& buffers, Handler&& handler) {
+    std::visit([&](auto& s) { s.async_read_some(buffers, std::forward<Handler>(handler)); }, s_);
+  }
+  template <class Buffers, class Handler>
   void async_write(const Buffers& buffers, Handler&& handler) {
     std::visit([&](auto& s) { boost::asio::async_write(s, buffers, std::forward<Handler>(handler)); }, s_);
   }

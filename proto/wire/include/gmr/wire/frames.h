@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "gmr/core/error.h"
+#include "gmr/wire/frame_head.h"
 #include "gmr/wire/frame_values.h"
 #include "gmr/stream/v1/stream.pb.h"
 
@@ -52,23 +53,10 @@ struct FrameContent {
 // The shared body: serialized Frame fields >= 16.
 std::string encode_frame_body(const FrameContent& content);
 
-// Frame.server_write_time_ns as it ends a frame's head: its tag and 8 bytes.
-inline constexpr std::size_t kWriteStampBytes = 9;
-// Overwrites the stamp's value (the last 8 bytes of a frame_head_for head,
-// or the 8 bytes at `value`).
-void set_write_stamp(char* value, std::int64_t ns);
-void set_write_stamp(std::string& head, std::int64_t ns);
-
 // A whole serialized ServerMessage{frame: Frame{ids + write stamp + body}}
 // (no length prefix), stamped `write_ns`.
 std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
                               std::string_view body, std::int64_t write_ns = 0);
-
-// The bytes that go before a shared body of `body_size` bytes to make it a
-// whole ServerMessage (with the TCP length prefix when `length_prefix`):
-// lengths, ids, and a write stamp of 0 as its last kWriteStampBytes.
-std::string frame_head_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
-                           std::size_t body_size, bool length_prefix);
 
 // A pushed frame as values, from whichever precision it carries. Fails
 // (kInvalidData) when the value counts do not form whole positions and
