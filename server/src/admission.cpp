@@ -121,6 +121,18 @@ std::vector<SessionStats> Admission::session_stats() const {
   return out;
 }
 
+std::vector<double> Admission::frame_wait_p99s() const {
+  std::vector<double> out;
+  for (const auto& [id, entry] : connections_) {
+    auto c = entry.connection.lock();
+    if (!c) continue;
+    const WaitHistogram wait = c->counters().frame_wait;
+    if (wait.count() != 0) out.push_back(wait.quantile_seconds(0.99));
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
 bool Admission::hello_refused(std::uint64_t& suppressed) {
   ++hellos_refused_;
   return hello_log_.allow(suppressed);

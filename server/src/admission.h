@@ -81,6 +81,9 @@ class Admission {
   Holdings holdings() const;
   // Each open connection's figures (Server::stats).
   std::vector<SessionStats> session_stats() const;
+  // Each open connection's p99 frame wait (seconds, WaitHistogram), for those
+  // that were sent frames, in ascending order.
+  std::vector<double> frame_wait_p99s() const;
 
   // --- Hello ---------------------------------------------------------------
   // A Hello refused for its token; true when it may be logged now (then

@@ -210,6 +210,7 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.subscriptions = held.subscriptions;
   s.accepted_connections = admission.accepted();
   s.connection_totals = admission.totals_by_transport();
+  s.client_frame_wait_p99 = admission.frame_wait_p99s();
   for (std::size_t k = 0; lanes && k < lanes->size(); ++k) s.lane_connections.push_back(lanes->connections(k));
   s.udp_bytes_sent = udp.bytes_sent();
   s.multicast_frames_sent = multicast.frames_sent;
@@ -225,8 +226,6 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.relay_announces_refused = replicas.announces_refused();
   return s;
 }
-
-// ---------------------------------------------------------------------------
 
 Server::Server(ServerConfig config, std::vector<LibraryEntry> library)
     : impl_(std::make_shared<Impl>(std::move(config), std::move(library), true)) {}

@@ -26,7 +26,7 @@ class RecordingOutbox final : public server::Outbox {
   bool closing() const override { return closing_; }
   void send(std::string framed) override { replies.push_back(unframe(framed)); }
   bool push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
-                  std::chrono::steady_clock::duration = {}) override {
+                  std::chrono::steady_clock::duration, std::chrono::steady_clock::time_point) override {
     frames.push_back(unframe(std::string(head.view()) + *body));
     keys.push_back(key);
     return true;
@@ -37,7 +37,7 @@ class RecordingOutbox final : public server::Outbox {
   void close_after_reply() override { closing_ = true; }
   void stop(const std::string&) override { closing_ = true; }
   void finish() override { closing_ = true; }
-  void count_udp_frame_sent() override {}
+  void count_udp_frame_sent(std::chrono::steady_clock::duration) override {}
   void count_udp_frame_dropped() override {}
   void count_frame_dropped(std::uint64_t) override {}
   void count_frame_skipped(std::uint64_t) override {}

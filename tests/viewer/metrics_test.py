@@ -9,6 +9,7 @@ Exit 77 (skipped) outside CI when prometheus_client, numpy or protobuf is
 missing; under CI=true that is a failure."""
 
 import argparse
+import math
 import pathlib
 import sys
 import time
@@ -80,7 +81,7 @@ class Metrics(unittest.TestCase):
             c.poll(0.05)
             got["tcp"] += len(tcp.frames())
             got["udp"] += len(udp.frames())
-        during, _ = scrape(self.server.http_port)
+        during, during_types = scrape(self.server.http_port)
         self.assertEqual(value(during, "gmr_subscriptions", transport="tcp"), 1)
         self.assertEqual(value(during, "gmr_subscriptions", transport="udp"), 1)
         self.assertEqual(value(during, "gmr_views"), 2)
@@ -108,6 +109,14 @@ class Metrics(unittest.TestCase):
             value(before, "gmr_frames_sent_total", transport="udp")
         self.assertGreaterEqual(value(during, "gmr_bytes_sent_total", transport="udp") -
                                 value(before, "gmr_bytes_sent_total", transport="udp"), 100 * udp_frames)
+        # This client's own tail: its p99 frame wait, seconds, as the upper
+        # bound of a power-of-two bucket of microseconds (at most 2^18 us).
+        self.assertEqual(during_types.get("gmr_client_frame_wait_p99_seconds"), "gauge")
+        self.assertGreaterEqual(value(during, "gmr_clients_sent_frames"), 1)
+        tail = [value(during, "gmr_client_frame_wait_p99_seconds", clients=c)
+                for c in ("median", "worst_1_percent", "worst")]
+        self.assertTrue(1e-6 <= tail[0] <= tail[1] <= tail[2] <= 0.263, tail)
+        self.assertEqual(round(math.log2(tail[2] * 1e6), 6) % 1, 0, tail)
         self.assertEqual(types.get("gmr_multicast_frames_sent"), "counter")
         self.assertEqual(value(during, "gmr_multicast_frames_sent_total"), 0)  # no --multicast-group
         self.assertEqual((value(during, "gmr_request_errors_total", code="NOT_FOUND") or 0) -

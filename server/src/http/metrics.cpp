@@ -196,6 +196,22 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
   }
   f.add("gmr_bytes_sent_total", "Bytes written to client connections", T::Counter,
         static_cast<double>(s.udp_bytes_sent), {{"transport", "udp"}});  // with multicast: one UDP port
+  // The tail per client: each open connection's own p99 wait (from its
+  // stream's fan-out to the write), and across the clients the median, the
+  // worst 1% and the worst of those: a burst that always makes the same
+  // clients wait shows here, where the all-frames histogram hides it.
+  const auto& p99 = s.client_frame_wait_p99;
+  f.add("gmr_clients_sent_frames", "Open connections that have been sent frames (of a stream, not multicast)", T::Gauge,
+        static_cast<double>(p99.size()));
+  if (!p99.empty()) {
+    const auto at = [&](double q) { return p99[static_cast<std::size_t>(q * static_cast<double>(p99.size() - 1))]; };
+    const char* help =
+        "Each client's p99 wait of its frames in the server (fan-out start to write, power-of-two buckets of "
+        "microseconds), across the clients: the median, the worst 1% and the worst";
+    f.add("gmr_client_frame_wait_p99_seconds", help, T::Gauge, at(0.5), {{"clients", "median"}});
+    f.add("gmr_client_frame_wait_p99_seconds", help, T::Gauge, at(0.99), {{"clients", "worst_1_percent"}});
+    f.add("gmr_client_frame_wait_p99_seconds", help, T::Gauge, p99.back(), {{"clients", "worst"}});
+  }
   f.add("gmr_multicast_frames_sent_total", "Frames sent to the multicast group (once each, whatever the receivers)",
         T::Counter, static_cast<double>(s.multicast_frames_sent));
   f.add("gmr_live_sources", "Live sources: motions published by clients or relayed from replicas", T::Gauge,

@@ -35,6 +35,7 @@ struct MetricsSnapshot {
   std::map<std::string, std::uint64_t, std::less<>> accepted_connections;    // by transport
   std::map<std::string, ConnectionCounters, std::less<>> connection_totals;  // open and closed, by transport
   std::vector<std::size_t> lane_connections;                                 // per I/O thread (empty before start)
+  std::vector<double> client_frame_wait_p99;  // per open connection sent frames (seconds), ascending
   std::size_t views = 0;
   std::map<std::string, std::size_t, std::less<>> subscriptions;  // by the transport their frames take
   std::uint64_t udp_bytes_sent = 0;

@@ -150,10 +150,11 @@ void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<co
   // than always borne by the last ones.
   const std::size_t n = targets.size();
   const std::size_t first = fan_out_start_++ % n;
+  const Clock::time_point made = Clock::now();
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t i = first + k < n ? first + k : first + k - n;
     if (ready_[i]) {
-      targets[i].target->deliver(id_, body);
+      targets[i].target->deliver(id_, body, made);
     } else if (alive_[i]) {
       targets[i].target->skipped(1);
     }

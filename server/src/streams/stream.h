@@ -42,8 +42,11 @@ class Target {
   virtual ~Target() = default;
   // False once the target's connection is gone: the stream forgets it.
   virtual bool alive() const = 0;
-  // One frame: the shared Frame body (fields >= 16) of stream `stream_id`.
-  virtual void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) = 0;
+  // One frame: the shared Frame body (fields >= 16) of stream `stream_id`,
+  // whose fan-out began at `made` (the wait a client's frames see from there
+  // is counted per connection: WaitHistogram in outbox.h).
+  virtual void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
+                       std::chrono::steady_clock::time_point made) = 0;
   // True while a frame would only wait behind others the client is not
   // reading: the stream then does not compute one for it.
   virtual bool congested() const { return false; }

@@ -22,16 +22,18 @@ void SubscriptionTarget::late(std::uint64_t n) {
 
 bool TcpTarget::congested() const { return connection_->congested(subscription_); }
 
-void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
+void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
+                        std::chrono::steady_clock::time_point made) {
   // The per-subscriber head (length prefix, ServerMessage tag, ids); the
   // body is shared. A closing connection takes nothing (and says it kept it).
   if (!connection_->push_frame(subscription_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), true),
-                               body, max_age_)) {
+                               body, max_age_, made)) {
     ++dropped_;
   }
 }
 
-void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
+void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
+                        std::chrono::steady_clock::time_point made) {
   // The head and the shared body go into the datagrams as they are: no copy
   // of the whole message per subscriber.
   if (!publisher_.send_frame(
@@ -40,7 +42,7 @@ void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std
     connection_->count_udp_frame_dropped();
     return;
   }
-  connection_->count_udp_frame_sent();
+  connection_->count_udp_frame_sent(std::chrono::steady_clock::now() - made);
 }
 
 void MulticastChannel::join(const std::shared_ptr<MulticastTarget>& member, std::uint64_t max_frames) {
@@ -69,7 +71,8 @@ void MulticastChannel::leave(const MulticastTarget* member) {
   if (member->slot_ < members_.size() && members_[member->slot_].target.get() == member) remove_slot(member->slot_);
 }
 
-void MulticastChannel::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) {
+void MulticastChannel::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
+                               std::chrono::steady_clock::time_point) {
   if (publisher_.send_frame(group_, wire::frame_head_for(0, 0, stream_id, body->size(), false).view(), *body)) {
     ++sent_;
     if (total_sent_ != nullptr) ++*total_sent_;

@@ -64,7 +64,8 @@ class SubscriptionTarget : public Target {
 class TcpTarget final : public SubscriptionTarget {
  public:
   using SubscriptionTarget::SubscriptionTarget;
-  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
+               std::chrono::steady_clock::time_point made) override;
   bool congested() const override;
 };
 
@@ -76,7 +77,8 @@ class UdpTarget final : public SubscriptionTarget {
       : SubscriptionTarget(std::move(events), std::move(connection), subscription, view),
         publisher_(publisher),
         endpoint_(std::move(endpoint)) {}
-  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
+               std::chrono::steady_clock::time_point made) override;
   bool congested() const override { return publisher_.congested(*endpoint_); }
 
  private:
@@ -111,7 +113,8 @@ class MulticastChannel final : public Target {
 
   // As its stream's target: alive while anyone listens.
   bool alive() const override { return !members_.empty(); }
-  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body) override;
+  void deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
+               std::chrono::steady_clock::time_point made) override;
   bool congested() const override { return publisher_.congested(*group_); }
   void skipped(std::uint64_t n) override;
   void late(std::uint64_t n) override;
@@ -154,7 +157,8 @@ class MulticastTarget final : public SubscriptionTarget {
       : SubscriptionTarget(std::move(events), std::move(connection), subscription, view),
         channel_(std::move(channel)) {}
   // The channel sends; a stream never hands this target a frame.
-  void deliver(std::uint64_t, const std::shared_ptr<const std::string>&) override {}
+  void deliver(std::uint64_t, const std::shared_ptr<const std::string>&,
+               std::chrono::steady_clock::time_point) override {}
   const std::shared_ptr<MulticastChannel>& channel() const { return channel_; }
 
  private:

@@ -58,13 +58,15 @@ void Connection::flush() {
   hold_heads_.reserve(frames_.count());
   // Every frame of this write is stamped with the same time: now.
   const std::int64_t now = now_ns();
-  frames_.drain(Clock::now(), counters_, [&](PendingFrame& f) {
+  const Clock::time_point write_time = Clock::now();
+  frames_.drain(write_time, counters_, [&](PendingFrame& f) {
     oldest_frame_in_flight_ = std::min(oldest_frame_in_flight_, f.pushed_at);
     f.head.set_write_stamp(now);
     hold_heads_.push_back(f.head);
     in_flight_bytes_ += hold_heads_.back().size() + f.body->size();
     hold_.push_back(std::move(f.body));
     ++counters_.frames_sent;
+    counters_.frame_wait.add(write_time - f.made_at);
   });
   for (std::size_t i = first_frame, head = 0; i < hold_.size(); ++i, ++head) {
     buffers.push_back(net::buffer(hold_heads_[head].data(), hold_heads_[head].size()));

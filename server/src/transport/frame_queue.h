@@ -28,6 +28,7 @@ struct PendingFrame {
   std::shared_ptr<const std::string> body;                // shared by every subscriber of the stream
   Clock::time_point stale_at = Clock::time_point::max();  // not written after this
   Clock::time_point pushed_at{};
+  Clock::time_point made_at{};  // its stream's fan-out began
   std::uint64_t size() const { return head.size() + body->size(); }
 };
 

@@ -4,6 +4,7 @@
 // records, to run a RequestHandler without sockets.
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -13,6 +14,47 @@
 #include "gmr/wire/frame_head.h"
 
 namespace gmr::server {
+
+// How long a client's frames waited in the server, from their stream's
+// fan-out (the frame made, the sends begun) to their write (TCP, WebSocket)
+// or their hand-over to the UDP sender: a count per power of two of
+// microseconds (bucket k: under 2^k us; the last: the rest). Cheap enough to
+// fill per frame, and small enough to keep per connection, so the tail is
+// seen per client and not only over all frames (metrics.h).
+class WaitHistogram {
+ public:
+  static constexpr std::size_t kBuckets = 20;  // the last from 2^18 us = 0.26 s up
+
+  void add(std::chrono::steady_clock::duration waited) {
+    const auto us = std::chrono::duration_cast<std::chrono::microseconds>(waited).count();
+    std::size_t k = 0;
+    while (k + 1 < kBuckets && us >= (std::int64_t{1} << k)) ++k;
+    ++counts_[k];
+  }
+  std::uint64_t count() const {
+    std::uint64_t n = 0;
+    for (auto c : counts_) n += c;
+    return n;
+  }
+  // The upper bound (seconds) of the bucket holding quantile `q` of the
+  // waits (the last bucket: its lower bound); 0 with none.
+  double quantile_seconds(double q) const {
+    const std::uint64_t n = count();
+    if (n == 0) return 0.0;
+    const auto rank = static_cast<std::uint64_t>(q * static_cast<double>(n - 1));
+    std::uint64_t seen = 0;
+    std::size_t k = 0;
+    for (; k + 1 < kBuckets; ++k) {
+      seen += counts_[k];
+      if (seen > rank) break;
+    }
+    const std::size_t bound = k + 1 < kBuckets ? k : k - 1;
+    return static_cast<double>(std::int64_t{1} << bound) * 1e-6;
+  }
+
+ private:
+  std::array<std::uint32_t, kBuckets> counts_{};
+};
 
 struct ConnectionCounters {
   std::uint64_t frames_sent = 0;
@@ -25,6 +67,7 @@ struct ConnectionCounters {
   std::uint64_t bytes_received = 0;      // read from it
   std::uint64_t queued_bytes = 0;        // replies and frames waiting or being written
   std::uint64_t max_queued_bytes = 0;    // high-water mark
+  WaitHistogram frame_wait;              // of frames_sent (not multicast), this connection's own
 
   // Adds another connection's totals (the gauges, queued bytes, stay).
   void add_totals(const ConnectionCounters& k) {
@@ -56,12 +99,13 @@ class Outbox {
   virtual void send(std::string framed) = 0;
   // Queues a frame: `head` (this client's length prefix, ids and write
   // stamp, which the outbox sets as it writes the frame) before the shared
-  // `body`. False when the key already had its share of frames
-  // waiting and the oldest was dropped to make room (counted). A frame still
-  // waiting `max_age` after this call is dropped instead of written (counted,
-  // and in end_frames(key)'s answer); zero: no limit.
+  // `body`, made (its stream's fan-out began) at `made`. False when the key
+  // already had its share of frames waiting and the oldest was dropped to
+  // make room (counted). A frame still waiting `max_age` after this call is
+  // dropped instead of written (counted, and in end_frames(key)'s answer);
+  // zero: no limit.
   virtual bool push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
-                          std::chrono::steady_clock::duration max_age = {}) = 0;
+                          std::chrono::steady_clock::duration max_age, std::chrono::steady_clock::time_point made) = 0;
   // True while frames for `key` cannot go out soon: its share of frames is
   // waiting behind a write that has been in flight for a while (the client
   // is not reading). Streams then skip computing frames for it.
@@ -91,9 +135,10 @@ class Outbox {
   // dropped, waiting replies written, then it stops.
   virtual void stop(const std::string& reason) = 0;
   virtual void finish() = 0;
-  // Frames sent or dropped elsewhere (UDP), and frames a stream dropped or
-  // skipped for this client, count with it.
-  virtual void count_udp_frame_sent() = 0;
+  // Frames sent (having waited `waited` since their fan-out began) or dropped
+  // elsewhere (UDP), and frames a stream dropped or skipped for this client,
+  // count with it.
+  virtual void count_udp_frame_sent(std::chrono::steady_clock::duration waited) = 0;
   virtual void count_udp_frame_dropped() = 0;
   virtual void count_frame_dropped(std::uint64_t n) = 0;
   virtual void count_frame_skipped(std::uint64_t n) = 0;

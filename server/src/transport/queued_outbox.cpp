@@ -86,14 +86,14 @@ void QueuedOutbox::send(std::string framed) {
 }
 
 bool QueuedOutbox::push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
-                              Clock::duration max_age) {
+                              Clock::duration max_age, Clock::time_point made) {
   Lock lock(m_);
   if (stopped_ || close_after_flush_) return true;
   // With no write in flight the frame goes out at once; otherwise it waits,
   // within this connection's bounds and the server's budget.
   const Clock::time_point now = Clock::now();
   const Clock::time_point stale_at = max_age > Clock::duration::zero() ? now + max_age : Clock::time_point::max();
-  const bool kept_all = frames_.push(PendingFrame{key, head, std::move(body), stale_at, now}, frames_wait(),
+  const bool kept_all = frames_.push(PendingFrame{key, head, std::move(body), stale_at, now, made}, frames_wait(),
                                      budget_ != nullptr && budget_->over(), counters_);
   note_queue();
   account();
@@ -120,21 +120,23 @@ void QueuedOutbox::discard_frames(std::uint32_t key) {
   account();
 }
 
-std::string QueuedOutbox::stamped(PendingFrame& f, std::int64_t write_time_ns) {
+std::string QueuedOutbox::stamped(PendingFrame& f, std::int64_t write_time_ns, Clock::time_point write_time) {
   f.head.set_write_stamp(write_time_ns);
   std::string framed;
   framed.reserve(f.size());
   framed.append(f.head.view());
   framed += *f.body;
   ++counters_.frames_sent;
+  counters_.frame_wait.add(write_time - f.made_at);
   return framed;
 }
 
 void QueuedOutbox::send_frames_now(std::uint32_t key) {
   Lock lock(m_);
   const std::int64_t now = now_ns();
+  const Clock::time_point write_time = Clock::now();
   for (auto& frame : frames_.take(key)) {
-    auto bytes = std::make_shared<const std::string>(stamped(frame, now));
+    auto bytes = std::make_shared<const std::string>(stamped(frame, now, write_time));
     reply_bytes_ += bytes->size();
     replies_.push_back(std::move(bytes));
   }
@@ -150,9 +152,10 @@ std::uint64_t QueuedOutbox::end_frames(std::uint32_t key) {
   return stale;
 }
 
-void QueuedOutbox::count_udp_frame_sent() {
+void QueuedOutbox::count_udp_frame_sent(Clock::duration waited) {
   Lock lock(m_);
   ++counters_.frames_sent;
+  counters_.frame_wait.add(waited);
   ++counters_.udp_frames_sent;
 }
 

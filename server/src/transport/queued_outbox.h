@@ -44,7 +44,7 @@ class QueuedOutbox : public Outbox {
   bool closing() const override;
   void send(std::string framed) override;
   bool push_frame(std::uint32_t key, const wire::FrameHead& head, std::shared_ptr<const std::string> body,
-                  Clock::duration max_age = {}) override;
+                  Clock::duration max_age, Clock::time_point made) override;
   bool congested(std::uint32_t key) const override;
   void discard_frames(std::uint32_t key) override;
   void send_frames_now(std::uint32_t key) override;
@@ -53,7 +53,7 @@ class QueuedOutbox : public Outbox {
   void established() override;
   void set_holding(bool holding) override;
   void hold_reading(bool hold) override;
-  void count_udp_frame_sent() override;
+  void count_udp_frame_sent(Clock::duration waited) override;
   void count_udp_frame_dropped() override;
   void count_frame_dropped(std::uint64_t n) override;
   void count_frame_skipped(std::uint64_t n) override;
@@ -90,8 +90,8 @@ class QueuedOutbox : public Outbox {
   // Forgets what waits (the link stops).
   void drop_queued();
   // Frame `f` (of a subscription whose frames go out now) as bytes with this
-  // write's stamp, counted as sent.
-  std::string stamped(PendingFrame& f, std::int64_t write_time_ns);
+  // write's stamp, counted as sent (and its wait, to `write_time`).
+  std::string stamped(PendingFrame& f, std::int64_t write_time_ns, Clock::time_point write_time);
   // One tick of the watchdog at `now`: why the link must stop (empty: it
   // lives on); meanwhile reading the budget paused resumes, and a heartbeat
   // is queued when nothing was written for a while.

@@ -204,7 +204,7 @@ void WsConnection::flush() {
   // One frame per message, the subscriptions taking turns.
   if (auto f = frames_.pop_next(next_key_, Clock::now(), counters_)) {
     oldest_frame_in_flight_ = f->pushed_at;
-    write(to_client(stamped(*f, now_ns())), true);
+    write(to_client(stamped(*f, now_ns(), Clock::now())), true);
     return;
   }
   account();

@@ -128,6 +128,25 @@ server::ConnectionLimits limits() {
 // instants (multiples of a quarter period), a period or at most a quarter
 // more after each asked: 10,000 idle connections wake their I/O thread a few
 // times a second, not 8,000 times.
+// A connection's frame waits, in power-of-two buckets of microseconds: a
+// quantile is its bucket's upper bound; past the last bound, its lower one.
+TEST(WaitHistogram, AQuantileIsTheUpperBoundOfItsBucket) {
+  using std::chrono::microseconds;
+  server::WaitHistogram h;
+  EXPECT_EQ(h.quantile_seconds(0.99), 0.0);
+  for (int i = 0; i < 99; ++i) h.add(microseconds(10));  // [8, 16) us
+  h.add(microseconds(5000));                             // [4096, 8192) us
+  EXPECT_EQ(h.count(), 100u);
+  EXPECT_DOUBLE_EQ(h.quantile_seconds(0.5), 16e-6);
+  EXPECT_DOUBLE_EQ(h.quantile_seconds(0.99), 16e-6);
+  EXPECT_DOUBLE_EQ(h.quantile_seconds(1.0), 8192e-6);
+  for (int i = 0; i < 5; ++i) h.add(std::chrono::seconds(10));
+  EXPECT_DOUBLE_EQ(h.quantile_seconds(0.99), 262144e-6);  // the last bucket, from 2^18 us
+  server::WaitHistogram zero;
+  zero.add(microseconds(0));
+  EXPECT_DOUBLE_EQ(zero.quantile_seconds(0.5), 1e-6);
+}
+
 TEST(ConnectionWatchdog, TicksOfManyConnectionsFallDueTogether) {
   server::ConnectionLimits limits;
   limits.heartbeat_interval = std::chrono::milliseconds(5000);
