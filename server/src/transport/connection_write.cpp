@@ -53,7 +53,8 @@ void Connection::flush() {
   replies_.clear();
   reply_bytes_ = 0;
   // Frames still within their subscriber's staleness bound, each its own
-  // head then the shared body (hold_heads_ is reserved: buffers point into it).
+  // head then the shared body (the buffers are made once every head is in
+  // hold_heads_, which no longer moves).
   const std::size_t first_frame = hold_.size();
   hold_heads_.reserve(frames_.count());
   // Every frame of this write is stamped with the same time: now.

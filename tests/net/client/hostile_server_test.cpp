@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cstdio>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -311,27 +312,38 @@ FakeServer::Answer stream_server(std::string root_name, std::vector<std::uint32_
   };
 }
 
+// Subscribes to a view of motion "m" (float64, no staleness bound), hands
+// each frame to `on_frame` (on the client's thread) and waits up to `wait`
+// for the subscription to end.
+::testing::AssertionResult stream_to_end(client::Client& c,
+                                         const std::function<void(const client::ReceivedFrame&)>& on_frame,
+                                         std::chrono::seconds wait) {
+  auto v = c.create_view("m");
+  if (!v.ok()) return ::testing::AssertionFailure() << v.error().to_string();
+  // Shared with the callback, which may outlive this call if the end is late.
+  auto ended = std::make_shared<Latch<client::SubscriptionEnd>>();
+  client::SubscribeOptions o;
+  o.float64 = true;
+  o.max_staleness = std::chrono::milliseconds(0);
+  auto sub = c.subscribe(v->id, o, on_frame, [ended](const client::SubscriptionEnd& e) { ended->set(e); });
+  if (!sub.ok()) return ::testing::AssertionFailure() << sub.error().to_string();
+  if (!ended->wait(wait).has_value()) return ::testing::AssertionFailure() << "the subscription did not end";
+  return ::testing::AssertionSuccess();
+}
+
 TEST(HostileServer, FramesWhoseValuesDoNotFitTheSubscriptionAreDroppedAndCounted) {
   FakeServer server(AfterHello::kServe, stream_server("Hips", {0, 1, 2, 3}, {0, 1, 4, 5, 4}));
   auto c = client::Client::connect(options_for(server.port()));
   ASSERT_TRUE(c.ok()) << c.error().to_string();
-  auto v = (*c)->create_view("m");
-  ASSERT_TRUE(v.ok()) << v.error().to_string();
   std::mutex mutex;
   std::vector<std::size_t> sizes;
-  Latch<client::SubscriptionEnd> ended;
-  client::SubscribeOptions o;
-  o.float64 = true;
-  o.max_staleness = std::chrono::milliseconds(0);
-  auto sub = (*c)->subscribe(
-      v->id, o,
+  ASSERT_TRUE(stream_to_end(
+      **c,
       [&](const client::ReceivedFrame& f) {
         std::lock_guard lock(mutex);
         sizes.push_back(f.positions.size());
       },
-      [&](const client::SubscriptionEnd& e) { ended.set(e); });
-  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
-  ASSERT_TRUE(ended.wait(std::chrono::seconds(5)).has_value());
+      std::chrono::seconds(5)));
   std::lock_guard lock(mutex);
   EXPECT_EQ(sizes, (std::vector<std::size_t>{4, 4}));  // the frames of 0, 1 and 5 positions never arrive
   EXPECT_EQ((*c)->counters().frames_malformed, 3u);
@@ -362,25 +374,17 @@ TEST(HostileServer, MessagesArriveWholeHoweverTheBytesAreCut) {
     ASSERT_TRUE(motions.ok()) << motions.error().to_string();
     ASSERT_EQ(motions->size(), 1u);
     EXPECT_EQ(motions->front().source, long_source);
-    auto v = (*c)->create_view("m");
-    ASSERT_TRUE(v.ok()) << v.error().to_string();
     std::mutex mutex;
     std::vector<std::uint64_t> indices;
-    Latch<client::SubscriptionEnd> ended;
-    client::SubscribeOptions o;
-    o.float64 = true;
-    o.max_staleness = std::chrono::milliseconds(0);
-    auto sub = (*c)->subscribe(
-        v->id, o,
+    ASSERT_TRUE(stream_to_end(
+        **c,
         [&](const client::ReceivedFrame& f) {
           std::lock_guard lock(mutex);
           EXPECT_EQ(f.positions.size(), 4u);
           EXPECT_EQ(f.positions[3], Eigen::Vector3d(9, 10, 11));
           indices.push_back(f.frame_index);
         },
-        [&](const client::SubscriptionEnd& e) { ended.set(e); });
-    ASSERT_TRUE(sub.ok()) << sub.error().to_string();
-    ASSERT_TRUE(ended.wait(std::chrono::seconds(20)).has_value());
+        std::chrono::seconds(20)));
     std::lock_guard lock(mutex);
     ASSERT_EQ(indices.size(), frames.size());
     for (std::size_t k = 0; k < indices.size(); ++k) EXPECT_EQ(indices[k], k);
