@@ -81,7 +81,7 @@ void Connection::flush() {
     return;
   }
   writing_ = true;
-  write_started_ = Clock::now();
+  write_started_ = write_time;  // the same clock reading as the frames' waits
   account();
   if (socket_.tls()) {
     // TLS writes one buffer at a time: given in one piece, the bytes go out
