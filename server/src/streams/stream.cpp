@@ -94,6 +94,7 @@ std::shared_ptr<Stream> Stream::split_off(std::uint64_t id, const Target* target
   auto s = std::make_shared<Stream>(clock_, id, content_, settings_, counters_);
   s->sequence_ = sequence_;  // the subscriber sees no gap or restart
   s->live_ = live_;
+  s->live_next_ = live_next_;
   s->last_frame_ = last_frame_;
   s->paused_ = paused_;
   const double pos = paused_ ? pause_pos_ : position(tick_);
@@ -247,6 +248,8 @@ void Stream::on_tick() {
 }
 
 void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_t index) {
+  if (index < live_next_) return;
+  live_next_ = index + 1;
   content_ = std::move(content);
   if (paused_ || targets_.empty()) return;
   // Copy the targets first: a target may end a subscription re-entrantly.

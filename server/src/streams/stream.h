@@ -134,6 +134,8 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void set_live() { live_ = true; }
   bool live() const { return live_; }
   // The source's frame `index`, as `content` (this stream's view at that frame).
+  // A frame at or before one this stream already sent is ignored: a joiner's
+  // newest frame (send_newest) may cross that same frame's fan-out.
   void live_frame(std::shared_ptr<const ViewContent> content, std::uint64_t index);
   // A frame this stream's view could not be computed for: a gap for its subscribers.
   void live_skipped();
@@ -189,6 +191,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   std::uint64_t sequence_ = 0;
 
   bool live_ = false;
+  std::uint64_t live_next_ = 0;      // the lowest source index not sent yet
   std::uint32_t fan_out_start_ = 0;  // rotates: each tick the fan-out starts one target further
   std::vector<char> ready_;          // per target, this tick: alive and not congested
   std::vector<char> alive_;          // per target, this tick: alive

@@ -184,6 +184,44 @@ TEST_F(RequestHandlerTest, SubscriptionFramesGoToTheOutboxThenItEnds) {
   EXPECT_EQ(end.subscription_ended().reason(), "max_frames reached");
 }
 
+// A subscriber joining a running live source starts at its newest frame,
+// handed over after the reply. Before, a frame published between the reply
+// and that hand-over reached the subscriber twice (once in its fan-out, once
+// as "the newest"), and a recording of the source had the frame twice (seen
+// under TSan's timing in CliNet.PublishPlaysAFileLiveAndRecordCapturesItsPositions).
+TEST_F(RequestHandlerTest, AJoinerOfALiveSourceGetsEachFrameOnceWhenOneCrossesItsFirst) {
+  const Motion& m = walk();
+  auto source = server_.catalog.add_live("live/walk", m.skeleton, 1.0 / 60, 0.01);
+  ASSERT_NE(source, nullptr);
+  ASSERT_TRUE(source->push(m.frame(0), std::nullopt, server::Clock::now()).ok());
+  hello();
+  const std::uint32_t v = create_view("live/walk");
+  pb::ClientMessage sub;
+  sub.mutable_subscribe()->set_view_id(v);
+  sub.mutable_subscribe()->set_rate_hz(60);
+  ASSERT_TRUE(ask(sub, 20).has_subscribed());
+  // Frame 1 arrives before the loop hands the joiner its newest frame.
+  ASSERT_TRUE(source->push(m.frame(1), std::nullopt, server::Clock::now()).ok());
+  server_.io.restart();
+  server_.io.poll();
+  ASSERT_TRUE(source->push(m.frame(2), std::nullopt, server::Clock::now()).ok());
+  server_.io.restart();
+  server_.io.poll();
+  ASSERT_EQ(outbox_->frames.size(), 2u) << "frames 1 and 2, each once";
+  std::vector<std::vector<Eigen::Vector3d>> positions;
+  for (std::size_t i = 0; i < 2; ++i) {
+    const auto& f = outbox_->frames[i].frame();
+    EXPECT_EQ(f.frame_index(), i + 1);
+    EXPECT_EQ(f.sequence(), i) << "no gap: the duplicate was never a frame";
+    auto values = wire::decode_frame(f);
+    ASSERT_TRUE(values.ok()) << values.error().to_string();
+    positions.push_back(values->positions);
+  }
+  double moved = 0;
+  for (std::size_t j = 0; j < positions[0].size(); ++j) moved += (positions[1][j] - positions[0][j]).norm();
+  EXPECT_GT(moved, 0.0) << "two different frames of the walk";
+}
+
 TEST_F(RequestHandlerTest, AnotherProtocolVersionClosesAfterTheReply) {
   pb::ClientMessage m;
   m.mutable_hello()->set_protocol_version(wire::kProtocolVersion + 1);
