@@ -47,7 +47,7 @@ void Connection::on_lane_do(F&& f) {
 void Connection::read_more() {
   on_lane_do([self = shared_from_this()] {
     Lock lock(self->m_);
-    self->read_prefix();
+    self->read_next();
   });
 }
 
@@ -73,7 +73,7 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
                    self->socket_.tls() ? " (TLS)" : "");
     self->arm_watchdog();
     if (!self->socket_.tls()) {
-      self->read_prefix();
+      self->read_next();
       return;
     }
     // The handshake counts against the Hello deadline (the watchdog's).
@@ -87,7 +87,7 @@ void Connection::start(std::shared_ptr<Handler> handler, std::function<void(std:
                                                  }
                                                  self->secured_ = true;
                                                  self->last_read_ = Clock::now();
-                                                 self->read_prefix();
+                                                 self->read_next();
                                                  self->flush();  // replies queued meanwhile
                                                });
   });
@@ -153,7 +153,7 @@ void Connection::arm_watchdog() {
   });
 }
 
-void Connection::read_prefix() {
+void Connection::read_next() {
   if (stopped_) return;
   if (body_waiting_) {
     // A body announced while the budget could not take it: read it once
@@ -162,40 +162,66 @@ void Connection::read_prefix() {
       read_paused_ = true;
       return;
     }
-    read_body();
+    if (auto request = start_body()) hand_over(std::move(*request), false);
     return;
   }
   // Back-pressure: a client that sends requests faster than it reads the
   // replies is not read until they drain; its replies never pile up beyond
   // the cap. While the server's buffers are over budget, nor is a connection
   // that holds more than its share of them; nor while a request is with the
-  // Handler (or held there).
+  // Handler (or held there). Requests already read wait as well.
   if (!may_read()) {
     read_paused_ = true;
     return;
   }
-  static_assert(std::tuple_size_v<decltype(prefix_)> == wire::kLengthPrefixBytes);
-  socket_.async_read(net::buffer(prefix_),
-                     [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
-                       Lock lock(self->m_);
-                       self->on_prefix(ec);
-                     });
+  if (in_end_ - in_begin_ >= wire::kLengthPrefixBytes) {
+    if (auto request = take_buffered()) hand_over(std::move(*request), false);
+    return;
+  }
+  // Part of a prefix stays, at the front; the rest of in_ takes what arrived.
+  // A read that fills less than it asked for leaves Asio's next read waiting
+  // for the socket (no recv that would only say EAGAIN).
+  std::copy(in_.begin() + static_cast<std::ptrdiff_t>(in_begin_), in_.begin() + static_cast<std::ptrdiff_t>(in_end_),
+            in_.begin());
+  in_end_ -= in_begin_;
+  in_begin_ = 0;
+  socket_.async_read_some(net::buffer(in_.data() + in_end_, in_.size() - in_end_),
+                          [self = shared_from_this()](const boost::system::error_code& ec, std::size_t got) {
+                            std::optional<std::string> request;
+                            {
+                              Lock lock(self->m_);
+                              request = self->on_read(ec, got);
+                            }
+                            if (request) self->hand_over(std::move(*request));
+                          });
 }
 
-void Connection::on_prefix(const boost::system::error_code& ec) {
-  if (stopped_) return;
+std::optional<std::string> Connection::on_read(const boost::system::error_code& ec, std::size_t got) {
+  if (stopped_) return std::nullopt;
+  in_end_ += got;
+  counters_.bytes_received += got;
   if (ec) {
     stop(asio::TlsSocket::peer_closed(ec) ? std::string("the client closed the connection")
                                           : "read failed: " + ec.message());
-    return;
+    return std::nullopt;
   }
   last_read_ = Clock::now();
-  counters_.bytes_received += prefix_.size();
-  const std::uint32_t length = wire::read_length_prefix(prefix_);
+  if (in_end_ - in_begin_ < wire::kLengthPrefixBytes) {
+    read_next();  // the rest of the prefix
+    return std::nullopt;
+  }
+  return take_buffered();
+}
+
+std::optional<std::string> Connection::take_buffered() {
+  const std::span<const std::uint8_t, wire::kLengthPrefixBytes> prefix(in_.data() + in_begin_,
+                                                                       wire::kLengthPrefixBytes);
+  const std::uint32_t length = wire::read_length_prefix(prefix);
+  in_begin_ += wire::kLengthPrefixBytes;
   if (auto s = wire::check_length(length, limits_.max_message_bytes); !s.ok()) {
     log_connection(spdlog::level::warn, "conn {}: bad length prefix: {}; closing", id_, s.error().message);
     stop("bad length prefix");
-    return;
+    return std::nullopt;
   }
   body_expected_ = length;
   body_received_ = 0;
@@ -203,9 +229,23 @@ void Connection::on_prefix(const boost::system::error_code& ec) {
   body_waiting_ = true;
   if (!reserve_body()) {
     read_paused_ = true;  // the bytes wait in the kernel, not here
-    return;
+    return std::nullopt;
   }
+  return start_body();
+}
+
+std::optional<std::string> Connection::start_body() {
+  const std::size_t here = std::min(in_end_ - in_begin_, body_expected_);
+  const auto from = in_.begin() + static_cast<std::ptrdiff_t>(in_begin_);
+  in_begin_ += here;
+  if (here == body_expected_) return finish_request(std::string(from, from + static_cast<std::ptrdiff_t>(here)));
+  // The body is longer than what arrived with it: in_ is empty now, and
+  // the rest is read into body_ itself.
+  body_.assign(from, from + static_cast<std::ptrdiff_t>(here));
+  body_received_ = here;
+  in_begin_ = in_end_ = 0;
   read_body();
+  return std::nullopt;
 }
 
 bool Connection::reserve_body() {
@@ -254,18 +294,22 @@ std::optional<std::string> Connection::on_body(const boost::system::error_code& 
     read_body();
     return std::nullopt;
   }
-  // The request goes to the Handler; reading waits until it is answered.
   std::string body = std::move(body_);
   body_ = std::string();  // a large request's buffer is not kept
+  return finish_request(std::move(body));
+}
+
+std::string Connection::finish_request(std::string body) {
+  // The request goes to the Handler; reading waits until it is answered.
   body_received_ = 0;
   if (budget_ != nullptr) budget_->unreserve(std::exchange(body_reserved_, 0));
   at_handler_ = true;
   account();
-  read_prefix();  // pauses: a request is with the Handler
+  read_next();  // pauses: a request is with the Handler
   return body;
 }
 
-void Connection::hand_over(std::string body) {
+void Connection::hand_over(std::string body, bool inline_ok) {
   // Without the lock: the Handler calls back into this connection, and must
   // not hold up its lane meanwhile.
   auto hand = [self = shared_from_this(), body = std::move(body)] {
@@ -279,7 +323,7 @@ void Connection::hand_over(std::string body) {
     Lock lock(self->m_);
     self->handed_back();
   };
-  if (control_ == &io_) {
+  if (control_ == &io_ && inline_ok) {
     hand();
   } else {
     net::post(*control_, std::move(hand));

@@ -93,22 +93,34 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   bool link_ready() const override { return secured_; }
 
   // Everything below runs with m_ held (but hand_over). On the lane only:
-  // read_prefix, on_prefix, read_body, on_body, flush, arm_watchdog.
+  // read_next, on_read, take_buffered, read_body, on_body, flush, arm_watchdog.
   bool on_lane() const { return io_.get_executor().running_in_this_thread(); }
   // Runs `f` on the lane (now, when this is the lane's thread).
   template <class F>
   void on_lane_do(F&& f);
   void deferred_flush();  // on the lane, locks
-  void read_prefix();
-  void on_prefix(const boost::system::error_code& ec);
+  // The next request: one already read (a pipelined one goes to the
+  // Handler), else a read of what arrived; nothing while reading may not go on.
+  void read_next();
+  // `got` bytes arrived in in_ (or the read failed: `ec`); a whole request
+  // among them is returned for hand_over.
+  std::optional<std::string> on_read(const boost::system::error_code& ec, std::size_t got);
+  // The request whose length prefix starts at in_begin_: whole when its
+  // body is in in_ too; else its body's read starts (or waits for the budget).
+  std::optional<std::string> take_buffered();
+  // The body's bytes in in_, then a read of the rest (or the whole body).
+  std::optional<std::string> start_body();
   void read_body();
   // Reserves the announced body against the server's buffer budget; false when it cannot yet.
   bool reserve_body();
   // A whole request body, for hand_over (called without m_).
   std::optional<std::string> on_body(const boost::system::error_code& ec, std::size_t got);
+  // `body` is whole: reading waits until the Handler has answered it.
+  std::string finish_request(std::string body);
   // Gives a request to the Handler on the control loop; when it has
-  // answered (handed_back), reading goes on.
-  void hand_over(std::string body);
+  // answered (handed_back), reading goes on. `inline_ok`: the caller holds
+  // no lock, so a Handler on this thread may run at once (else it is posted).
+  void hand_over(std::string body, bool inline_ok = true);
   void handed_back();
   void flush();
   // The write in flight goes on asynchronously (gather_: what is left of it;
@@ -132,7 +144,14 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   std::string peer_address_;  // the IP address alone
   std::shared_ptr<Handler> handler_;
   std::function<void(std::uint64_t)> on_closed_;
-  std::array<std::uint8_t, 4> prefix_{};
+  // What arrived and was not taken yet (in_begin_ to in_end_): a small
+  // request (a heartbeat, a subscription) comes in one read with its prefix,
+  // and several sent at once are taken one by one without reading again.
+  // At most this much is read ahead of the budget's reservation.
+  static constexpr std::size_t kInBytes = 512;
+  std::array<std::uint8_t, kInBytes> in_{};
+  std::size_t in_begin_ = 0;
+  std::size_t in_end_ = 0;
   std::string body_;
   std::size_t body_expected_ = 0;  // bytes the length prefix announced
   std::size_t body_received_ = 0;

@@ -246,6 +246,54 @@ TEST(Connection, OnALaneHandsEachRequestToTheControlThreadOneAtATimeInOrder) {
   EXPECT_EQ(threads, std::set<std::thread::id>{s.control_thread}) << "the handler ran off the control thread";
 }
 
+// The connection reads what arrived (up to 512 bytes) and takes each whole
+// request out of it; a body longer than what came with its prefix is read
+// on into a buffer of its own. Whatever the cut of the bytes (one at a time,
+// at the prefix, around the 512-byte read, all at once), every request
+// reaches the handler whole and once, in order, on one thread or on a lane.
+TEST(Connection, RequestsArriveWholeAndInOrderHoweverTheBytesAreCut) {
+  // Bodies (echoed back, so each parses as a ServerMessage with its id)
+  // around every edge of the read: empty, tiny, ending just before, at and
+  // past the first read, and two reads long.
+  std::vector<std::string> bodies;
+  std::string stream;
+  std::uint64_t id = 0;
+  for (std::size_t text : {0, 1, 40, 490, 495, 496, 497, 498, 499, 500, 501, 700, 1000}) {
+    pb::ServerMessage m;
+    m.set_request_id(++id);
+    if (text > 0) m.mutable_error()->set_message(std::string(text, 'a' + static_cast<char>(id % 26)));
+    bodies.push_back(m.SerializeAsString());
+    ASSERT_LE(bodies.back().size(), limits().max_message_bytes);
+    stream += wire::frame_bytes(bodies.back());
+  }
+  stream += wire::frame_bytes("");  // an empty body: an empty message
+  bodies.emplace_back();
+  int runs = 0;
+  for (const bool lane : {false, true}) {
+    for (const std::size_t cut : {std::size_t{1}, std::size_t{3}, std::size_t{4}, std::size_t{5}, std::size_t{511},
+                                  std::size_t{512}, std::size_t{513}, stream.size()}) {
+      EchoServer s(limits(), lane);
+      RawConnection c(s.port);
+      for (std::size_t at = 0; at < stream.size(); at += cut) {
+        c.send_bytes(stream.substr(at, cut));
+        if (cut < stream.size()) std::this_thread::sleep_for(std::chrono::microseconds(cut < 8 ? 50 : 1000));
+      }
+      for (std::size_t k = 0; k < bodies.size(); ++k) {
+        auto back = c.receive();
+        ASSERT_TRUE(back.has_value()) << "reply " << k << ", cut " << cut << (lane ? ", on a lane" : "");
+        EXPECT_EQ(back->SerializeAsString(), bodies[k]) << "reply " << k << ", cut " << cut;
+      }
+      c.shutdown_send();
+      EXPECT_TRUE(c.wait_closed());
+      std::promise<int> messages;
+      net::post(s.io, [&] { messages.set_value(s.echo->messages); });
+      EXPECT_EQ(messages.get_future().get(), static_cast<int>(bodies.size())) << "cut " << cut;
+      ++runs;
+    }
+  }
+  EXPECT_EQ(runs, 16);
+}
+
 // A client that closes while its request is with the handler: the lane sees
 // the socket close, the handler finishes, is told once, and nothing more is
 // read or handed over.
