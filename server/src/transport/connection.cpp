@@ -140,8 +140,12 @@ void Connection::finish() {
   request_flush();
 }
 
+void Connection::watch_budget() {
+  if (watchdog_.expiry() > watchdog_due(limits_, established_, Clock::now())) arm_watchdog();
+}
+
 void Connection::arm_watchdog() {
-  watchdog_.expires_at(watchdog_due(limits_, established_, Clock::now()));
+  watchdog_.expires_at(watchdog_next_tick(Clock::now()));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     Lock lock(self->m_);
     if (ec || self->stopped_) return;
@@ -159,7 +163,7 @@ void Connection::read_next() {
     // A body announced while the budget could not take it: read it once
     // the budget can (the watchdog's tick and every write retry).
     if (!reserve_body()) {
-      read_paused_ = true;
+      pause_reading(true);
       return;
     }
     if (auto request = start_body()) hand_over(std::move(*request), false);
@@ -171,7 +175,7 @@ void Connection::read_next() {
   // that holds more than its share of them; nor while a request is with the
   // Handler (or held there). Requests already read wait as well.
   if (!may_read()) {
-    read_paused_ = true;
+    pause_reading();
     return;
   }
   if (in_end_ - in_begin_ >= wire::kLengthPrefixBytes) {
@@ -228,7 +232,7 @@ std::optional<std::string> Connection::take_buffered() {
   body_.clear();
   body_waiting_ = true;
   if (!reserve_body()) {
-    read_paused_ = true;  // the bytes wait in the kernel, not here
+    pause_reading(true);  // the bytes wait in the kernel, not here
     return std::nullopt;
   }
   return start_body();

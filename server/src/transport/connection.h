@@ -130,6 +130,7 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   // one starts.
   void wrote_all(const boost::system::error_code& ec, std::size_t n);
   void arm_watchdog();
+  void watch_budget() override;
 
   // Request bodies are read in chunks of at most this; a TLS write's copy
   // past it is given back.

@@ -56,11 +56,39 @@ std::chrono::milliseconds watchdog_period(const ConnectionLimits& l, bool establ
   return std::max(milliseconds(10), shortest / 4);
 }
 
+namespace {
+// `t` rounded up to a multiple of a quarter of `period` (from the clock's epoch).
+Clock::time_point round_up_to_grain(Clock::time_point t, Clock::duration period) {
+  const Clock::duration grain = std::max<Clock::duration>(period / 4, std::chrono::milliseconds(1));
+  return Clock::time_point((t.time_since_epoch() + grain - Clock::duration(1)) / grain * grain);
+}
+}  // namespace
+
 Clock::time_point watchdog_due(const ConnectionLimits& l, bool established, Clock::time_point now) {
   const Clock::duration period = watchdog_period(l, established);
-  const Clock::duration grain = std::max<Clock::duration>(period / 4, std::chrono::milliseconds(1));
-  const auto due = (now + period).time_since_epoch();
-  return Clock::time_point((due + grain - Clock::duration(1)) / grain * grain);
+  return round_up_to_grain(now + period, period);
+}
+
+Clock::time_point watchdog_next(const LinkTimes& t, Clock::time_point last_write, bool ready, bool polled,
+                                const ConnectionLimits& l, Clock::time_point now) {
+  const Clock::duration period = watchdog_period(l, t.established);
+  if (polled) return round_up_to_grain(now + period, period);
+  using std::chrono::milliseconds;
+  milliseconds reach = std::max(l.write_timeout, l.idle_timeout);
+  for (const milliseconds m : {l.write_timeout, l.idle_timeout}) {
+    if (m.count() > 0) reach = std::min(reach, m);
+  }
+  Clock::time_point next = now + std::max<Clock::duration>(period, reach);
+  // A verdict is "longer than the limit": one tick of the clock past it.
+  const auto consider = [&](Clock::time_point deadline, milliseconds limit) {
+    if (limit.count() > 0) next = std::min(next, deadline + limit + Clock::duration(1));
+  };
+  if (!t.established) consider(t.started, l.handshake_timeout);
+  consider(std::max(t.last_read, t.last_frames_written), l.idle_timeout);
+  if (t.established && !t.holding) consider(t.last_held, l.idle_timeout);
+  if (t.writing) consider(t.write_started, l.write_timeout);
+  if (ready && !t.writing) consider(last_write, l.heartbeat_interval);
+  return round_up_to_grain(std::max(next, now + milliseconds(1)), period);
 }
 
 std::string watchdog_verdict(const LinkTimes& t, const ConnectionLimits& lim, Clock::time_point now, std::uint64_t id) {

@@ -56,6 +56,13 @@ void QueuedOutbox::resume_reading() {
   read_more();
 }
 
+void QueuedOutbox::pause_reading(bool for_budget) {
+  read_paused_ = true;
+  if (for_budget || (budget_ != nullptr && !reads_held_ && !at_handler_ && !budget_->allows_reading(accounted_))) {
+    watch_budget();
+  }
+}
+
 void QueuedOutbox::drop_queued() {
   frames_.clear();
   replies_.clear();
@@ -182,13 +189,23 @@ ConnectionCounters QueuedOutbox::counters() const {
   return c;
 }
 
+LinkTimes QueuedOutbox::link_times() const {
+  return LinkTimes{established_,         writing_, started_,  last_read_, write_started_,
+                   last_frames_written_, holding_, last_held_};
+}
+
+Clock::time_point QueuedOutbox::watchdog_next_tick(Clock::time_point now) const {
+  // Reads waiting for the budget resume at a tick; those waiting for the
+  // Handler count as reading there.
+  const bool polled = read_paused_ || reads_held_ || at_handler_;
+  return watchdog_next(link_times(), last_write_, link_ready(), polled, limits_, now);
+}
+
 std::string QueuedOutbox::watchdog_tick(Clock::time_point now) {
   // A client whose request the server is still on (its reads held for an
   // edit, or a body with the handler) waits for the server: not idle.
   if (reads_held_ || at_handler_) last_read_ = now;
-  const LinkTimes times{established_,         writing_, started_,  last_read_, write_started_,
-                        last_frames_written_, holding_, last_held_};
-  if (std::string why = watchdog_verdict(times, limits_, now, id_); !why.empty()) return why;
+  if (std::string why = watchdog_verdict(link_times(), limits_, now, id_); !why.empty()) return why;
   // Reads paused for the server-wide budget resume once it allows.
   resume_reading();
   if (link_ready() && !writing_ && now - last_write_ > limits_.heartbeat_interval) {

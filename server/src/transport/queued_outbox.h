@@ -87,6 +87,12 @@ class QueuedOutbox : public Outbox {
   bool may_read() const;
   // Calls read_more() when reading was paused and may go on now.
   void resume_reading();
+  // Reading pauses. `for_budget`: the server-wide buffer budget is why (or
+  // may_read found it so): nothing tells the link when it frees, so the
+  // watchdog is to look within a period (watch_budget).
+  void pause_reading(bool for_budget = false);
+  // Brings the watchdog's next tick within a period (the transport's timer).
+  virtual void watch_budget() {}
   // Forgets what waits (the link stops).
   void drop_queued();
   // Frame `f` (of a subscription whose frames go out now) as bytes with this
@@ -96,6 +102,9 @@ class QueuedOutbox : public Outbox {
   // lives on); meanwhile reading the budget paused resumes, and a heartbeat
   // is queued when nothing was written for a while.
   std::string watchdog_tick(Clock::time_point now);
+  // When the watchdog's next tick is due (watchdog_next in link.h).
+  Clock::time_point watchdog_next_tick(Clock::time_point now) const;
+  LinkTimes link_times() const;
   // A write of `n` bytes completed (`writing_frames_`: it carried frames).
   void wrote(std::size_t n);
 

@@ -92,7 +92,7 @@ void WsConnection::start(http::request<http::string_body> upgrade, Format format
 void WsConnection::read() {
   if (stopped_ || reading_) return;
   if (!may_read()) {  // back-pressure, as over TCP
-    read_paused_ = true;
+    pause_reading();
     return;
   }
   reading_ = true;
@@ -277,8 +277,12 @@ void WsConnection::close_socket() {
   });
 }
 
+void WsConnection::watch_budget() {
+  if (watchdog_.expiry() > watchdog_due(limits_, established_, Clock::now())) arm_watchdog();
+}
+
 void WsConnection::arm_watchdog() {
-  watchdog_.expires_at(watchdog_due(limits_, established_, Clock::now()));
+  watchdog_.expires_at(watchdog_next_tick(Clock::now()));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
     if (ec || self->stopped_) return;
     if (std::string why = self->watchdog_tick(Clock::now()); !why.empty()) {

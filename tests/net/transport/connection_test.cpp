@@ -167,6 +167,69 @@ TEST(ConnectionWatchdog, TicksOfManyConnectionsFallDueTogether) {
   EXPECT_LE(instants.size(), 6u) << "1.37 s of arming falls on a few quarter-period instants";
 }
 
+// Before, every link's watchdog ticked each period (a quarter of its
+// shortest timeout: 1.25 s by default), so 10,000 multicast subscribers
+// were 8,000 timer expiries a second with nothing to do at most of them.
+// Now it wakes at the link's first deadline: an idle link once per heartbeat.
+TEST(ConnectionWatchdog, ALinkWakesAtItsFirstDeadlineNotEveryPeriod) {
+  using std::chrono::milliseconds;
+  using std::chrono::seconds;
+  server::ConnectionLimits l;
+  l.heartbeat_interval = seconds(5);
+  l.idle_timeout = seconds(30);
+  l.write_timeout = seconds(20);
+  l.handshake_timeout = seconds(5);
+  const auto period = server::watchdog_period(l, true);
+  ASSERT_EQ(period, milliseconds(1250));
+  const server::Clock::duration grain = server::Clock::duration(period) / 4;
+  const auto now = server::Clock::now();
+  server::LinkTimes t;
+  t.established = true;
+  t.holding = true;
+  t.started = now - seconds(60);
+  t.last_read = t.last_frames_written = t.last_held = now - seconds(1);
+  const auto next = [&](server::Clock::time_point last_write, bool ready, bool polled) {
+    const auto due = server::watchdog_next(t, last_write, ready, polled, l, now);
+    EXPECT_EQ(due.time_since_epoch() % grain, server::Clock::duration::zero());
+    return due;
+  };
+  // between `at` and a grain past it
+  const auto near = [&](server::Clock::time_point due, server::Clock::time_point at) {
+    return due > at && due <= at + grain;
+  };
+  // Idle, written a second ago: the heartbeat is due in 4 s, and the tick with it.
+  EXPECT_TRUE(near(next(now - seconds(1), true, false), now + seconds(4)));
+  // Until the link is ready (TLS) no heartbeat: the write and idle timeouts bound the tick.
+  EXPECT_TRUE(near(next(now - seconds(1), false, false), now + seconds(20)));
+  // A write in flight for 1 s: its timeout in 19 s comes first (no heartbeat while writing).
+  t.writing = true;
+  t.write_started = now - seconds(1);
+  EXPECT_TRUE(near(next(now - seconds(1), true, false), now + seconds(19)));
+  t.writing = false;
+  // Holding nothing since 28 s ago: its idle timeout in 2 s.
+  t.holding = false;
+  t.last_held = now - seconds(28);
+  EXPECT_TRUE(near(next(now, true, false), now + seconds(2)));
+  t.holding = true;
+  // Before Hello: the handshake deadline.
+  t.established = false;
+  t.started = now - seconds(1);
+  EXPECT_TRUE(near(next(now, true, false), now + seconds(4)));
+  t.established = true;
+  // Reads waiting for the budget or the Handler: every period, as before.
+  EXPECT_TRUE(near(next(now - seconds(1), true, true), now + period));
+  // A deadline already passed: the next grain (the verdict runs there).
+  EXPECT_TRUE(near(next(now - seconds(10), true, false), now));
+  // However long the heartbeat, never further than the shorter of the write
+  // and idle timeouts (a write starting later must not go unwatched).
+  l.heartbeat_interval = seconds(600);
+  l.write_timeout = seconds(10);
+  const auto long_period = server::watchdog_period(l, true);
+  const auto due = server::watchdog_next(t, now, true, false, l, now);
+  EXPECT_GT(due, now + seconds(10));
+  EXPECT_LE(due, now + seconds(10) + long_period / 4);
+}
+
 TEST(Connection, HeldReadsAreNotIdleness) {
   server::ConnectionLimits l = limits();
   l.idle_timeout = std::chrono::milliseconds(200);
