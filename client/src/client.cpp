@@ -402,6 +402,8 @@ Result<ServerCounters> Client::stats() {
   c.live_edit_replays = s.live_edit_replays();
   c.live_marker_points_missing = s.live_marker_points_missing();
   c.live_marker_parts_held = s.live_marker_parts_held();
+  c.live_marker_points_outliers = s.live_marker_points_outliers();
+  c.live_marker_frames_unsolved = s.live_marker_frames_unsolved();
   c.multicast_frames_sent = s.multicast_frames_sent();
   c.frames_sent_total = s.frames_sent_total();
   c.frames_dropped_total = s.frames_dropped_total();

@@ -13,6 +13,7 @@
 #include <string_view>
 #include <vector>
 
+#include "gmr/markers/marker_frames.h"
 #include "gmr/server/library.h"
 #include "gmr/server/view.h"
 #include "live/live_directory.h"
@@ -83,13 +84,15 @@ class Catalog final : public LiveDirectory {
   std::uint64_t live_frames_refused() const { return live_frames_refused_; }
   std::uint64_t live_frames_over_rate() const { return live_frames_over_rate_; }
   std::uint64_t live_edit_replays() const { return *live_edit_replays_; }
-  // Live marker sources: points their frames lacked, part poses held.
-  void count_marker_frame(std::uint64_t missing, std::uint64_t held) {
-    live_marker_points_missing_ += missing;
-    live_marker_parts_held_ += held;
+  // Live marker sources, all: what their solvers met (the change one frame made).
+  void count_marker_frame(const MarkerFrameCounts& before, const MarkerFrameCounts& after) {
+    live_markers_.solved += after.solved - before.solved;
+    live_markers_.refused += after.refused - before.refused;
+    live_markers_.held += after.held - before.held;
+    live_markers_.outliers += after.outliers - before.outliers;
+    live_markers_.missing += after.missing - before.missing;
   }
-  std::uint64_t live_marker_points_missing() const { return live_marker_points_missing_; }
-  std::uint64_t live_marker_parts_held() const { return live_marker_parts_held_; }
+  const MarkerFrameCounts& live_markers() const { return live_markers_; }
 
  private:
   std::vector<LibraryEntry> library_;
@@ -107,7 +110,7 @@ class Catalog final : public LiveDirectory {
   std::uint64_t live_frames_over_rate_ = 0;  // faster than the declared rate: dropped (RateHold)
   // Edit lists the sources replayed (LiveSource::count_replays), all sources.
   std::shared_ptr<std::uint64_t> live_edit_replays_ = std::make_shared<std::uint64_t>(0);
-  std::uint64_t live_marker_points_missing_ = 0, live_marker_parts_held_ = 0;
+  MarkerFrameCounts live_markers_;
 };
 
 }  // namespace gmr::server

@@ -219,8 +219,7 @@ MetricsSnapshot Server::Impl::metrics_snapshot() {
   s.live_frames_refused = catalog.live_frames_refused();
   s.live_frames_over_rate = catalog.live_frames_over_rate();
   s.live_edit_replays = catalog.live_edit_replays();
-  s.live_marker_points_missing = catalog.live_marker_points_missing();
-  s.live_marker_parts_held = catalog.live_marker_parts_held();
+  s.live_markers = catalog.live_markers();
   s.library_reloads = catalog.reloads();
   s.library_changes = catalog.library_changes();
   s.relay_announces_refused = replicas.announces_refused();

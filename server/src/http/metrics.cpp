@@ -227,10 +227,16 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
         "Live views' edit lists replayed on published frames (views with equal edits share one replay a frame)",
         T::Counter, static_cast<double>(s.live_edit_replays));
   f.add("gmr_live_marker_points_missing_total", "Marker points the frames of live marker sources lacked", T::Counter,
-        static_cast<double>(s.live_marker_points_missing));
+        static_cast<double>(s.live_markers.missing));
   f.add("gmr_live_marker_parts_held_total",
         "Body parts of live marker sources that held their last pose for want of markers", T::Counter,
-        static_cast<double>(s.live_marker_parts_held));
+        static_cast<double>(s.live_markers.held));
+  f.add("gmr_live_marker_points_outliers_total",
+        "Marker points of live marker sources their part's fit left out as outliers (a swapped or stray label)",
+        T::Counter, static_cast<double>(s.live_markers.outliers));
+  f.add("gmr_live_marker_frames_unsolved_total",
+        "Frames of live marker sources left unsolved (a body part not fitted yet)", T::Counter,
+        static_cast<double>(s.live_markers.refused));
   f.add("gmr_library_reloads_total", "Library reloads (files under --library changed, or SIGHUP)", T::Counter,
         static_cast<double>(s.library_reloads));
   const char* kChangeHelp = "Library motions a reload added, read again (changed on disk) or removed";

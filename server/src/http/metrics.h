@@ -16,6 +16,7 @@
 #include <string_view>
 #include <vector>
 
+#include "gmr/markers/marker_frames.h"
 #include "gmr/server/library.h"
 #include "gmr/server/server.h"
 #include "requests/services.h"
@@ -43,7 +44,7 @@ struct MetricsSnapshot {
   std::size_t live_sources = 0;
   std::uint64_t live_frames_received = 0, live_frames_refused = 0, live_frames_over_rate = 0;
   std::uint64_t live_edit_replays = 0;
-  std::uint64_t live_marker_points_missing = 0, live_marker_parts_held = 0;
+  MarkerFrameCounts live_markers;  // what live marker sources' solvers met
   std::uint64_t relay_announces_refused = 0;
   std::uint64_t library_reloads = 0;
   LibraryChanges library_changes;

@@ -182,7 +182,7 @@ Reply Publications::marker_frame(std::uint32_t id, Held& held, const pb::Publish
     return Refusal{pb::ERROR_CODE_BAD_REQUEST, why};
   }
   if (const MarkerFrameCounts* after = feed.counts()) {
-    link_.services.catalog.count_marker_frame(after->missing - before.missing, after->held - before.held);
+    link_.services.catalog.count_marker_frame(before, *after);
   }
   switch (*taken) {
     case MarkerFeed::Taken::kCalibrating:

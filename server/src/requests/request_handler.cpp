@@ -297,8 +297,11 @@ Reply RequestHandler::stats() {
   st->set_live_frames_refused(link_.services.catalog.live_frames_refused());
   st->set_live_frames_over_rate(link_.services.catalog.live_frames_over_rate());
   st->set_live_edit_replays(link_.services.catalog.live_edit_replays());
-  st->set_live_marker_points_missing(link_.services.catalog.live_marker_points_missing());
-  st->set_live_marker_parts_held(link_.services.catalog.live_marker_parts_held());
+  const MarkerFrameCounts& markers = link_.services.catalog.live_markers();
+  st->set_live_marker_points_missing(markers.missing);
+  st->set_live_marker_parts_held(markers.held);
+  st->set_live_marker_points_outliers(markers.outliers);
+  st->set_live_marker_frames_unsolved(markers.refused);
   st->set_multicast_frames_sent(link_.services.multicast.frames_sent);
   st->set_io_threads(static_cast<std::uint32_t>(link_.services.lanes ? link_.services.lanes->size() : 1));
   if (auto conn = link_.connection()) st->set_io_thread(static_cast<std::uint32_t>(conn->lane()));

@@ -82,18 +82,28 @@ std::span<const double> frame_of(std::size_t f) {
   return std::span<const double>(take().markers.positions).subspan(f * row, row);
 }
 
+// Frame `f` of the take with the positions of markers `swap` exchanged
+// (none when they are the same marker).
+std::vector<double> frame_swapped(std::size_t f, std::pair<std::size_t, std::size_t> swap) {
+  std::vector<double> frame(frame_of(f).begin(), frame_of(f).end());
+  for (std::size_t k = 0; k < 3 && swap.first != swap.second; ++k) {
+    std::swap(frame[3 * swap.first + k], frame[3 * swap.second + k]);
+  }
+  return frame;
+}
+
 // Publishes frames [begin, end) of the take, one per 2 ms (8 ms in a
-// sanitized build), dropping each present marker with probability `drop`;
-// returns the points sent missing (the take's and the dropped).
+// sanitized build), markers `swap` exchanged, dropping each present marker
+// with probability `drop`; returns the points sent missing (the take's and the dropped).
 std::size_t publish(client::Client& c, std::uint32_t id, std::size_t begin, std::size_t end, double drop,
-                    std::mt19937& random) {
+                    std::mt19937& random, std::pair<std::size_t, std::size_t> swap = {0, 0}) {
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   const auto period = std::chrono::microseconds(kSlowBuild ? 8000 : 2000);
   const auto start = std::chrono::steady_clock::now();
   std::size_t missing = 0;
   for (std::size_t f = begin; f < end; ++f) {
     std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(f - begin));
-    std::vector<double> frame(frame_of(f).begin(), frame_of(f).end());
+    std::vector<double> frame = frame_swapped(f, swap);
     for (std::size_t m = 0; m < frame.size() / 3; ++m) {
       if (std::isnan(frame[3 * m])) {
         ++missing;
@@ -223,6 +233,59 @@ TEST(LiveMarkers, SubscribersGetTheTakeSolvedFrameByFrameAndDropsAreCounted) {
   }
   EXPECT_LE(after.live_marker_points_missing - before.live_marker_points_missing, take_missing + missing);
   EXPECT_GE(after.live_marker_points_missing - before.live_marker_points_missing, take_missing + missing / 2);
+}
+
+// Two labels swapped (a forehead marker and the sternum's) in every served
+// frame: each lands far from its part's fit, the outlier rule leaves both
+// out, the joints stay near the take's solve, and the server counts what
+// the library's solver counts on the same frames.
+TEST(LiveMarkers, SwappedLabelsAreLeftOutAsOutliersAndCounted) {
+  GMR_REQUIRE_DATA();
+  ASSERT_GT(take().solved.frame_count, 0u);
+  const std::size_t calibration = take().calibration, served = 120;
+  Received swapped;  // declared before the clients: their callbacks write here
+  TestServer server(live_config());
+  auto pub = connect_as(server, kPublishToken);
+  auto sub = connect_as(server, kControlToken);
+  ASSERT_TRUE(pub && sub);
+  const std::vector<std::string>& names = take().markers.names;
+  const auto index_of = [&](const std::string& label) {
+    const auto it = std::ranges::find_if(names, [&](const std::string& n) { return n.ends_with(label); });
+    EXPECT_NE(it, names.end()) << label;
+    return static_cast<std::size_t>(it - names.begin());
+  };
+  const std::pair<std::size_t, std::size_t> swap{index_of("LFHD"), index_of("STRN")};
+  ASSERT_NE(swap.first, swap.second);
+  std::mt19937 random(20261128);
+  auto a = pub->publish_markers(names, options("lab swapped"));
+  ASSERT_TRUE(a.ok()) << a.error().to_string();
+  publish(*pub, a->id, 0, calibration, 0.0, random);
+  ASSERT_TRUE(listed(*sub, "lab swapped"));
+  subscribe(*sub, "lab swapped", swapped);
+  const auto before = sub->stats().value();
+  publish(*pub, a->id, calibration, calibration + served, 0.0, random, swap);
+  ASSERT_TRUE(pub->unpublish(a->id).ok());  // answered after every frame before it
+  ASSERT_TRUE(swapped.end.wait().has_value());
+  EXPECT_TRUE(pub->take_errors().empty());
+  const auto after = sub->stats().value();
+
+  // The library's solver on the same calibration and frames.
+  auto model = builtin_marker_model("cmu41");
+  ASSERT_TRUE(model.ok());
+  auto solver = MarkerFrameSolver::calibrate(take().markers, *model, 0, calibration);
+  ASSERT_TRUE(solver.ok()) << solver.error().to_string();
+  const MarkerFrameCounts start = solver->counts();
+  for (std::size_t f = calibration; f < calibration + served; ++f) (void)solver->solve(frame_swapped(f, swap));
+  const std::size_t outliers = solver->counts().outliers - start.outliers;
+  EXPECT_GE(outliers, 2 * served * 9 / 10) << "both swapped points, in nearly every frame";
+  EXPECT_EQ(after.live_marker_points_outliers - before.live_marker_points_outliers, outliers);
+  EXPECT_EQ(after.live_marker_frames_unsolved - before.live_marker_frames_unsolved,
+            solver->counts().refused - start.refused);
+  const auto d = distances(swapped);
+  ASSERT_FALSE(d.empty());
+  std::printf("[ figures  ] live markers, two labels swapped: %zu outliers in %zu frames, joints %.1f mm median off\n",
+              outliers, served, median(d));
+  EXPECT_LE(median(d), 10.0);
 }
 
 TEST(LiveMarkers, BadAnnouncementsAndFramesAreRefusedNamingWhatAndCounted) {

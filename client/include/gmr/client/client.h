@@ -228,21 +228,23 @@ struct ServerCounters {
   std::uint64_t frames_skipped_total = 0;  // all streams
   std::uint64_t queued_bytes = 0;
   std::uint64_t max_queued_bytes = 0;
-  double committed_frames_per_second = 0;        // all subscriptions' rates together
-  double send_budget = 0;                        // what the server admits (0: no limit)
-  std::uint64_t subscriptions_refused = 0;       // for the send budget
-  std::uint32_t live_sources = 0;                // being published now
-  std::uint64_t live_frames_received = 0;        // published frames the server accepted
-  std::uint64_t live_frames_refused = 0;         // and refused
-  std::uint64_t live_frames_over_rate = 0;       // and dropped: faster than the source's declared rate
-  std::uint64_t live_edit_replays = 0;           // live views' edits replayed, once per frame for equal edits
-  std::uint64_t live_marker_points_missing = 0;  // marker points live marker sources' frames lacked
-  std::uint64_t live_marker_parts_held = 0;      // and part poses held for want of them
-  std::uint64_t multicast_frames_sent = 0;       // to the multicast group, once each
-  std::uint64_t frames_sent_total = 0;           // all connections, open and closed (one request's snapshot)
-  std::uint64_t frames_dropped_total = 0;        // all connections, open and closed
-  std::uint32_t io_threads = 0;                  // the server's I/O threads (0: a server that does not say)
-  std::uint32_t io_thread = 0;                   // this connection's (0: the control loop)
+  double committed_frames_per_second = 0;         // all subscriptions' rates together
+  double send_budget = 0;                         // what the server admits (0: no limit)
+  std::uint64_t subscriptions_refused = 0;        // for the send budget
+  std::uint32_t live_sources = 0;                 // being published now
+  std::uint64_t live_frames_received = 0;         // published frames the server accepted
+  std::uint64_t live_frames_refused = 0;          // and refused
+  std::uint64_t live_frames_over_rate = 0;        // and dropped: faster than the source's declared rate
+  std::uint64_t live_edit_replays = 0;            // live views' edits replayed, once per frame for equal edits
+  std::uint64_t live_marker_points_missing = 0;   // marker points live marker sources' frames lacked
+  std::uint64_t live_marker_parts_held = 0;       // and part poses held for want of them
+  std::uint64_t live_marker_points_outliers = 0;  // and points left out as outliers (swapped or stray labels)
+  std::uint64_t live_marker_frames_unsolved = 0;  // frames left unsolved (a part not fitted yet)
+  std::uint64_t multicast_frames_sent = 0;        // to the multicast group, once each
+  std::uint64_t frames_sent_total = 0;            // all connections, open and closed (one request's snapshot)
+  std::uint64_t frames_dropped_total = 0;         // all connections, open and closed
+  std::uint32_t io_threads = 0;                   // the server's I/O threads (0: a server that does not say)
+  std::uint32_t io_thread = 0;                    // this connection's (0: the control loop)
 };
 
 // A live source this client publishes (docs/protocol.md, "Live sources").
