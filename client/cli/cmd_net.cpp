@@ -574,6 +574,7 @@ void run_publish_markers(const PublishCommand& o) {
   po.model = o.model;
   po.calibration_seconds = o.calibration_seconds;
   po.units = d.units.empty() ? "mm" : d.units;
+  po.record = o.record;
   auto c = connect(o.server);
   const client::Publication publication = take(c->publish_markers(d.names, po));
   std::fprintf(stderr, "publishing %s as live markers '%s': %zu markers, model %s, %.2f Hz%s; served after %.3g s\n",
@@ -587,8 +588,11 @@ void run_publish_markers(const PublishCommand& o) {
   });
   check(c->unpublish(publication.id));
   for (const auto& e : c->take_errors()) throw CommandError("the server refused a frame: " + e);
-  std::fprintf(stderr, "published %llu marker frames of '%s'\n", static_cast<unsigned long long>(sent),
-               po.name.c_str());
+  std::fprintf(stderr, "published %llu marker frames of '%s'%s\n", static_cast<unsigned long long>(sent),
+               po.name.c_str(),
+               publication.recording.empty()
+                   ? ""
+                   : ("; the server records the solved skeleton to " + shown(publication.recording)).c_str());
 }
 
 // Plays a motion file as a live source: the skeleton (pre-rotation), then one

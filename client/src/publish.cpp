@@ -51,6 +51,7 @@ Result<Publication> Client::publish_markers(std::span<const std::string> marker_
   markers->set_model(options.model);
   markers->set_calibration_seconds(options.calibration_seconds);
   markers->set_units(options.units);
+  p->set_record(options.record);
   auto r = impl_->expect(m, pb::ServerMessage::kPublished);
   if (!r.ok()) return r.error();
   return Publication{r->published().publication_id(), r->published().motion(), r->published().recording()};

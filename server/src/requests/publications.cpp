@@ -6,6 +6,7 @@
 #include <cmath>
 #include <ctime>
 #include <filesystem>
+#include <utility>
 
 #include "live/announcement.h"
 
@@ -50,6 +51,38 @@ std::optional<Refusal> Publications::room_for(const std::string& name) const {
   return std::nullopt;
 }
 
+std::variant<std::string, Refusal> Publications::recording_file(const std::string& name) const {
+  const ServerConfig& cfg = link_.services.cfg;
+  if (cfg.record_dir.empty()) {
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
+                   "this server records no live sources (start it with --record-dir DIR)"};
+  }
+  return recording_path(cfg.record_dir, name).string();
+}
+
+std::optional<Refusal> Publications::admit_recording(const std::string& name) {
+  if (const std::string why = link_.services.recordings.budget().admit(); !why.empty()) {
+    spdlog::warn("conn {}: live {} not recorded: {}", link_.connection_id, printable(name, 200), why);
+    return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "this server cannot record now: " + why};
+  }
+  return std::nullopt;
+}
+
+Result<std::unique_ptr<Recording>> Publications::open_recording(const std::string& path, const Skeleton& skeleton,
+                                                                double frame_time, const std::string& name) {
+  RecordBudget& budget = link_.services.recordings.budget();
+  Motion pattern;
+  pattern.skeleton = skeleton;
+  pattern.convention = Convention::kPreRotation;
+  pattern.frame_time = frame_time;
+  auto file = GmrbAppender::open(pattern, path);
+  if (!file.ok()) {
+    budget.release(RecordBudget::kStep, 0);
+    return make_error("the recording cannot be written: " + file.error().to_string());
+  }
+  return std::make_unique<Recording>(std::move(file).value(), link_.services.cfg.max_record_bytes, budget, name);
+}
+
 Reply Publications::publish(const pb::Publish& r, Role role) {
   if (role < Role::kPublish) {
     return Refusal{pb::ERROR_CODE_PERMISSION_DENIED,
@@ -63,11 +96,9 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
   if (auto refused = room_for(r.name())) return std::move(*refused);
   std::string recording;
   if (r.record()) {
-    if (cfg.record_dir.empty()) {
-      return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
-                     "this server records no live sources (start it with --record-dir DIR)"};
-    }
-    recording = recording_path(cfg.record_dir, r.name()).string();
+    auto file = recording_file(r.name());
+    if (auto* refusal = std::get_if<Refusal>(&file)) return std::move(*refusal);
+    recording = std::get<std::string>(std::move(file));
   }
   // The memory budget: the skeleton and its newest frame, as views count
   // their edited copies.
@@ -92,23 +123,16 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
   // frame, within the record budget (live/recordings.h).
   std::unique_ptr<Recording> recorder;
   if (!recording.empty()) {
-    RecordBudget& budget = link_.services.recordings.budget();
-    if (const std::string why = budget.admit(); !why.empty()) {
+    if (auto refused = admit_recording(r.name())) {
       admission.release_rate(rate_mhz);
-      spdlog::warn("conn {}: live {} not recorded: {}", link_.connection_id, printable(r.name(), 200), why);
-      return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, "this server cannot record now: " + why};
+      return std::move(*refused);
     }
-    Motion pattern;
-    pattern.skeleton = std::get<Skeleton>(checked);
-    pattern.convention = Convention::kPreRotation;
-    pattern.frame_time = r.frame_time();
-    auto file = GmrbAppender::open(pattern, recording);
-    if (!file.ok()) {
-      budget.release(RecordBudget::kStep, 0);
+    auto made = open_recording(recording, std::get<Skeleton>(checked), r.frame_time(), r.name());
+    if (!made.ok()) {
       admission.release_rate(rate_mhz);
-      return Refusal{pb::ERROR_CODE_INTERNAL, "the recording cannot be written: " + file.error().to_string()};
+      return Refusal{pb::ERROR_CODE_INTERNAL, made.error().message};
     }
-    recorder = std::make_unique<Recording>(std::move(file).value(), cfg.max_record_bytes, budget, r.name());
+    recorder = std::move(made).value();
   }
   link_.held_bytes = mine;
   admission.set_view_bytes(all);
@@ -136,9 +160,13 @@ Reply Publications::publish_markers(const pb::Publish& r) {
   if (auto* refusal = std::get_if<Refusal>(&made)) return std::move(*refusal);
   auto feed = std::make_shared<MarkerFeed>(std::move(std::get<MarkerFeed>(made)));
   if (auto refused = room_for(r.name())) return std::move(*refused);
+  // Recorded from its first solved frame: the file opens with the skeleton
+  // the calibration gives (marker_frame); the budget's step is taken now.
+  std::string recording;
   if (r.record()) {
-    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION,
-                   "recording a marker publication is not offered yet: record a subscription to it (gmr record)"};
+    auto file = recording_file(r.name());
+    if (auto* refusal = std::get_if<Refusal>(&file)) return std::move(*refusal);
+    recording = std::get<std::string>(std::move(file));
   }
   Admission& admission = link_.services.admission;
   const std::uint64_t bytes = feed->held_bytes();
@@ -154,16 +182,23 @@ Reply Publications::publish_markers(const pb::Publish& r) {
   if (auto refused = admission.commit_rate(rate, rate_mhz, Admission::Asker::kPublication)) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, *refused};
   }
+  if (!recording.empty()) {
+    if (auto refused = admit_recording(r.name())) {
+      admission.release_rate(rate_mhz);
+      return std::move(*refused);
+    }
+  }
   link_.held_bytes = mine;
   admission.set_view_bytes(all);
   const std::uint32_t id = next_publication_++;
-  publications_[id] = Held{nullptr, bytes, rate_mhz, feed, r.name(), r.frame_time()};
+  publications_[id] = Held{nullptr, bytes, rate_mhz, feed, r.name(), r.frame_time(), recording};
   spdlog::info("conn {}: publishes live markers {} ({} markers, model {}, {:.1f} Hz; served after {} frames)",
                link_.connection_id, printable(r.name(), 200), r.markers().names_size(),
                printable(r.markers().model(), 64), rate, feed->calibration_frames());
   pb::ServerMessage out;
   out.mutable_published()->set_publication_id(id);
   out.mutable_published()->set_motion(r.name());
+  out.mutable_published()->set_recording(recording);
   return out;
 }
 
@@ -205,6 +240,15 @@ Reply Publications::marker_frame(std::uint32_t id, Held& held, const pb::Publish
       held.bytes = bytes;
       held.source =
           link_.services.catalog.add_live(held.name, feed.skeleton(), held.frame_time, feed.metres_per_unit());
+      if (!held.recording.empty()) {
+        auto made = open_recording(std::exchange(held.recording, {}), feed.skeleton(), held.frame_time, held.name);
+        if (!made.ok()) {
+          const std::string why = "live markers '" + held.name + "': " + made.error().message;
+          end(id, why);
+          return Refusal{pb::ERROR_CODE_INTERNAL, why};
+        }
+        held.source->record(std::move(made).value());
+      }
       link_.services.replicas.announce(*held.source);
       spdlog::info("conn {}: live markers {} calibrated on {} frames: served as {} joints", link_.connection_id,
                    printable(held.name, 200), feed.calibration_frames(), feed.skeleton().size());
@@ -266,8 +310,10 @@ void Publications::end(std::uint32_t id, const std::string& reason) {
   link_.services.admission.release_view_bytes(it->second.bytes);
   link_.services.admission.release_rate(it->second.rate_mhz);
   const std::string name = it->second.name;
+  const std::string recording_step = it->second.recording;  // a step taken, no file opened
   publications_.erase(it);
   if (!source) {  // a marker publication that had not calibrated yet
+    if (!recording_step.empty()) link_.services.recordings.budget().release(RecordBudget::kStep, 0);
     spdlog::info("conn {}: live markers {} ended before their calibration: {}", link_.connection_id,
                  printable(name, 200), reason);
     return;

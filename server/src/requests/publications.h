@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <variant>
 
 #include "gmr/server/auth.h"
 #include "live/live_source.h"
@@ -37,9 +38,22 @@ class Publications {
     std::shared_ptr<MarkerFeed> markers;  // a marker publication
     std::string name;
     double frame_time = 0;
+    // A marker publication to be recorded: the file, its budget step taken,
+    // opened once the calibration gives the skeleton.
+    std::string recording;
   };
   // A new publication named `name`: the name free, this session under its bound.
   std::optional<Refusal> room_for(const std::string& name) const;
+  // Where a recording of `name` goes, or why none can be made (no record
+  // directory). The refusal names the option.
+  std::variant<std::string, Refusal> recording_file(const std::string& name) const;
+  // The record budget's first step for a new recording (a refusal when the
+  // server cannot record now).
+  std::optional<Refusal> admit_recording(const std::string& name);
+  // The recording of `skeleton` frames at `path`, its first step admitted;
+  // when the file cannot be written the step is given back.
+  Result<std::unique_ptr<Recording>> open_recording(const std::string& path, const Skeleton& skeleton,
+                                                    double frame_time, const std::string& name);
   Reply publish_markers(const pb::Publish& r);
   Reply marker_frame(std::uint32_t id, Held& held, const pb::PublishFrame& r);
   // Hands `values` to the publication's source (the rate hold, the replicas).

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -286,6 +287,64 @@ TEST(LiveMarkers, SwappedLabelsAreLeftOutAsOutliersAndCounted) {
   std::printf("[ figures  ] live markers, two labels swapped: %zu outliers in %zu frames, joints %.1f mm median off\n",
               outliers, served, median(d));
   EXPECT_LE(median(d), 10.0);
+}
+
+// Before, recording a marker publication was refused. Now the server
+// records the solved skeleton from its first solved frame, as any live
+// source: the file holds every served frame, the take solved frame by frame.
+TEST(LiveMarkers, ARecordedMarkerPublicationHoldsTheSolvedFrames) {
+  GMR_REQUIRE_DATA();
+  ASSERT_GT(take().solved.frame_count, 0u);
+  const std::size_t calibration = take().calibration, served = 60;
+  TempDir dir;
+  server::ServerConfig cfg = live_config();
+  cfg.record_dir = dir.path.string();
+  std::filesystem::path file;
+  {
+    TestServer server(cfg);
+    auto pub = connect_as(server, kPublishToken);
+    ASSERT_TRUE(pub);
+    client::MarkerPublishOptions o = options("lab/recorded");
+    o.record = true;
+    auto a = pub->publish_markers(take().markers.names, o);
+    ASSERT_TRUE(a.ok()) << a.error().to_string();
+    file = a->recording;
+    EXPECT_EQ(file.parent_path(), dir.path);
+    EXPECT_EQ(file.extension(), ".gmrb");
+    std::mt19937 random(7);
+    publish(*pub, a->id, 0, calibration, 0.0, random);
+    // Slower than the declared rate: no frame is dropped for it.
+    const auto period = std::chrono::milliseconds(12);
+    const auto start = std::chrono::steady_clock::now();
+    for (std::size_t f = calibration; f < calibration + served; ++f) {
+      std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(f - calibration));
+      ASSERT_TRUE(pub->publish_marker_frame(a->id, frame_of(f)).ok());
+    }
+    ASSERT_TRUE(pub->unpublish(a->id).ok());
+    EXPECT_TRUE(pub->take_errors().empty());
+    for (int i = 0; i < 1000 && !std::filesystem::exists(file); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
+  ASSERT_TRUE(std::filesystem::exists(file));
+  auto recorded = load_motion(file);
+  ASSERT_TRUE(recorded.ok()) << recorded.error().to_string();
+  ASSERT_EQ(recorded->frame_count, served);
+  const Motion& want = take().solved;
+  ASSERT_EQ(recorded->skeleton.size(), want.skeleton.size());
+  const std::size_t n = want.skeleton.size();
+  const auto got = compute_positions(*recorded);
+  const auto expected = compute_positions(want);
+  for (std::size_t j = 0; j < n; ++j) {
+    EXPECT_EQ(recorded->skeleton.joint(static_cast<int>(j)).name, want.skeleton.joint(static_cast<int>(j)).name);
+  }
+  double worst = 0;
+  for (std::size_t f = 0; f < served; ++f) {
+    for (std::size_t j = 0; j < n; ++j) {
+      worst = std::max(worst, (got[f * n + j] - expected[(calibration + f) * n + j]).norm());
+    }
+  }
+  EXPECT_LT(worst, 1e-6) << "millimetres";
 }
 
 TEST(LiveMarkers, BadAnnouncementsAndFramesAreRefusedNamingWhatAndCounted) {

@@ -264,6 +264,7 @@ struct MarkerPublishOptions {
   std::string model = "cmu41";  // a built-in skeleton model
   double calibration_seconds = 2.0;
   std::string units = "mm";  // of the coordinates: mm, cm, m or in
+  bool record = false;       // ask the server to record the solved skeleton (its --record-dir) as .gmrb
 };
 
 struct Publication {
