@@ -182,9 +182,9 @@ void Connection::read_next() {
     if (auto request = take_buffered()) hand_over(std::move(*request), false);
     return;
   }
-  // Part of a prefix stays, at the front; the rest of in_ takes what arrived.
-  // A read that fills less than it asked for leaves Asio's next read waiting
-  // for the socket (no recv that would only say EAGAIN).
+  // Part of a prefix stays, at the front; the rest of in_ takes what arrived
+  // (Asio tries the read at once: when nothing has arrived, one recv says
+  // EAGAIN and the read waits for the socket).
   std::copy(in_.begin() + static_cast<std::ptrdiff_t>(in_begin_), in_.begin() + static_cast<std::ptrdiff_t>(in_end_),
             in_.begin());
   in_end_ -= in_begin_;

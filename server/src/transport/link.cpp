@@ -87,7 +87,11 @@ Clock::time_point watchdog_next(const LinkTimes& t, Clock::time_point last_write
   consider(std::max(t.last_read, t.last_frames_written), l.idle_timeout);
   if (t.established && !t.holding) consider(t.last_held, l.idle_timeout);
   if (t.writing) consider(t.write_started, l.write_timeout);
-  if (ready && !t.writing) consider(last_write, l.heartbeat_interval);
+  // No heartbeat goes out while a write is in flight, but one due later
+  // still wakes the tick: the write (a heartbeat over TLS or WebSocket,
+  // written asynchronously) is likely done by then.
+  const Clock::time_point beat = last_write + l.heartbeat_interval + Clock::duration(1);
+  if (ready && l.heartbeat_interval.count() > 0 && (!t.writing || beat > now)) next = std::min(next, beat);
   return round_up_to_grain(std::max(next, now + milliseconds(1)), period);
 }
 

@@ -98,14 +98,15 @@ std::chrono::milliseconds watchdog_period(const ConnectionLimits& limits, bool e
 // all, instead of one each (10,000 idle connections were 8,000 wake-ups a second).
 Clock::time_point watchdog_due(const ConnectionLimits& limits, bool established, Clock::time_point now);
 // When the watchdog next looks at a link that is not `polled`: at the first
-// of its deadlines (a heartbeat due since `last_write`, when `ready` and not
-// writing; the idle, held, write or handshake timeout), rounded up as
+// of its deadlines (a heartbeat due since `last_write`, when `ready`, unless
+// overdue while a write is in flight; the idle, held, write or handshake timeout), rounded up as
 // watchdog_due rounds. Deadlines only move later, but two that may begin
 // after the tick is armed: a write's timeout and a session's idle timeout
 // once it lets go of what it held; the tick is never further off than the
 // shorter of those timeouts, so neither is missed. A `polled` link (its
-// reads wait for the budget or the Handler) is looked at every period
-// (watchdog_due). An idle multicast subscriber's connection wakes once per
+// reads wait for the budget or the Handler; or it is not established or not
+// ready yet, when the heartbeat's deadline is still to come) is looked at
+// every period (watchdog_due). An idle multicast subscriber's connection wakes once per
 // heartbeat, not four times (a period is a quarter of the shortest timeout).
 Clock::time_point watchdog_next(const LinkTimes& times, Clock::time_point last_write, bool ready, bool polled,
                                 const ConnectionLimits& limits, Clock::time_point now);

@@ -196,8 +196,9 @@ LinkTimes QueuedOutbox::link_times() const {
 
 Clock::time_point QueuedOutbox::watchdog_next_tick(Clock::time_point now) const {
   // Reads waiting for the budget resume at a tick; those waiting for the
-  // Handler count as reading there.
-  const bool polled = read_paused_ || reads_held_ || at_handler_;
+  // Handler count as reading there. Before Hello, or while the link is not
+  // ready (TLS, WebSocket handshakes), deadlines come nearer as it opens.
+  const bool polled = read_paused_ || reads_held_ || at_handler_ || !established_ || !link_ready();
   return watchdog_next(link_times(), last_write_, link_ready(), polled, limits_, now);
 }
 

@@ -563,6 +563,31 @@ TEST(WebSocket, HasTheLimitsOfATcpClient) {
   EXPECT_TRUE(ws.wait_closed());
 }
 
+// The watchdog wakes at a link's next deadline. A WebSocket (like TLS)
+// writes its heartbeat asynchronously, so the watchdog re-arms while that
+// write is in flight: the next heartbeat must still wake it, not the write
+// timeout 20 s later.
+TEST(WebSocket, HeartbeatsKeepTheirIntervalThoughWrittenAsynchronously) {
+  server::ServerConfig cfg = http_config();
+  cfg.heartbeat_interval = std::chrono::milliseconds(100);
+  TestServer s(cfg);
+  WsClient ws(s.server.http_port(), "gmr.stream.v1");
+  ASSERT_TRUE(ws.open());
+  EXPECT_TRUE(ws.ask(hello(), 1).has_hello());
+  pb::ClientMessage create;
+  create.mutable_create_view()->set_motion("walk");
+  ASSERT_TRUE(ws.ask(create, 2).has_view());  // holds a view: not idle for holding nothing
+  int heartbeats = 0;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(1500);
+  while (std::chrono::steady_clock::now() < until) {
+    auto m = ws.receive();
+    ASSERT_TRUE(m.has_value()) << "closed after " << heartbeats << " heartbeats";
+    heartbeats += m->has_heartbeat() ? 1 : 0;
+  }
+  // About 14 at 100 ms; a busy machine delays some, never a 20 s gap.
+  EXPECT_GE(heartbeats, 5);
+}
+
 TEST(WebSocket, AClientThatStopsReadingGetsLatestFramesThenIsClosed) {
   server::ServerConfig cfg = http_config();
   cfg.write_timeout = std::chrono::milliseconds(1500);
