@@ -118,6 +118,16 @@ std::size_t publish(client::Client& c, std::uint32_t id, std::size_t begin, std:
   return missing;
 }
 
+// A client with the publish token whose requests wait up to 30 s: the
+// calibration runs on the server's control loop, seconds in a sanitized
+// build under load, and requests queued behind it wait for it.
+std::unique_ptr<client::Client> publisher(TestServer& server) {
+  client::ClientOptions o;
+  o.auth_token = kPublishToken;
+  o.timeout = std::chrono::seconds(30);
+  return server.connect(o);
+}
+
 // Waits (a round trip at a time) until the server lists `name`.
 bool listed(client::Client& c, const std::string& name) {
   for (int i = 0; i < 200; ++i) {
@@ -246,7 +256,7 @@ TEST(LiveMarkers, SwappedLabelsAreLeftOutAsOutliersAndCounted) {
   const std::size_t calibration = take().calibration, served = 120;
   Received swapped;  // declared before the clients: their callbacks write here
   TestServer server(live_config());
-  auto pub = connect_as(server, kPublishToken);
+  auto pub = publisher(server);
   auto sub = connect_as(server, kControlToken);
   ASSERT_TRUE(pub && sub);
   const std::vector<std::string>& names = take().markers.names;
@@ -302,7 +312,7 @@ TEST(LiveMarkers, ARecordedMarkerPublicationHoldsTheSolvedFrames) {
   std::filesystem::path file;
   {
     TestServer server(cfg);
-    auto pub = connect_as(server, kPublishToken);
+    auto pub = publisher(server);
     ASSERT_TRUE(pub);
     client::MarkerPublishOptions o = options("lab/recorded");
     o.record = true;
@@ -313,6 +323,7 @@ TEST(LiveMarkers, ARecordedMarkerPublicationHoldsTheSolvedFrames) {
     EXPECT_EQ(file.extension(), ".gmrb");
     std::mt19937 random(7);
     publish(*pub, a->id, 0, calibration, 0.0, random);
+    ASSERT_TRUE(listed(*pub, "lab/recorded"));  // calibrated
     // Slower than the declared rate: no frame is dropped for it.
     const auto period = std::chrono::milliseconds(12);
     const auto start = std::chrono::steady_clock::now();
@@ -320,7 +331,8 @@ TEST(LiveMarkers, ARecordedMarkerPublicationHoldsTheSolvedFrames) {
       std::this_thread::sleep_until(start + period * static_cast<std::int64_t>(f - calibration));
       ASSERT_TRUE(pub->publish_marker_frame(a->id, frame_of(f)).ok());
     }
-    ASSERT_TRUE(pub->unpublish(a->id).ok());
+    const Status ended = pub->unpublish(a->id);
+    ASSERT_TRUE(ended.ok()) << ended.error().to_string();
     EXPECT_TRUE(pub->take_errors().empty());
     for (int i = 0; i < 1000 && !std::filesystem::exists(file); ++i) {
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
