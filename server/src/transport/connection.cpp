@@ -140,10 +140,6 @@ void Connection::finish() {
   request_flush();
 }
 
-void Connection::watch_budget() {
-  if (watchdog_.expiry() > watchdog_due(limits_, established_, Clock::now())) arm_watchdog();
-}
-
 void Connection::arm_watchdog() {
   watchdog_.expires_at(watchdog_next_tick(Clock::now()));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {

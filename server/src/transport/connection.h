@@ -129,8 +129,7 @@ class Connection final : public QueuedOutbox, public std::enable_shared_from_thi
   // The write in flight completed (`ec`, `n` bytes of it written); the next
   // one starts.
   void wrote_all(const boost::system::error_code& ec, std::size_t n);
-  void arm_watchdog();
-  void watch_budget() override;
+  void arm_watchdog() override;
 
   // Request bodies are read in chunks of at most this; a TLS write's copy
   // past it is given back.

@@ -58,9 +58,9 @@ void QueuedOutbox::resume_reading() {
 
 void QueuedOutbox::pause_reading(bool for_budget) {
   read_paused_ = true;
-  if (for_budget || (budget_ != nullptr && !reads_held_ && !at_handler_ && !budget_->allows_reading(accounted_))) {
-    watch_budget();
-  }
+  const bool budget =
+      for_budget || (budget_ != nullptr && !reads_held_ && !at_handler_ && !budget_->allows_reading(accounted_));
+  if (budget && tick_due_ > watchdog_due(limits_, established_, Clock::now())) arm_watchdog();
 }
 
 void QueuedOutbox::drop_queued() {
@@ -194,12 +194,13 @@ LinkTimes QueuedOutbox::link_times() const {
                    last_frames_written_, holding_, last_held_};
 }
 
-Clock::time_point QueuedOutbox::watchdog_next_tick(Clock::time_point now) const {
+Clock::time_point QueuedOutbox::watchdog_next_tick(Clock::time_point now) {
   // Reads waiting for the budget resume at a tick; those waiting for the
   // Handler count as reading there. Before Hello, or while the link is not
   // ready (TLS, WebSocket handshakes), deadlines come nearer as it opens.
   const bool polled = read_paused_ || reads_held_ || at_handler_ || !established_ || !link_ready();
-  return watchdog_next(link_times(), last_write_, link_ready(), polled, limits_, now);
+  tick_due_ = watchdog_next(link_times(), last_write_, link_ready(), polled, limits_, now);
+  return tick_due_;
 }
 
 std::string QueuedOutbox::watchdog_tick(Clock::time_point now) {

@@ -89,10 +89,10 @@ class QueuedOutbox : public Outbox {
   void resume_reading();
   // Reading pauses. `for_budget`: the server-wide buffer budget is why (or
   // may_read found it so): nothing tells the link when it frees, so the
-  // watchdog is to look within a period (watch_budget).
+  // watchdog's tick, if further off, is brought within a period.
   void pause_reading(bool for_budget = false);
-  // Brings the watchdog's next tick within a period (the transport's timer).
-  virtual void watch_budget() {}
+  // (Re)arms the transport's watchdog timer for watchdog_next_tick.
+  virtual void arm_watchdog() = 0;
   // Forgets what waits (the link stops).
   void drop_queued();
   // Frame `f` (of a subscription whose frames go out now) as bytes with this
@@ -103,7 +103,7 @@ class QueuedOutbox : public Outbox {
   // is queued when nothing was written for a while.
   std::string watchdog_tick(Clock::time_point now);
   // When the watchdog's next tick is due (watchdog_next in link.h).
-  Clock::time_point watchdog_next_tick(Clock::time_point now) const;
+  Clock::time_point watchdog_next_tick(Clock::time_point now);
   LinkTimes link_times() const;
   // A write of `n` bytes completed (`writing_frames_`: it carried frames).
   void wrote(std::size_t n);
@@ -136,6 +136,7 @@ class QueuedOutbox : public Outbox {
   ConnectionCounters counters_;
 
   Clock::time_point started_ = Clock::now();
+  Clock::time_point tick_due_ = Clock::time_point::max();  // what watchdog_next_tick last gave
   Clock::time_point write_started_{}, last_read_{}, last_write_{};
   Clock::time_point last_frames_written_{};  // the last write that held frames completed
   Clock::time_point oldest_frame_in_flight_ = Clock::time_point::max();

@@ -277,10 +277,6 @@ void WsConnection::close_socket() {
   });
 }
 
-void WsConnection::watch_budget() {
-  if (watchdog_.expiry() > watchdog_due(limits_, established_, Clock::now())) arm_watchdog();
-}
-
 void WsConnection::arm_watchdog() {
   watchdog_.expires_at(watchdog_next_tick(Clock::now()));
   watchdog_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {

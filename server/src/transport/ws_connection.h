@@ -82,8 +82,7 @@ class WsConnection final : public QueuedOutbox, public std::enable_shared_from_t
   void on_read(const boost::system::error_code& ec, std::size_t bytes);
   void flush();
   void write(std::string message, bool frame);
-  void arm_watchdog();
-  void watch_budget() override;
+  void arm_watchdog() override;
   void close_socket();
   // A framed protocol message (prefix, then body) as this client's format
   // wants it; empty when it cannot be converted (logged).
