@@ -35,6 +35,7 @@ class RecordingOutbox final : public server::Outbox {
   void send_frames_now(std::uint32_t) override {}
   std::uint64_t end_frames(std::uint32_t) override { return 0; }
   void close_after_reply() override { closing_ = true; }
+  void hold_reading(bool hold) override { reading_held = hold; }
   void stop(const std::string&) override { closing_ = true; }
   void finish() override { closing_ = true; }
   void count_udp_frame_sent(std::chrono::steady_clock::duration) override {}
@@ -46,6 +47,7 @@ class RecordingOutbox final : public server::Outbox {
   std::deque<pb::ServerMessage> replies;
   std::vector<pb::ServerMessage> frames;
   std::vector<std::uint32_t> keys;
+  bool reading_held = false;  // the handler's last hold_reading
 
  private:
   static pb::ServerMessage unframe(const std::string& framed) {

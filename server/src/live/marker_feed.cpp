@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <utility>
 
 #include "gmr/core/names.h"
 #include "gmr/markers/marker_model.h"
@@ -114,17 +115,10 @@ Result<MarkerFeed::Taken> MarkerFeed::take(const pb::PublishFrame& frame) {
     }
   }
   ++frames_;
+  if (calibration_out_) return Taken::kSkipped;  // the connection's reads wait while it computes
   if (!solver_) {
     calibration_.positions.insert(calibration_.positions.end(), positions_.begin(), positions_.end());
-    if (++calibration_.frame_count < calibration_frames_) return Taken::kCalibrating;
-    auto solver = MarkerFrameSolver::calibrate(calibration_, model_, 0, calibration_.frame_count);
-    calibration_.positions = {};
-    if (!solver.ok()) {
-      return make_error(ErrorKind::kFailedPrecondition, fmt::format("the calibration on the first {} frames failed: {}",
-                                                                    calibration_frames_, solver.error().message));
-    }
-    solver_.emplace(std::move(solver).value());
-    return Taken::kCalibrated;
+    return ++calibration_.frame_count < calibration_frames_ ? Taken::kCalibrating : Taken::kCalibrationDue;
   }
   auto values = solver_->solve(positions_);
   if (!values.ok()) {
@@ -133,6 +127,28 @@ Result<MarkerFeed::Taken> MarkerFeed::take(const pb::PublishFrame& frame) {
   }
   values_ = std::move(values).value();
   return Taken::kSolved;
+}
+
+MarkerFeed::Calibration MarkerFeed::take_calibration() {
+  calibration_out_ = true;
+  MarkerTrajectories frames = calibration_;  // names, rate, units; the positions move
+  frames.positions = std::exchange(calibration_.positions, {});
+  calibration_.frame_count = 0;
+  return Calibration{std::move(frames), model_};
+}
+
+Result<MarkerFrameSolver> MarkerFeed::Calibration::run() const {
+  return MarkerFrameSolver::calibrate(frames, model, 0, frames.frame_count);
+}
+
+Status MarkerFeed::calibrated(Result<MarkerFrameSolver> solver) {
+  calibration_out_ = false;
+  if (!solver.ok()) {
+    return make_error(ErrorKind::kFailedPrecondition, fmt::format("the calibration on the first {} frames failed: {}",
+                                                                  calibration_frames_, solver.error().message));
+  }
+  solver_.emplace(std::move(solver).value());
+  return Ok{};
 }
 
 }  // namespace gmr::server

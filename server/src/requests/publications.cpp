@@ -140,7 +140,7 @@ Reply Publications::publish(const pb::Publish& r, Role role) {
                                                 r.metres_per_unit());
   if (recorder) source->record(std::move(recorder));
   const std::uint32_t id = next_publication_++;
-  publications_[id] = Held{source, bytes, rate_mhz, nullptr, r.name(), r.frame_time()};
+  publications_[id] = Held{source, bytes, rate_mhz, nullptr, r.name(), r.frame_time(), {}};
   link_.services.replicas.announce(*source);
   spdlog::info("conn {}: publishes live {} ({} joints, {} channels, {:.1f} Hz)", link_.connection_id,
                printable(r.name(), 200), source->latest()->skeleton.size(), source->latest()->stride(),
@@ -209,12 +209,7 @@ Reply Publications::marker_frame(std::uint32_t id, Held& held, const pb::Publish
   auto taken = feed.take(r);
   if (!taken.ok()) {
     link_.services.catalog.count_live_frame(Fate::kRefused);
-    const std::string why = "live markers '" + held.name + "': " + taken.error().message;
-    if (taken.error().kind == ErrorKind::kFailedPrecondition) {  // the calibration failed: nothing to serve
-      end(id, why);
-      return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
-    }
-    return Refusal{pb::ERROR_CODE_BAD_REQUEST, why};
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST, "live markers '" + held.name + "': " + taken.error().message};
   }
   if (const MarkerFrameCounts* after = feed.counts()) {
     link_.services.catalog.count_marker_frame(before, *after);
@@ -224,40 +219,52 @@ Reply Publications::marker_frame(std::uint32_t id, Held& held, const pb::Publish
     case MarkerFeed::Taken::kSkipped:
       link_.services.catalog.count_live_frame(Fate::kAccepted);
       return pb::ServerMessage{};
-    case MarkerFeed::Taken::kCalibrated: {
+    case MarkerFeed::Taken::kCalibrationDue:
       link_.services.catalog.count_live_frame(Fate::kAccepted);
-      if (link_.services.catalog.find(held.name)) {
-        const std::string why = "a motion named '" + held.name + "' appeared while the markers calibrated";
-        end(id, why);
-        return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
-      }
-      // The memory budget now holds the skeleton and its newest frame.
-      Admission& admission = link_.services.admission;
-      const std::uint64_t bytes = LiveSource::held_bytes(feed.skeleton());
-      link_.held_bytes = link_.held_bytes - held.bytes + bytes;
-      admission.release_view_bytes(held.bytes);
-      admission.set_view_bytes(admission.view_bytes() + bytes);
-      held.bytes = bytes;
-      held.source =
-          link_.services.catalog.add_live(held.name, feed.skeleton(), held.frame_time, feed.metres_per_unit());
-      if (!held.recording.empty()) {
-        auto made = open_recording(std::exchange(held.recording, {}), feed.skeleton(), held.frame_time, held.name);
-        if (!made.ok()) {
-          const std::string why = "live markers '" + held.name + "': " + made.error().message;
-          end(id, why);
-          return Refusal{pb::ERROR_CODE_INTERNAL, why};
-        }
-        held.source->record(std::move(made).value());
-      }
-      link_.services.replicas.announce(*held.source);
-      spdlog::info("conn {}: live markers {} calibrated on {} frames: served as {} joints", link_.connection_id,
-                   printable(held.name, 200), feed.calibration_frames(), feed.skeleton().size());
+      due_ = DueCalibration{id, feed.take_calibration()};
       return pb::ServerMessage{};
-    }
     case MarkerFeed::Taken::kSolved:
       break;
   }
   return push(*held.source, feed.values(), feed.frames() - 1);
+}
+
+Reply Publications::calibrated(std::uint32_t id, Result<MarkerFrameSolver> solver) {
+  auto it = publications_.find(id);
+  if (it == publications_.end()) return pb::ServerMessage{};
+  Held& held = it->second;
+  MarkerFeed& feed = *held.markers;
+  if (auto made = feed.calibrated(std::move(solver)); !made.ok()) {
+    const std::string why = "live markers '" + held.name + "': " + made.error().message;
+    end(id, why);
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
+  }
+  if (link_.services.catalog.find(held.name)) {
+    const std::string why = "a motion named '" + held.name + "' appeared while the markers calibrated";
+    end(id, why);
+    return Refusal{pb::ERROR_CODE_FAILED_PRECONDITION, why};
+  }
+  // The memory budget now holds the skeleton and its newest frame.
+  Admission& admission = link_.services.admission;
+  const std::uint64_t bytes = LiveSource::held_bytes(feed.skeleton());
+  link_.held_bytes = link_.held_bytes - held.bytes + bytes;
+  admission.release_view_bytes(held.bytes);
+  admission.set_view_bytes(admission.view_bytes() + bytes);
+  held.bytes = bytes;
+  held.source = link_.services.catalog.add_live(held.name, feed.skeleton(), held.frame_time, feed.metres_per_unit());
+  if (!held.recording.empty()) {
+    auto made = open_recording(std::exchange(held.recording, {}), feed.skeleton(), held.frame_time, held.name);
+    if (!made.ok()) {
+      const std::string why = "live markers '" + held.name + "': " + made.error().message;
+      end(id, why);
+      return Refusal{pb::ERROR_CODE_INTERNAL, why};
+    }
+    held.source->record(std::move(made).value());
+  }
+  link_.services.replicas.announce(*held.source);
+  spdlog::info("conn {}: live markers {} calibrated on {} frames: served as {} joints", link_.connection_id,
+               printable(held.name, 200), feed.calibration_frames(), feed.skeleton().size());
+  return pb::ServerMessage{};
 }
 
 Reply Publications::publish_frame(const pb::PublishFrame& r) {

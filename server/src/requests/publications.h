@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <variant>
 
 #include "gmr/server/auth.h"
@@ -25,6 +26,18 @@ class Publications {
   // `role`: the session's (publishing needs kPublish).
   Reply publish(const pb::Publish& r, Role role);
   Reply publish_frame(const pb::PublishFrame& r);
+  // A marker publication's calibration frames are all in (publish_frame
+  // gave no reply then): the calibration, to be computed off the control loop
+  // and handed back to calibrated(), whose reply answers that frame. The
+  // session reads no request meanwhile. Empty otherwise.
+  struct DueCalibration {
+    std::uint32_t publication = 0;
+    MarkerFeed::Calibration calibration;
+  };
+  std::optional<DueCalibration> take_due_calibration() { return std::exchange(due_, std::nullopt); }
+  // Serves the publication as a live source (and records it when asked), or
+  // ends it with the calibration's error. Nothing when it ended meanwhile.
+  Reply calibrated(std::uint32_t publication, Result<MarkerFrameSolver> solver);
   Reply unpublish(const pb::Unpublish& r);
   // Every source this session publishes ends with `reason`.
   void end_all(const std::string& reason);
@@ -63,6 +76,7 @@ class Publications {
   SessionLink& link_;
   std::map<std::uint32_t, Held> publications_;
   std::uint32_t next_publication_ = 1;
+  std::optional<DueCalibration> due_;
   LogLimiter over_rate_log_{1, std::chrono::seconds(10)};
 };
 

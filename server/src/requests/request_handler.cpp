@@ -173,7 +173,7 @@ Reply RequestHandler::dispatch(const pb::ClientMessage& req, Clock::time_point b
     case C::kPublish:
       return publications_.publish(req.publish(), role_);
     case C::kPublishFrame:
-      return publications_.publish_frame(req.publish_frame());
+      return publish_frame(req, began);
     case C::kUnpublish:
       return publications_.unpublish(req.unpublish());
     default:
@@ -355,33 +355,26 @@ Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point 
   if (std::max<std::uint64_t>(edit->values(), bound) <= cfg.edit_inline_values) {
     return views_.commit_edit(view_id, *edit, edit->run(), decorate);
   }
-  // A long one is computed on the edit thread; meanwhile this connection's
-  // requests are not read (they keep their order, and wait in the kernel),
-  // and everyone's frames go on.
-  edit_deferred_ = true;
-  if (auto c = link_.connection()) c->hold_reading(true);
-  net::post(link_.services.edit_pool,
-            [self = weak_from_this(), &io = link_.services.io, edit = std::move(edit).value(), view_id, decorate,
-             request_id = req.request_id(), kind = request_kind(req), began]() mutable {
-              auto next = [&]() -> Result<std::shared_ptr<const ViewContent>> {
-                try {
-                  return edit.run();
-                } catch (const std::bad_alloc&) {
-                  return make_error(ErrorKind::kResourceExhausted, "the server ran out of memory computing the edit");
-                } catch (const std::exception& e) {  // nothing may leave the edit thread's handler
-                  return make_error(ErrorKind::kFailedPrecondition, std::string("the edit failed: ") + e.what());
-                }
-              }();
-              net::post(io, [self = std::move(self), edit = std::move(edit), next = std::move(next), view_id, decorate,
-                             request_id, kind, began]() mutable {
-                auto handler = self.lock();
-                if (!handler || handler->stopped_) return;
-                Reply reply = handler->views_.commit_edit(view_id, edit, std::move(next), decorate);
-                handler->answer(request_id, kind, began, std::move(reply));
-                if (auto c = handler->link_.connection()) c->hold_reading(false);
-              });
-            });
+  // A long one is computed on the edit thread.
+  auto shared = std::make_shared<const ViewEdit>(std::move(edit).value());
+  defer<std::shared_ptr<const ViewContent>>(
+      req, began, "the edit", [shared] { return shared->run(); },
+      [shared, view_id, decorate](RequestHandler& handler, Result<std::shared_ptr<const ViewContent>> next) {
+        return handler.views_.commit_edit(view_id, *shared, std::move(next), decorate);
+      });
   return pb::ServerMessage{};
+}
+
+Reply RequestHandler::publish_frame(const pb::ClientMessage& req, Clock::time_point began) {
+  Reply reply = publications_.publish_frame(req.publish_frame());
+  auto due = publications_.take_due_calibration();
+  if (!due) return reply;
+  defer<MarkerFrameSolver>(
+      req, began, "the marker calibration", [calibration = std::move(due->calibration)] { return calibration.run(); },
+      [id = due->publication](RequestHandler& handler, Result<MarkerFrameSolver> solver) {
+        return handler.publications_.calibrated(id, std::move(solver));
+      });
+  return reply;
 }
 
 void RequestHandler::udp_registered(const udp::endpoint& ep) {

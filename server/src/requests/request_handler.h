@@ -20,6 +20,7 @@
 #include "gmr/server/auth.h"
 #include "gmr/server/view.h"
 #include "gmr/wire/udp.h"
+#include "requests/off_loop.h"
 #include "requests/publications.h"
 #include "requests/services.h"
 #include "requests/session_link.h"
@@ -63,6 +64,27 @@ class RequestHandler : public Connection::Handler,
   // there; dispatch gives none). `decorate` adds what the edit reports.
   Reply edit_view(const pb::ClientMessage& req, Clock::time_point began, std::uint32_t view_id,
                   const std::function<Result<ViewEdit>(const View&)>& make, Views::EditDecoration decorate = nullptr);
+  // A frame of a publication; the one that completes a marker calibration
+  // is answered once the calibration, computed on the edit thread, is back.
+  Reply publish_frame(const pb::ClientMessage& req, Clock::time_point began);
+  // `work` (a Result<T>) on the server's edit thread while this connection's
+  // requests are not read (they keep their order, and wait in the kernel;
+  // everyone's frames go on), then `finish(*this, outcome)` on the control
+  // loop gives the reply to `req` (dispatch gives none).
+  template <class T, class Work, class Finish>
+  void defer(const pb::ClientMessage& req, Clock::time_point began, std::string_view doing, Work work, Finish finish) {
+    edit_deferred_ = true;
+    if (auto c = link_.connection()) c->hold_reading(true);
+    run_off_loop<T>(link_.services.edit_pool, link_.services.io, doing, std::move(work),
+                    [self = weak_from_this(), finish = std::move(finish), request_id = req.request_id(),
+                     kind = request_kind(req), began](Result<T> outcome) mutable {
+                      auto handler = self.lock();
+                      if (!handler || handler->stopped_) return;
+                      Reply reply = finish(*handler, std::move(outcome));
+                      handler->answer(request_id, kind, began, std::move(reply));
+                      if (auto c = handler->link_.connection()) c->hold_reading(false);
+                    });
+  }
   // Requests only a 'control' connection may make (docs/security.md).
   static bool needs_control(pb::ClientMessage::BodyCase request);
   // The request's kind for metrics: its ClientMessage field's name.

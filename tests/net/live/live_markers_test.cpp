@@ -8,9 +8,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <future>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -25,6 +27,8 @@
 #include "gmr/markers/markers.h"
 #include "live_test_util.h"
 #include "net_test_util.h"
+#include "recording_outbox.h"
+#include "server_parts.h"
 #include "test_data.h"
 
 namespace gmr::test {
@@ -119,8 +123,8 @@ std::size_t publish(client::Client& c, std::uint32_t id, std::size_t begin, std:
 }
 
 // A client with the publish token whose requests wait up to 30 s: the
-// calibration runs on the server's control loop, seconds in a sanitized
-// build under load, and requests queued behind it wait for it.
+// calibration takes seconds in a sanitized build under load, and the
+// publisher's requests after it wait unread until it is done.
 std::unique_ptr<client::Client> publisher(TestServer& server) {
   client::ClientOptions o;
   o.auth_token = kPublishToken;
@@ -400,6 +404,100 @@ TEST(LiveMarkers, BadAnnouncementsAndFramesAreRefusedNamingWhatAndCounted) {
   EXPECT_NE(errors[1].find("beyond 10 km"), std::string::npos) << errors[1];
   EXPECT_NE(errors[2].find("need " + std::to_string(3 * names.size())), std::string::npos) << errors[2];
   EXPECT_EQ(pub->stats().value().live_frames_refused - before.live_frames_refused, 3u);
+}
+
+// The calibration (20 ms in Release, seconds under a sanitizer) is computed
+// on the edit thread: the frame that completes it returns at once, the
+// publisher's requests are not read until it is back, other sessions are
+// answered meanwhile; a calibration that fails answers that frame with why;
+// a publisher that goes away meanwhile leaves nothing. Without sockets: the
+// handler alone, its control loop run by the test.
+TEST(LiveMarkers, TheCalibrationRunsOffTheControlLoopWhileThePublishersRequestsWait) {
+  GMR_REQUIRE_DATA();
+  server::ServerConfig cfg;
+  cfg.anonymous = server::Role::kPublish;
+  const std::size_t calibration = take().calibration;
+  enum class Case { kServed, kFails, kLeaves };
+  for (const Case c : {Case::kServed, Case::kFails, Case::kLeaves}) {
+    SCOPED_TRACE(c == Case::kServed  ? "served"
+                 : c == Case::kFails ? "the calibration fails (no lower-body marker seen)"
+                                     : "the publisher leaves while it calibrates");
+    ServerParts parts(cfg, test_library());
+    std::promise<void> open;
+    server::net::post(parts.edit_pool, [gate = open.get_future().share()] { gate.wait(); });  // the edit thread, busy
+    RecordedSession pub(parts.services, 1), other(parts.services, 2);
+    pb::ClientMessage m;
+    pb::Publish& p = *m.mutable_publish();
+    p.set_name("lab/off loop");
+    p.set_frame_time(1.0 / take().markers.frame_rate);
+    p.mutable_markers()->set_model("cmu41");
+    p.mutable_markers()->set_units(take().markers.units);
+    for (const std::string& name : take().markers.names) p.mutable_markers()->add_names(name);
+    const pb::ServerMessage published = pub.ask(m);
+    ASSERT_TRUE(published.has_published()) << published.DebugString();
+    const std::uint32_t id = published.published().publication_id();
+    auto send = [&](std::size_t f) {
+      pb::ClientMessage frame;
+      frame.set_request_id(100 + f);
+      pb::PublishFrame& pf = *frame.mutable_publish_frame();
+      pf.set_publication_id(id);
+      const auto values = frame_of(f);
+      for (std::size_t k = 0; k < values.size(); ++k) {
+        const std::string& name = take().markers.names[k / 3];
+        const bool lower_body = name.find("KNE") != std::string::npos || name.find("ANK") != std::string::npos;
+        const bool missing = std::isnan(values[k - k % 3]) || (c == Case::kFails && lower_body);
+        pf.add_values(missing ? 0.0 : values[k]);
+        if (missing && k % 3 == 0) pf.add_missing_markers(static_cast<std::uint32_t>(k / 3));
+      }
+      pub.handler->on_message(frame.SerializeAsString());
+    };
+    for (std::size_t f = 0; f < calibration; ++f) send(f);
+    EXPECT_TRUE(pub.box->replies.empty()) << pub.box->replies.front().DebugString();
+    EXPECT_TRUE(pub.box->reading_held) << "the publisher's requests wait for the calibration";
+    EXPECT_FALSE(parts.catalog.find("lab/off loop")) << "served before its calibration";
+    EXPECT_GT(parts.admission.view_bytes(), 0u) << "the calibration's frames are in the memory budget";
+    pb::ClientMessage list;
+    list.mutable_list_motions();
+    EXPECT_TRUE(other.ask(list).has_motions()) << "another session is answered while it calibrates";
+    if (c == Case::kLeaves) pub.handler->on_stop();
+    // The edit thread runs the calibration, then this marker; the control
+    // loop gets the calibration's outcome, then the marker's.
+    std::atomic<bool> done = false;
+    open.set_value();
+    server::net::post(parts.edit_pool, [&] { server::net::post(parts.io, [&] { done = true; }); });
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!done && std::chrono::steady_clock::now() < give_up) {
+      parts.io.restart();  // the loop stops, and returns at once, when it has nothing to do
+      if (parts.io.poll() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    ASSERT_TRUE(done);
+    if (c != Case::kFails) {
+      EXPECT_TRUE(pub.box->replies.empty()) << pub.box->replies.front().DebugString();
+    }
+    if (c != Case::kServed) {
+      EXPECT_FALSE(parts.catalog.find("lab/off loop"));
+      EXPECT_EQ(parts.admission.view_bytes(), 0u) << "the calibration's frames are given back";
+    }
+    if (c == Case::kLeaves) continue;
+    EXPECT_FALSE(pub.box->reading_held);
+    if (c == Case::kFails) {
+      ASSERT_EQ(pub.box->replies.size(), 1u);
+      const pb::ServerMessage& r = pub.box->replies.front();
+      EXPECT_EQ(r.request_id(), 100 + calibration - 1) << "the frame that completed the calibration";
+      EXPECT_EQ(r.error().code(), pb::ERROR_CODE_FAILED_PRECONDITION);
+      EXPECT_NE(
+          r.error().message().find("the calibration on the first " + std::to_string(calibration) + " frames failed"),
+          std::string::npos)
+          << r.error().message();
+      continue;
+    }
+    const auto source = parts.catalog.live("lab/off loop");
+    ASSERT_TRUE(source);
+    EXPECT_EQ(source->latest()->skeleton.size(), take().solved.skeleton.size());
+    send(calibration);  // the first frame served
+    EXPECT_EQ(source->frames(), calibration + 1) << "served as the take's frame " << calibration;
+    EXPECT_TRUE(pub.box->replies.empty()) << pub.box->replies.front().DebugString();
+  }
 }
 
 }  // namespace
