@@ -191,9 +191,9 @@ double Admission::send_cost(SendKind kind) {
     case SendKind::kOwnUdp:
       return 0.7;
     case SendKind::kSharedTcp:
-      return 0.8;
+      return 0.85;
     case SendKind::kSharedUdp:
-      return 0.5;
+      return 0.55;
     case SendKind::kMulticast:
       return 0.005;
   }

@@ -112,10 +112,11 @@ class Admission {
   // --- The send budget (docs/protocol.md, "Admission") --------------------
   // The budget is in frames/s of own TCP streams (a forward-kinematics run,
   // an encoding and a TCP send each). Another kind of frame costs a share of
-  // one, measured on the reference machine (issue 39's grid, CPU per
-  // delivered frame at 1,000-10,000 subscribers): an own stream's frame over
-  // UDP about 0.7 of it, a frame of a shared stream someone else's tick
-  // computed 0.8 over TCP and 0.5 over UDP (the send alone), and a
+  // one, measured on the reference machine (issue 39's grids, CPU per
+  // delivered frame at 1,000-10,000 subscribers, and what each kind sends at
+  // saturation): an own stream's frame over UDP about 0.7 of it, a frame of
+  // a shared stream someone else's tick computed 0.85 over TCP and 0.55 over
+  // UDP (the send alone; 0.81-0.93 and 0.42-0.59 in two grids), and a
   // multicast subscriber's share of its stream's one send nearly nothing
   // (its control connection's bookkeeping).
   enum class SendKind { kOwnTcp, kOwnUdp, kSharedTcp, kSharedUdp, kMulticast };

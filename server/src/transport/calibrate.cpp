@@ -55,10 +55,13 @@ double thread_cpu_ns() {
   return static_cast<double>(t.tv_sec) * 1e9 + static_cast<double>(t.tv_nsec);
 }
 
-// The fastest round's ns per send on the calling thread: what the send
-// costs when nothing else interferes (a round another process shared the
-// CPU with only comes out slower), so starts agree with one another.
-Result<double> ns_per_send(std::size_t bytes, std::size_t sends_per_round, int rounds) {
+// The fastest pass's ns per send on the calling thread: a pass writes one
+// frame to each of `connections` loopback TCP connections, as a stream's
+// fan-out does, timed by the thread's CPU clock; the readers are drained
+// after it, untimed. What a pass costs is the kernel's send path and the
+// loopback delivery it does in the sender's context; a pass that something
+// else interfered with only comes out slower, so starts agree.
+Result<double> ns_per_send(std::size_t bytes, std::size_t connections, int passes) {
   Fd listener(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
   if (listener.get() < 0) return system_error("socket");
   sockaddr_in address{};
@@ -66,51 +69,54 @@ Result<double> ns_per_send(std::size_t bytes, std::size_t sends_per_round, int r
   address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   socklen_t length = sizeof address;
   if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) return system_error("bind");
-  if (::listen(listener.get(), 1) != 0) return system_error("listen");
+  if (::listen(listener.get(), static_cast<int>(std::min<std::size_t>(connections, 4096))) != 0) {
+    return system_error("listen");
+  }
   if (::getsockname(listener.get(), reinterpret_cast<sockaddr*>(&address), &length) != 0) {
     return system_error("getsockname");
   }
-  Fd writer(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-  if (writer.get() < 0) return system_error("socket");
-  if (::connect(writer.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
-    return system_error("connect");
-  Fd reader(::accept4(listener.get(), nullptr, nullptr, SOCK_CLOEXEC));
-  if (reader.get() < 0) return system_error("accept");
-  const int one = 1;
-  ::setsockopt(writer.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  std::vector<Fd> writers, readers;
+  for (std::size_t k = 0; k < connections; ++k) {
+    Fd writer(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+    if (writer.get() < 0) return system_error("socket");
+    const int one = 1;
+    ::setsockopt(writer.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    if (::connect(writer.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+      return system_error("connect");
+    }
+    Fd reader(::accept4(listener.get(), nullptr, nullptr, SOCK_CLOEXEC | SOCK_NONBLOCK));
+    if (reader.get() < 0) return system_error("accept");
+    writers.push_back(std::move(writer));
+    readers.push_back(std::move(reader));
+  }
 
-  // One thread writes each frame and reads it back at once: a send and its
-  // loopback delivery, without another thread to wake or share the socket
-  // with, whose cost would depend on what else the machine runs.
   const std::string frame(bytes, 'f');
-  std::vector<char> back(bytes);
-  std::vector<double> per_send;
-  for (int r = 0; r < rounds; ++r) {
+  std::vector<char> back(4 * bytes);
+  double fastest = std::numeric_limits<double>::infinity();
+  for (int p = 0; p < passes; ++p) {
     const double start = thread_cpu_ns();
-    for (std::size_t i = 0; i < sends_per_round; ++i) {
+    for (const Fd& writer : writers) {
       for (std::size_t sent = 0; sent < frame.size();) {
         const ssize_t n = ::send(writer.get(), frame.data() + sent, frame.size() - sent, MSG_NOSIGNAL);
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) return system_error("send");
         sent += static_cast<std::size_t>(n);
       }
-      for (std::size_t got = 0; got < back.size();) {
-        const ssize_t n = ::recv(reader.get(), back.data() + got, back.size() - got, 0);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) return system_error("recv");
-        got += static_cast<std::size_t>(n);
+    }
+    fastest = std::min(fastest, (thread_cpu_ns() - start) / static_cast<double>(connections));
+    for (const Fd& reader : readers) {
+      while (::recv(reader.get(), back.data(), back.size(), 0) > 0) {
       }
     }
-    per_send.push_back((thread_cpu_ns() - start) / static_cast<double>(sends_per_round));
   }
-  return std::max(1.0, *std::min_element(per_send.begin(), per_send.end()));
+  return std::max(1.0, fastest);
 }
 
 }  // namespace
 
-Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t sends_per_round, int rounds) {
-  if (bytes == 0 || sends_per_round == 0 || rounds <= 0) {
-    return make_error(ErrorKind::kInvalidArgument, "send calibration: needs bytes, sends and rounds");
+Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t connections, int passes) {
+  if (bytes == 0 || connections == 0 || passes <= 0) {
+    return make_error(ErrorKind::kInvalidArgument, "send calibration: needs bytes, connections and passes");
   }
   const auto began = std::chrono::steady_clock::now();
   // The CPUs this process may run on (at most 16 are measured).
@@ -134,7 +140,7 @@ Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t sen
         CPU_SET(cpu, &one);
         ::pthread_setaffinity_np(::pthread_self(), sizeof one, &one);
       }
-      ns = ns_per_send(bytes, sends_per_round, rounds);
+      ns = ns_per_send(bytes, connections, passes);
     });
     t.join();
     if (!ns.ok()) return ns.error();
@@ -143,7 +149,7 @@ Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t sen
   }
   out.cpus = cpus.size();
   out.budget = kReferenceBudget * kReferenceNsPerSend / out.fastest_ns_per_send;
-  out.sends = sends_per_round * static_cast<std::size_t>(rounds) * cpus.size();
+  out.sends = connections * static_cast<std::size_t>(passes) * cpus.size();
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count();
   return out;
 }

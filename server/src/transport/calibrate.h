@@ -10,7 +10,7 @@
 namespace gmr::server {
 
 struct SendCalibration {
-  double ns_per_send = 0;  // CPU per frame-sized TCP write, its loopback delivery and its read: the slowest CPU's
+  double ns_per_send = 0;          // CPU per frame-sized TCP write and its loopback delivery: the slowest CPU's
   double fastest_ns_per_send = 0;  // the fastest CPU's, which the budget is scaled by
   double budget = 0;               // frames/s: the reference budget scaled by how fast this machine sends
   std::size_t cpus = 0;            // CPUs measured
@@ -18,28 +18,31 @@ struct SendCalibration {
   double seconds = 0;              // wall time the calibration took
 };
 
-// On the reference 2-core machine (docs/performance.md, "TCP without an
-// allocation per frame"), one I/O thread holds 102,000 frames/s of own TCP
-// streams at 120 Hz with p99 <= 2 ms (850 subscribers: p99 0.61 / 0.68 ms;
-// 700 0.07 / 0.12 ms; 1,000 2.5-9.2 ms in three runs, all frames delivered),
-// and this calibration measured 3,550 ns per send there (the fastest CPU's fastest round:
-// 3,504-3,893 ns in eleven starts of twelve, 4,733 once; the slowest CPU's
-// ranged 3,566-5,869 ns from one start to the next, which made the budget
-// it gave vary by a third).
-inline constexpr double kReferenceBudget = 102000;
-inline constexpr double kReferenceNsPerSend = 3550;
+// On the reference 2-core machine (docs/performance.md, "Admission against
+// the grid", 2026-11-28), one I/O thread sends about 120,000 frames/s of own
+// TCP streams at saturation (1,000 subscribers at 120 Hz: 98.5-99.9% of
+// their frames delivered; 3,000: 124,760 frames/s), and this calibration
+// measured 3,350 ns per send there (3,344-3,357 ns in five starts of six,
+// 3,631 once). The budget is 0.9 of what it sends: 108,000 frames/s (900
+// subscribers), which admits every load of that day's grid that got every
+// frame (1,000 subscribers of each other kind) and refuses part of every
+// load past saturation. The calibration before it (one connection, each
+// frame read back at once) measured 6,811-8,393 ns that day against 3,550
+// on an earlier one, while the server's CPU per own TCP frame at 1,000-3,000
+// subscribers was 4-17% above that day's: its
+// budget had halved (43,000-54,000 frames/s).
+inline constexpr double kReferenceBudget = 108000;
+inline constexpr double kReferenceNsPerSend = 3350;
 
 // On each CPU the process may use (at most 16), a thread pinned there times
-// `rounds` rounds of `sends_per_round` writes of `bytes` bytes over a
-// loopback TCP connection (TCP_NODELAY), each read back at once by the same
-// thread, by its CPU clock: a measure of how fast this machine's kernel moves
-// a frame that does not depend on what else runs (a second thread reading
-// would make it: wake-ups and a shared socket cost as much as the send).
-// Each CPU's fastest round is its figure (interference only slows a round
-// down); the fastest CPU's figure scales the budget: kReferenceBudget times
-// kReferenceNsPerSend / that, stable from one start to the next. Takes about
+// `passes` passes, each a write of `bytes` bytes to every one of
+// `connections` loopback TCP connections (TCP_NODELAY; the readers drained
+// after each pass, untimed), by its CPU clock: what the kernel's send path
+// costs this machine for a fan-out, which is most of what a subscriber's
+// frame costs the server. Each CPU's fastest pass is its figure
+// (interference only slows a pass down); the fastest CPU's figure scales the
+// budget: kReferenceBudget times kReferenceNsPerSend / that. Takes about
 // 0.05 s per CPU. An error when no loopback connection can be made.
-Result<SendCalibration> calibrate_send_budget(std::size_t bytes = 480, std::size_t sends_per_round = 4000,
-                                              int rounds = 5);
+Result<SendCalibration> calibrate_send_budget(std::size_t bytes = 480, std::size_t connections = 64, int passes = 100);
 
 }  // namespace gmr::server

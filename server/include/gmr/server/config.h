@@ -191,7 +191,7 @@ struct ServerConfig {
   // 0: no limit (load tests that mean to overload). The default is what one
   // I/O thread held at p99 <= 2 ms on the reference 2-core machine, in own
   // TCP streams' frames (docs/performance.md); measure yours with gmr-load.
-  double send_budget = 102000;
+  double send_budget = 108000;
   // Bytes of float forward kinematics kept for streams to share
   // (docs/performance.md, "FK blocks"): frames are computed 16 at a time, for
   // every stream that plays them; past this the least recently used go.
