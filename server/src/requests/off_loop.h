@@ -16,7 +16,9 @@
 namespace gmr::server {
 
 // `work()` (a Result<T>) on `pool`, then `done(outcome)` on `io`. `doing`
-// names the work in the errors ("the edit": "the edit failed: ...").
+// names the work in the errors ("the edit": "the edit failed: ..."). What
+// `work` holds is let go on the pool's thread, what `done` holds on `io`'s
+// (so control-loop state belongs in `done`; `work` may point into it).
 template <class T, class Work, class Done>
 void run_off_loop(net::thread_pool& pool, net::io_context& io, std::string_view doing, Work work, Done done) {
   net::post(pool, [&io, doing = std::string(doing), work = std::move(work), done = std::move(done)]() mutable {

@@ -355,12 +355,15 @@ Reply RequestHandler::edit_view(const pb::ClientMessage& req, Clock::time_point 
   if (std::max<std::uint64_t>(edit->values(), bound) <= cfg.edit_inline_values) {
     return views_.commit_edit(view_id, *edit, edit->run(), decorate);
   }
-  // A long one is computed on the edit thread.
-  auto shared = std::make_shared<const ViewEdit>(std::move(edit).value());
+  // A long one is computed on the edit thread. The edit goes with the
+  // answer, so it is let go on the control loop, as the view it holds.
+  auto owned = std::make_unique<const ViewEdit>(std::move(edit).value());
+  const ViewEdit* running = owned.get();
   defer<std::shared_ptr<const ViewContent>>(
-      req, began, "the edit", [shared] { return shared->run(); },
-      [shared, view_id, decorate](RequestHandler& handler, Result<std::shared_ptr<const ViewContent>> next) {
-        return handler.views_.commit_edit(view_id, *shared, std::move(next), decorate);
+      req, began, "the edit", [running] { return running->run(); },
+      [owned = std::move(owned), view_id, decorate](RequestHandler& handler,
+                                                    Result<std::shared_ptr<const ViewContent>> next) {
+        return handler.views_.commit_edit(view_id, *owned, std::move(next), decorate);
       });
   return pb::ServerMessage{};
 }
