@@ -132,9 +132,12 @@ std::unique_ptr<client::Client> publisher(TestServer& server) {
   return server.connect(o);
 }
 
-// Waits (a round trip at a time) until the server lists `name`.
+// Waits (a round trip at a time, up to 30 s) until the server lists `name`:
+// a publication is listed once its calibration is back from the edit thread,
+// seconds in a sanitized build, after the calibrations queued before it.
 bool listed(client::Client& c, const std::string& name) {
-  for (int i = 0; i < 200; ++i) {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (std::chrono::steady_clock::now() < give_up) {
     auto list = c.list_motions();
     if (list.ok() && std::ranges::any_of(*list, [&](const auto& m) { return m.name == name; })) return true;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
