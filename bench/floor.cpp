@@ -7,11 +7,19 @@
 // this machine; bench/server/run.sh divides gmr's by it (docs/performance.md,
 // "The floor").
 //
-//   gmr-floor --transport udp|tcp --sockets N [--rate 120] [--bytes 510]
+// By default every socket's frame of a tick leaves in one burst, as a shared
+// stream sends. With --phases P the sockets are P groups, each sent at its own
+// phase of the period (group g at k / rate + g / (P * rate)), as own streams
+// that started at different times send: gmr-server's clock runs the ticks due
+// within 0.5 ms of each other together, about 17 groups a period at 120 Hz.
+// Fewer frames per burst mean more wake-ups of the receiver, which on
+// loopback the sender pays for.
+//
+//   gmr-floor --transport udp|tcp --sockets N [--rate 120] [--bytes 510] [--phases 1]
 //             [--seconds 10] [--warmup 2] [--send-cpu 0] [--receive-cpu 1] [--json FILE]
 //
 // Prints one line; --json writes {"transport", "sockets", "rate_hz", "bytes",
-// "frames", "seconds", "cpu_seconds", "ns_per_frame", "late_ticks"}.
+// "phases", "frames", "seconds", "cpu_seconds", "ns_per_frame", "late_ticks"}.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -108,13 +116,15 @@ struct Result {
 int main(int argc, char** argv) {
   CLI::App app{"gmr-floor: the kernel's cost of sending what gmr-server sends, with nothing else to do"};
   std::string transport = "udp", json;
-  int sockets = 1000, send_cpu = 0, receive_cpu = 1;
+  int sockets = 1000, send_cpu = 0, receive_cpu = 1, phases = 1;
   double rate = 120, seconds = 10, warmup = 2;
   std::size_t bytes = 510;  // a CMU 01_01 frame at float32 with its head, as gmr sends it
   app.add_option("--transport", transport, "udp (sendmmsg) or tcp (writev)")->check(CLI::IsMember({"udp", "tcp"}));
   app.add_option("--sockets", sockets, "Receiving sockets (subscribers)")->check(CLI::Range(1, 30000));
   app.add_option("--rate", rate, "Frames per second to each socket")->check(CLI::Range(1.0, 10000.0));
   app.add_option("--bytes", bytes, "Bytes per frame (a datagram, or a TCP message)")->check(CLI::Range(1, 65000));
+  app.add_option("--phases", phases, "Groups of sockets sent at their own phase of the period (1: one burst)")
+      ->check(CLI::Range(1, 1000));
   app.add_option("--seconds", seconds, "Measured window")->check(CLI::PositiveNumber);
   app.add_option("--warmup", warmup, "Seconds sent before the window")->check(CLI::NonNegativeNumber);
   app.add_option("--send-cpu", send_cpu, "CPU the sender is pinned to (-1: none)");
@@ -187,10 +197,17 @@ int main(int argc, char** argv) {
     std::vector<iovec> iovs(2 * kBatch);
     const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate));
     Result r;
-    auto tick = [&] {
+    // Group g is sockets [g * N / P, (g + 1) * N / P).
+    const auto group = [&](int g, std::size_t count) {
+      return std::pair<std::size_t, std::size_t>(
+          count * static_cast<std::size_t>(g) / static_cast<std::size_t>(phases),
+          count * static_cast<std::size_t>(g + 1) / static_cast<std::size_t>(phases));
+    };
+    auto tick = [&](int g) {
       if (udp) {
-        for (std::size_t first = 0; first < to.size(); first += kBatch) {
-          const std::size_t n = std::min(kBatch, to.size() - first);
+        const auto [begin, end] = group(g, to.size());
+        for (std::size_t first = begin; first < end; first += kBatch) {
+          const std::size_t n = std::min(kBatch, end - first);
           for (std::size_t i = 0; i < n; ++i) {
             iovs[2 * i] = {const_cast<char*>(head.data()), head.size()};
             iovs[2 * i + 1] = {const_cast<char*>(body.data()), body.size()};
@@ -210,25 +227,28 @@ int main(int argc, char** argv) {
         }
       } else {
         iovec v[2] = {{const_cast<char*>(head.data()), head.size()}, {const_cast<char*>(body.data()), body.size()}};
-        for (int fd : send_fds) {
-          if (::writev(fd, v, 2) == static_cast<ssize_t>(bytes)) ++r.frames;
+        const auto [begin, end] = group(g, send_fds.size());
+        for (std::size_t i = begin; i < end; ++i) {
+          if (::writev(send_fds[i], v, 2) == static_cast<ssize_t>(bytes)) ++r.frames;
         }
       }
     };
-    // Every frame is due at start + k / rate, as gmr's streams are.
+    // Every frame is due at start + k / rate (+ its group's phase), as gmr's streams are.
     auto run = [&](double s, bool measured) {
       const auto start = Clock::now();
       const auto end = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
       for (std::uint64_t k = 0;; ++k) {
-        const auto due = start + k * period;
-        if (due >= end) break;
-        const auto now = Clock::now();
-        if (now < due) {
-          std::this_thread::sleep_until(due);
-        } else if (measured && now - due > period) {
-          ++r.late_ticks;
+        for (int g = 0; g < phases; ++g) {
+          const auto due = start + k * period + g * period / phases;
+          if (due >= end) return;
+          const auto now = Clock::now();
+          if (now < due) {
+            std::this_thread::sleep_until(due);
+          } else if (measured && now - due > period) {
+            ++r.late_ticks;
+          }
+          tick(g);
         }
-        tick();
       }
     };
     run(warmup, false);
@@ -243,16 +263,17 @@ int main(int argc, char** argv) {
 
     const double ns = r.frames > 0 ? 1e9 * r.cpu / static_cast<double>(r.frames) : 0.0;
     std::printf(
-        "gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes: %llu frames in %.2f s, %.3f cores, %.0f ns per "
-        "frame, %llu late ticks\n",
-        transport.c_str(), sockets, rate, bytes, static_cast<unsigned long long>(r.frames), r.seconds,
-        r.cpu / r.seconds, ns, static_cast<unsigned long long>(r.late_ticks));
+        "gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes, %d phase%s: %llu frames in %.2f s, %.3f cores, %.0f ns "
+        "per frame, %llu late ticks\n",
+        transport.c_str(), sockets, rate, bytes, phases, phases == 1 ? "" : "s",
+        static_cast<unsigned long long>(r.frames), r.seconds, r.cpu / r.seconds, ns,
+        static_cast<unsigned long long>(r.late_ticks));
     if (!json.empty()) {
       std::ofstream out(json + ".partial");
       out << "{\"transport\": \"" << transport << "\", \"sockets\": " << sockets << ", \"rate_hz\": " << rate
-          << ", \"bytes\": " << bytes << ", \"frames\": " << r.frames << ", \"seconds\": " << r.seconds
-          << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns << ", \"late_ticks\": " << r.late_ticks
-          << "}\n";
+          << ", \"bytes\": " << bytes << ", \"phases\": " << phases << ", \"frames\": " << r.frames
+          << ", \"seconds\": " << r.seconds << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns
+          << ", \"late_ticks\": " << r.late_ticks << "}\n";
       out.close();
       if (!out || std::rename((json + ".partial").c_str(), json.c_str()) != 0) fail("cannot write " + json);
     }

@@ -7,12 +7,16 @@
 #   bench/server/run.sh [BUILD_DIR] [OUT_DIR]
 #     SUBSCRIBERS="100 1000 3000 10000"  REPEATS=3  SECONDS_PER_POINT=10  RATE=120
 #     MOTION_FILE=../shared/data/bvh/cmu/01_01.bvh  TRANSPORTS="tcp udp"  MODES="own shared"
-#     CLIENTS_PER_PROCESS=(what the open-files limit allows)  LOAD_THREADS=1
+#     CLIENTS_PER_PROCESS=(what the open-files limit allows)  LOAD_THREADS=1  PHASES=17
 #
 # Each (transport, subscribers) point also runs gmr-floor (bench/floor.cpp) as
 # many times, pinned the same way: the same frames, of the same size (BYTES,
 # default 510: a 01_01 frame at float32 with its head), sent with sendmmsg or
 # writev and nothing else. The CSV gives gmr's CPU per frame as a ratio to it.
+# Own streams start at different times, so their frames leave in about 17
+# groups a period (gmr-server's clock runs ticks due within 0.5 ms together),
+# not in one burst: for them the floor also runs with --phases PHASES, and
+# the CSV gives the ratio to that floor too (phased_floor_*).
 #
 # Writes OUT_DIR/runs/*.json (every run, gmr-load --json; the floor's in
 # runs/floor/), OUT_DIR/grid.csv (one row per point, medians over the
@@ -32,6 +36,7 @@ load_threads=${LOAD_THREADS:-1}
 transports=${TRANSPORTS:-tcp udp}
 modes=${MODES:-own shared}
 bytes=${BYTES:-510}
+phases=${PHASES:-17}
 bin="$build/bin"
 here=$(dirname "$0")
 
@@ -49,7 +54,7 @@ clients_per_process() {
   echo $(( ($(ulimit -n) - 200) / 2 ))
 }
 
-mkdir -p "$out/runs/floor"
+mkdir -p "$out/runs/floor/phased"
 library=$(mktemp -d)
 ln -s "$(realpath "$motion_file")" "$library/"
 motion=$(basename "$motion_file"); motion=${motion%.*}
@@ -72,6 +77,11 @@ for n in $subscribers; do
     for rep in $(seq "$repeats"); do
       "$bin/gmr-floor" --transport "$transport" --sockets "$n" --rate "$rate" --bytes "$bytes" --seconds "$seconds" \
         --send-cpu 0 --receive-cpu 1 --json "$out/runs/floor/$transport-$n-$rep.json" | sed "s/^/floor $transport-$n-$rep: /"
+      if [[ " $modes " == *" own "* ]] && [ "$phases" -gt 1 ]; then
+        "$bin/gmr-floor" --transport "$transport" --sockets "$n" --rate "$rate" --bytes "$bytes" --seconds "$seconds" \
+          --phases "$phases" --send-cpu 0 --receive-cpu 1 --json "$out/runs/floor/phased/$transport-$n-$rep.json" |
+          sed "s/^/floor (phased) $transport-$n-$rep: /"
+      fi
     done
     for mode in $modes; do
       for rep in $(seq "$repeats"); do

@@ -27,10 +27,11 @@ def load(runs_dir):
     return points
 
 
-def floors(runs_dir):
-    """gmr-floor's median ns per frame by (transport, subscribers)."""
+def floors(runs_dir, sub=""):
+    """gmr-floor's median ns per frame by (transport, subscribers): its runs in
+    runs/floor, or with sub="phased" those sent in phases (run.sh, PHASES)."""
     found = {}
-    floor_dir = os.path.join(runs_dir, "floor")
+    floor_dir = os.path.join(runs_dir, "floor", sub)
     if os.path.isdir(floor_dir):
         for name in sorted(os.listdir(floor_dir)):
             if name.endswith(".json"):
@@ -40,7 +41,7 @@ def floors(runs_dir):
     return {k: statistics.median(v) for k, v in found.items()}
 
 
-def row(key, runs, floor_ns=None):
+def row(key, runs, floor_ns=None, phased_ns=None):
     transport, mode, subscribers = key
     med = lambda f: statistics.median(f(r) for r in runs)
     window = lambda r: r["seconds"] or 1.0
@@ -64,6 +65,9 @@ def row(key, runs, floor_ns=None):
         "load_cores": round(med(load_cores), 3),
         "floor_ns_per_frame": round(floor_ns) if floor_ns else "",
         "floor_ratio": round(med(server_ns) / floor_ns, 2) if floor_ns else "",
+        # Own streams only: the floor whose frames leave in phases, as theirs do.
+        "phased_floor_ns_per_frame": round(phased_ns) if phased_ns and mode == "own" else "",
+        "phased_floor_ratio": round(med(server_ns) / phased_ns, 2) if phased_ns and mode == "own" else "",
         "setup_s": round(med(lambda r: r["setup_seconds"]), 2),
         "repeats": len(runs),
     }
@@ -114,8 +118,8 @@ def main():
     points = load(runs_dir)
     if not points:
         sys.exit(f"summarize: no results in {runs_dir}")
-    floor = floors(runs_dir)
-    rows = [row(k, v, floor.get((k[0], k[2]))) for k, v in sorted(points.items())]
+    floor, phased = floors(runs_dir), floors(runs_dir, "phased")
+    rows = [row(k, v, floor.get((k[0], k[2])), phased.get((k[0], k[2]))) for k, v in sorted(points.items())]
     partial = out_csv + ".partial"
     with open(partial, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
@@ -128,6 +132,8 @@ def main():
               f'frames/s, lost {r["lost_pct"]}%, p99 {r["p99_ms"]} ms, p99.9 {r["p999_ms"]} ms, '
               f'server {r["server_ns_per_frame"]} ns/frame'
               + (f' ({r["floor_ratio"]}x the floor\'s {r["floor_ns_per_frame"]})' if r["floor_ratio"] != "" else "")
+              + (f' ({r["phased_floor_ratio"]}x the phased floor\'s {r["phased_floor_ns_per_frame"]})'
+                 if r["phased_floor_ratio"] != "" else "")
               + f', load {r["load_cores"]} cores')
     print(f"wrote {out_csv} and {out_png}")
 
