@@ -8,6 +8,12 @@
 #     SUBSCRIBERS="100 1000 3000 10000"  REPEATS=3  SECONDS_PER_POINT=10  RATE=120
 #     MOTION_FILE=../shared/data/bvh/cmu/01_01.bvh  TRANSPORTS="tcp udp"  MODES="own shared"
 #     CLIENTS_PER_PROCESS=(what the open-files limit allows)  LOAD_THREADS=1  PHASES=17
+#     SERVER_CPUS=0  LOAD_CPUS=1  FLOOR=1
+#
+# SERVER_CPUS and LOAD_CPUS are taskset lists: SERVER_CPUS=0,1 LOAD_CPUS=0,1
+# gives the server both cores (one I/O thread per CPU), shared with the load
+# generator; FLOOR=0 skips the floor (it is pinned to CPUs 0 and 1 whatever
+# those say).
 #
 # Each (transport, subscribers) point also runs gmr-floor (bench/floor.cpp) as
 # many times, pinned the same way: the same frames, of the same size (BYTES,
@@ -37,6 +43,9 @@ transports=${TRANSPORTS:-tcp udp}
 modes=${MODES:-own shared}
 bytes=${BYTES:-510}
 phases=${PHASES:-17}
+server_cpus=${SERVER_CPUS:-0}
+load_cpus=${LOAD_CPUS:-1}
+run_floor=${FLOOR:-1}
 bin="$build/bin"
 here=$(dirname "$0")
 
@@ -61,7 +70,7 @@ motion=$(basename "$motion_file"); motion=${motion%.*}
 spid=""
 start_server() {
   rm -f "$library/port"
-  taskset -c 0 "$bin/gmr-server" --library "$library" --port 0 --port-file "$library/port" --http-port -1 \
+  taskset -c "$server_cpus" "$bin/gmr-server" --library "$library" --port 0 --port-file "$library/port" --http-port -1 \
     --max-connections 30000 --max-connections-per-address 0 --max-pending-handshakes 30000 --send-budget 0 \
     --log-level warn >"$library/server.log" 2>&1 &
   spid=$!
@@ -75,6 +84,7 @@ trap cleanup EXIT
 for n in $subscribers; do
   for transport in $transports; do
     for rep in $(seq "$repeats"); do
+      [ "$run_floor" = 1 ] || continue
       "$bin/gmr-floor" --transport "$transport" --sockets "$n" --rate "$rate" --bytes "$bytes" --seconds "$seconds" \
         --send-cpu 0 --receive-cpu 1 --json "$out/runs/floor/$transport-$n-$rep.json" | sed "s/^/floor $transport-$n-$rep: /"
       if [[ " $modes " == *" own "* ]] && [ "$phases" -gt 1 ]; then
@@ -100,7 +110,7 @@ for n in $subscribers; do
         for p in $(seq "$processes"); do
           share=$(( n / processes + (p <= n % processes ? 1 : 0) ))
           part="$out/runs/$name.part$p"
-          taskset -c 1 "$bin/gmr-load" --port "$(cat "$library/port")" --clients "$share" --rate "$rate" \
+          taskset -c "$load_cpus" "$bin/gmr-load" --port "$(cat "$library/port")" --clients "$share" --rate "$rate" \
             --seconds "$seconds" --warmup 2 --threads "$load_threads" --motion "$motion" --server-pid "$spid" \
             "${window[@]}" "${flags[@]}" --json "$part.json" >"$part.txt" 2>&1 &
           pids+=($!); parts+=("$part.json")
