@@ -270,6 +270,34 @@ class DemoLibrary(unittest.TestCase):
         self.assertEqual(e.exception.code, "CONNECTION")
         c.close()
 
+    def test_heartbeats_come_every_third_of_the_idle_timeout(self):
+        # The server's heartbeat interval is 0.2 s and its idle timeout 3 s:
+        # a client reading frames for 2.5 s heartbeats every second (a third
+        # of the idle timeout), as the C++ client does, not every 0.2 s; and
+        # stays connected.
+        server = env.Server(ARGS.bin_dir, "--idle-timeout-ms", "3000", "--heartbeat-ms", "200")
+        self.addCleanup(server.stop)
+        c = gmr_client.Client(port=server.port)
+        self.addCleanup(c.close)
+        sent = []
+        real_send = c._send
+        def send(m):
+            sent.append(m.WhichOneof("body"))
+            return real_send(m)
+        c._send = send
+        v = c.create_view("walk")
+        sub = c.subscribe(v.id, loop=True, rate_hz=30)
+        start = time.monotonic()
+        for _ in sub:
+            if time.monotonic() - start > 2.5:
+                break
+        beats = sent.count("heartbeat")
+        print(f"{beats} heartbeats in 2.5 s of reading (idle timeout 3 s, server heartbeat 0.2 s)")
+        self.assertGreaterEqual(beats, 1)
+        self.assertLessEqual(beats, 3)
+        self.assertIsNone(sub.ended)
+        self.assertEqual(len(c.list_motions()), 4)
+
     def test_a_client_that_stalls_gets_no_stale_frame(self):
         # Not reading for 2 s lets the kernel's buffers fill with old frames;
         # after it, none older than the bound is handed out, and they are counted.

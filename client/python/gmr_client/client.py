@@ -343,8 +343,8 @@ class Client:
     def poll(self, timeout: float = 0.0) -> None:
         """Reads whatever has arrived (frames go to their subscriptions), waiting
         at most `timeout` seconds for the first message. Sends a heartbeat when
-        this client has sent nothing for the server's heartbeat interval or a
-        third of its idle timeout, whichever is shorter."""
+        this client has sent nothing for a third of the server's idle timeout
+        (without one, its heartbeat interval)."""
         self._pump(timeout)
         while self._pump(0.0):
             pass
@@ -410,9 +410,13 @@ class Client:
         if self._sock is None:
             raise GmrError("CONNECTION", "the client is closed")
         interval = 0.0
-        if hasattr(self, "hello"):  # a heartbeat well within the server's idle timeout
-            intervals = [x / 1000.0 for x in (self.hello.heartbeat_interval_ms, self.hello.idle_timeout_ms / 3) if x]
-            interval = min(intervals) if intervals else 0.0
+        if hasattr(self, "hello"):
+            # A heartbeat every third of the server's idle timeout (without
+            # one, its heartbeat interval), 10 ms at the least, as the C++
+            # client does: the idle rule is what heartbeats are for, and each
+            # is a wake-up and a read on the server.
+            ms = self.hello.idle_timeout_ms / 3 or self.hello.heartbeat_interval_ms
+            interval = max(10, ms) / 1000.0 if ms else 0.0
         if interval and time.monotonic() - self._last_send > interval:
             h = pb.ClientMessage()
             h.heartbeat.client_time_ns = time.time_ns()
