@@ -15,11 +15,17 @@
 // Fewer frames per burst mean more wake-ups of the receiver, which on
 // loopback the sender pays for.
 //
+// Each frame carries the time its burst began (CLOCK_MONOTONIC, in its first
+// 8 bytes); the receiver reports the latency of the measured window's frames
+// (p50, p99, p99.9, max): how long the kernel alone makes the last of a
+// burst wait, the bound a fan-out on this core cannot beat.
+//
 //   gmr-floor --transport udp|tcp --sockets N [--rate 120] [--bytes 510] [--phases 1]
 //             [--seconds 10] [--warmup 2] [--send-cpu 0] [--receive-cpu 1] [--json FILE]
 //
 // Prints one line; --json writes {"transport", "sockets", "rate_hz", "bytes",
-// "phases", "frames", "seconds", "cpu_seconds", "ns_per_frame", "late_ticks"}.
+// "phases", "frames", "seconds", "cpu_seconds", "ns_per_frame", "late_ticks",
+// "received", "latency_ms": {"p50", "p99", "p99.9", "max"}}.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -33,11 +39,14 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -79,8 +88,23 @@ std::uint16_t bound_port(int fd) {
   return ntohs(a.sin_port);
 }
 
-// The receiving side: reads every socket until the parent closes the pipe.
-[[noreturn]] void drain(const std::vector<int>& fds, int stop_fd, int cpu) {
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+}
+
+// Where a TCP receiver is in its stream of `bytes`-byte frames: the stamp
+// may arrive cut between two reads.
+struct StreamPlace {
+  std::size_t pos = 0;  // bytes of the current frame read
+  char stamp[8] = {};
+};
+
+// The receiving side: reads every socket until the parent closes `stop_fd`,
+// timing the frames whose stamps are at or after the time the parent writes
+// to `window_fd`; then writes the latencies' p50, p99, p99.9 and max (ns) and
+// how many it timed to `result_fd`.
+[[noreturn]] void drain(const std::vector<int>& fds, bool udp, std::size_t bytes, int stop_fd, int window_fd,
+                        int result_fd, int cpu) {
   pin(cpu);
   const int ep = ::epoll_create1(0);
   for (int fd : fds) {
@@ -89,18 +113,62 @@ std::uint16_t bound_port(int fd) {
     e.data.fd = fd;
     ::epoll_ctl(ep, EPOLL_CTL_ADD, fd, &e);
   }
-  epoll_event e{};
-  e.events = EPOLLIN;
-  e.data.fd = stop_fd;
-  ::epoll_ctl(ep, EPOLL_CTL_ADD, stop_fd, &e);
+  for (const int fd : {stop_fd, window_fd}) {
+    epoll_event e{};
+    e.events = EPOLLIN;
+    e.data.fd = fd;
+    ::epoll_ctl(ep, EPOLL_CTL_ADD, fd, &e);
+  }
   std::vector<epoll_event> ready(1024);
   std::vector<char> buf(1 << 16);
+  std::vector<StreamPlace> place(static_cast<std::size_t>(*std::max_element(fds.begin(), fds.end())) + 1);
+  std::vector<std::int64_t> latencies;
+  std::int64_t window = std::numeric_limits<std::int64_t>::max();
+  auto timed = [&](const char* stamp) {
+    std::int64_t sent = 0;
+    std::memcpy(&sent, stamp, sizeof sent);
+    if (sent >= window) latencies.push_back(now_ns() - sent);
+  };
   for (;;) {
     const int n = ::epoll_wait(ep, ready.data(), static_cast<int>(ready.size()), -1);
     for (int i = 0; i < n; ++i) {
       const int fd = ready[static_cast<std::size_t>(i)].data.fd;
-      if (fd == stop_fd) ::_exit(0);
-      while (::recv(fd, buf.data(), buf.size(), MSG_DONTWAIT) > 0) {
+      if (fd == window_fd) {
+        if (::read(window_fd, &window, sizeof window) != sizeof window) window = 0;
+        ::epoll_ctl(ep, EPOLL_CTL_DEL, window_fd, nullptr);
+        continue;
+      }
+      if (fd == stop_fd) {
+        std::int64_t out[5] = {0, 0, 0, 0, static_cast<std::int64_t>(latencies.size())};
+        if (!latencies.empty()) {
+          std::sort(latencies.begin(), latencies.end());
+          const auto at = [&](double q) {
+            return latencies[std::min(latencies.size() - 1, static_cast<std::size_t>(q * latencies.size()))];
+          };
+          out[0] = at(0.5), out[1] = at(0.99), out[2] = at(0.999), out[3] = latencies.back();
+        }
+        (void)!::write(result_fd, out, sizeof out);
+        ::_exit(0);
+      }
+      for (;;) {
+        const ssize_t got = ::recv(fd, buf.data(), buf.size(), MSG_DONTWAIT);
+        if (got <= 0) break;
+        if (udp) {  // a datagram, one frame
+          if (static_cast<std::size_t>(got) >= sizeof(std::int64_t)) timed(buf.data());
+          continue;
+        }
+        StreamPlace& at = place[static_cast<std::size_t>(fd)];
+        for (std::size_t k = 0; k < static_cast<std::size_t>(got);) {
+          if (at.pos < sizeof at.stamp) {
+            at.stamp[at.pos++] = buf[k++];
+            if (at.pos == sizeof at.stamp) timed(at.stamp);
+          } else {
+            const std::size_t skip = std::min(bytes - at.pos, static_cast<std::size_t>(got) - k);
+            at.pos += skip;
+            k += skip;
+          }
+          if (at.pos == bytes) at.pos = 0;
+        }
       }
     }
   }
@@ -122,7 +190,7 @@ int main(int argc, char** argv) {
   app.add_option("--transport", transport, "udp (sendmmsg) or tcp (writev)")->check(CLI::IsMember({"udp", "tcp"}));
   app.add_option("--sockets", sockets, "Receiving sockets (subscribers)")->check(CLI::Range(1, 30000));
   app.add_option("--rate", rate, "Frames per second to each socket")->check(CLI::Range(1.0, 10000.0));
-  app.add_option("--bytes", bytes, "Bytes per frame (a datagram, or a TCP message)")->check(CLI::Range(1, 65000));
+  app.add_option("--bytes", bytes, "Bytes per frame (a datagram, or a TCP message)")->check(CLI::Range(16, 65000));
   app.add_option("--phases", phases, "Groups of sockets sent at their own phase of the period (1: one burst)")
       ->check(CLI::Range(1, 1000));
   app.add_option("--seconds", seconds, "Measured window")->check(CLI::PositiveNumber);
@@ -175,22 +243,27 @@ int main(int argc, char** argv) {
       }
       ::close(listener);
     }
-    int stop[2];
-    if (::pipe(stop) != 0) fail("pipe");
+    int stop[2], window[2], result[2];
+    if (::pipe(stop) != 0 || ::pipe(window) != 0 || ::pipe(result) != 0) fail("pipe");
     const pid_t child = ::fork();
     if (child < 0) fail("fork");
     if (child == 0) {
       ::close(stop[1]);
+      ::close(window[1]);
+      ::close(result[0]);
       for (int fd : send_fds) ::close(fd);
-      drain(receive_fds, stop[0], receive_cpu);
+      drain(receive_fds, udp, bytes, stop[0], window[0], result[1], receive_cpu);
     }
     ::close(stop[0]);
+    ::close(window[0]);
+    ::close(result[1]);
     for (int fd : receive_fds) ::close(fd);
     pin(send_cpu);
 
     // gmr's frame: a small head (ids, stamp) and the shared body, as two
     // pieces, the way the server hands them to the kernel.
-    const std::string head(std::min<std::size_t>(24, bytes / 2), 'h');
+    // The head's first 8 bytes: the time its burst began.
+    std::string head(std::min<std::size_t>(24, bytes / 2), 'h');
     const std::string body(bytes - head.size(), 'b');
     constexpr std::size_t kBatch = 1024;
     std::vector<mmsghdr> msgs(kBatch);
@@ -204,6 +277,8 @@ int main(int argc, char** argv) {
           count * static_cast<std::size_t>(g + 1) / static_cast<std::size_t>(phases));
     };
     auto tick = [&](int g) {
+      const std::int64_t stamp = now_ns();
+      std::memcpy(head.data(), &stamp, sizeof stamp);
       if (udp) {
         const auto [begin, end] = group(g, to.size());
         for (std::size_t first = begin; first < end; first += kBatch) {
@@ -255,25 +330,36 @@ int main(int argc, char** argv) {
     r = Result{};
     const double cpu0 = cpu_seconds();
     const auto t0 = Clock::now();
+    const std::int64_t from = now_ns();
+    if (::write(window[1], &from, sizeof from) != sizeof from) fail("write to the receiver");
     run(seconds, true);
     r.cpu = cpu_seconds() - cpu0;
     r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     ::close(stop[1]);
+    std::int64_t latency[5] = {};  // p50, p99, p99.9, max (ns), frames timed
+    for (std::size_t got = 0; got < sizeof latency;) {
+      const ssize_t k = ::read(result[0], reinterpret_cast<char*>(latency) + got, sizeof latency - got);
+      if (k <= 0) fail("read the receiver's latencies");
+      got += static_cast<std::size_t>(k);
+    }
     ::waitpid(child, nullptr, 0);
+    const auto ms = [&](int i) { return static_cast<double>(latency[i]) / 1e6; };
 
     const double ns = r.frames > 0 ? 1e9 * r.cpu / static_cast<double>(r.frames) : 0.0;
     std::printf(
         "gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes, %d phase%s: %llu frames in %.2f s, %.3f cores, %.0f ns "
-        "per frame, %llu late ticks\n",
+        "per frame, %llu late ticks; %lld received, latency p50 %.3f ms p99 %.3f ms p99.9 %.3f ms max %.3f ms\n",
         transport.c_str(), sockets, rate, bytes, phases, phases == 1 ? "" : "s",
         static_cast<unsigned long long>(r.frames), r.seconds, r.cpu / r.seconds, ns,
-        static_cast<unsigned long long>(r.late_ticks));
+        static_cast<unsigned long long>(r.late_ticks), static_cast<long long>(latency[4]), ms(0), ms(1), ms(2), ms(3));
     if (!json.empty()) {
       std::ofstream out(json + ".partial");
       out << "{\"transport\": \"" << transport << "\", \"sockets\": " << sockets << ", \"rate_hz\": " << rate
           << ", \"bytes\": " << bytes << ", \"phases\": " << phases << ", \"frames\": " << r.frames
           << ", \"seconds\": " << r.seconds << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns
-          << ", \"late_ticks\": " << r.late_ticks << "}\n";
+          << ", \"late_ticks\": " << r.late_ticks << ", \"received\": " << latency[4]
+          << ", \"latency_ms\": {\"p50\": " << ms(0) << ", \"p99\": " << ms(1) << ", \"p99.9\": " << ms(2)
+          << ", \"max\": " << ms(3) << "}" << "}\n";
       out.close();
       if (!out || std::rename((json + ".partial").c_str(), json.c_str()) != 0) fail("cannot write " + json);
     }

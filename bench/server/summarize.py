@@ -27,9 +27,10 @@ def load(runs_dir):
     return points
 
 
-def floors(runs_dir, sub=""):
-    """gmr-floor's median ns per frame by (transport, subscribers): its runs in
-    runs/floor, or with sub="phased" those sent in phases (run.sh, PHASES)."""
+def floors(runs_dir, sub="", field=lambda r: r["ns_per_frame"]):
+    """gmr-floor's median `field` (ns per frame) by (transport, subscribers):
+    its runs in runs/floor, or with sub="phased" those sent in phases
+    (run.sh, PHASES). Runs without the field (older gmr-floor) are left out."""
     found = {}
     floor_dir = os.path.join(runs_dir, "floor", sub)
     if os.path.isdir(floor_dir):
@@ -37,11 +38,15 @@ def floors(runs_dir, sub=""):
             if name.endswith(".json"):
                 transport, subscribers, _repeat = name[:-5].split("-")
                 with open(os.path.join(floor_dir, name)) as f:
-                    found.setdefault((transport, int(subscribers)), []).append(json.load(f)["ns_per_frame"])
+                    try:
+                        value = field(json.load(f))
+                    except KeyError:
+                        continue
+                found.setdefault((transport, int(subscribers)), []).append(value)
     return {k: statistics.median(v) for k, v in found.items()}
 
 
-def row(key, runs, floor_ns=None, phased_ns=None):
+def row(key, runs, floor_ns=None, phased_ns=None, floor_p99=None):
     transport, mode, subscribers = key
     med = lambda f: statistics.median(f(r) for r in runs)
     window = lambda r: r["seconds"] or 1.0
@@ -65,6 +70,8 @@ def row(key, runs, floor_ns=None, phased_ns=None):
         "load_cores": round(med(load_cores), 3),
         "floor_ns_per_frame": round(floor_ns) if floor_ns else "",
         "floor_ratio": round(med(server_ns) / floor_ns, 2) if floor_ns else "",
+        # The p99 latency of the floor's frames (each burst's last waits for the others).
+        "floor_p99_ms": round(floor_p99, 3) if floor_p99 else "",
         # Own streams only: the floor whose frames leave in phases, as theirs do.
         "phased_floor_ns_per_frame": round(phased_ns) if phased_ns and mode == "own" else "",
         "phased_floor_ratio": round(med(server_ns) / phased_ns, 2) if phased_ns and mode == "own" else "",
@@ -119,7 +126,9 @@ def main():
     if not points:
         sys.exit(f"summarize: no results in {runs_dir}")
     floor, phased = floors(runs_dir), floors(runs_dir, "phased")
-    rows = [row(k, v, floor.get((k[0], k[2])), phased.get((k[0], k[2]))) for k, v in sorted(points.items())]
+    floor_p99 = floors(runs_dir, field=lambda r: r["latency_ms"]["p99"])
+    rows = [row(k, v, floor.get((k[0], k[2])), phased.get((k[0], k[2])), floor_p99.get((k[0], k[2])))
+            for k, v in sorted(points.items())]
     partial = out_csv + ".partial"
     with open(partial, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
