@@ -359,7 +359,8 @@ int main(int argc, char** argv) {
           << ", \"seconds\": " << r.seconds << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns
           << ", \"late_ticks\": " << r.late_ticks << ", \"received\": " << latency[4]
           << ", \"latency_ms\": {\"p50\": " << ms(0) << ", \"p99\": " << ms(1) << ", \"p99.9\": " << ms(2)
-          << ", \"max\": " << ms(3) << "}" << "}\n";
+          << ", \"max\": " << ms(3) << "}"
+          << "}\n";
       out.close();
       if (!out || std::rename((json + ".partial").c_str(), json.c_str()) != 0) fail("cannot write " + json);
     }
