@@ -31,22 +31,9 @@ bin="$build/bin"
 ulimit -n "$(ulimit -Hn)"
 
 mkdir -p "$out"
-library=$(mktemp -d)
-ln -s "$(realpath "$motion_file")" "$library/"
-motion=$(basename "$motion_file"); motion=${motion%.*}
-spid=""
-start_server() {
-  rm -f "$library/port"
-  taskset -c 0 "$bin/gmr-server" --library "$library" --port 0 --port-file "$library/port" --http-port -1 \
-    --max-connections 30000 --max-connections-per-address 0 --max-pending-handshakes 30000 \
-    --log-level info >"$library/server.log" 2>&1 &
-  spid=$!
-  for _ in $(seq 300); do [ -s "$library/port" ] && return; sleep 0.1; done
-  echo "admission bench: gmr-server did not start:" >&2; cat "$library/server.log" >&2; exit 1
-}
-stop_server() { [ -n "$spid" ] && kill -INT "$spid" 2>/dev/null && wait "$spid" 2>/dev/null; spid=""; }
-cleanup() { stop_server || true; rm -rf "$library"; }
-trap cleanup EXIT
+bench_name="admission bench"
+# shellcheck source=bench/server/common.sh
+. "$(dirname "$0")/common.sh"
 
 csv="$out/admission.csv"
 echo "transport,stream,subscribers,start,budget_fps,asked,admitted,grid_delivered_pct,verdict" >"$csv"
@@ -61,7 +48,8 @@ while IFS=, read -r transport stream n expected delivered _; do
   if [ "$held" = 0 ] && [ "$saturated" != "$key" ]; then past=1; saturated=$key; fi
   [ "$held" = 1 ] || [ "$past" = 1 ] || continue  # beyond the first point past saturation: nothing to say
   for s in $(seq "$starts"); do
-    start_server
+    start_server 0 --http-port -1 --max-connections 30000 --max-connections-per-address 0 \
+      --max-pending-handshakes 30000 --log-level info
     budget=$(sed -n 's/.*send budget \([0-9]*\) frames\/s.*/\1/p' "$library/server.log" | head -1)
     flags=()
     [ "$transport" = udp ] && flags+=(--udp)

@@ -37,24 +37,17 @@ ip route add 224.0.0.0/4 dev mc0
 ulimit -n "$(ulimit -Hn)"
 
 mkdir -p "$out"
-library=$(mktemp -d)
-ln -s "$(realpath "$motion_file")" "$library/"
-motion=$(basename "$motion_file"); motion=${motion%.*}
-spid=""
-stop_server() { [ -n "$spid" ] && kill -INT "$spid" 2>/dev/null && wait "$spid" 2>/dev/null; spid=""; }
-trap 'stop_server || true; rm -rf "$library"' EXIT
+bench_name="multicast bench"
+# shellcheck source=bench/server/common.sh
+. "$(dirname "$0")/common.sh"
 echo "subscribers,repeat,server_cores,ns_per_multicast_frame,multicast_frames_sent" >"$out/multicast.csv"
 for n in $subscribers; do
   for rep in $(seq "$repeats"); do
-    rm -f "$library/port"
     # Bound to every address: the group leaves by its route (mc0), not loopback.
-    taskset -c 0 "$bin/gmr-server" --library "$library" --bind 0.0.0.0 --port 0 --port-file "$library/port" \
-      --http-port -1 --max-connections 30000 --max-connections-per-address 0 --max-pending-handshakes 30000 \
-      --send-budget 0 --multicast-group 239.255.74.9 --multicast-port 17600 --log-level warn ${SERVER_FLAGS:-} \
-      >"$library/server.log" 2>&1 &
-    spid=$!
-    for _ in $(seq 200); do [ -s "$library/port" ] && break; sleep 0.1; done
-    [ -s "$library/port" ] || { echo "multicast bench: gmr-server did not start:" >&2; cat "$library/server.log" >&2; exit 1; }
+    # shellcheck disable=SC2086  # SERVER_FLAGS: options, split on spaces
+    start_server 0 --bind 0.0.0.0 --http-port -1 --max-connections 30000 --max-connections-per-address 0 \
+      --max-pending-handshakes 30000 --send-budget 0 --multicast-group 239.255.74.9 --multicast-port 17600 \
+      --log-level warn ${SERVER_FLAGS:-}
     name="multicast-$n-$rep"
     # A client holds three sockets (TCP, UDP, the group's): past the
     # open-files limit, several processes measure one window (--merge).

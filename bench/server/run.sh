@@ -64,22 +64,9 @@ clients_per_process() {
 }
 
 mkdir -p "$out/runs/floor/phased"
-library=$(mktemp -d)
-ln -s "$(realpath "$motion_file")" "$library/"
-motion=$(basename "$motion_file"); motion=${motion%.*}
-spid=""
-start_server() {
-  rm -f "$library/port"
-  taskset -c "$server_cpus" "$bin/gmr-server" --library "$library" --port 0 --port-file "$library/port" --http-port -1 \
-    --max-connections 30000 --max-connections-per-address 0 --max-pending-handshakes 30000 --send-budget 0 \
-    --log-level warn >"$library/server.log" 2>&1 &
-  spid=$!
-  for _ in $(seq 200); do [ -s "$library/port" ] && return; sleep 0.1; done
-  echo "server bench: gmr-server did not start:" >&2; cat "$library/server.log" >&2; exit 1
-}
-stop_server() { [ -n "$spid" ] && kill -INT "$spid" 2>/dev/null && wait "$spid" 2>/dev/null; spid=""; }
-cleanup() { stop_server || true; rm -rf "$library"; }
-trap cleanup EXIT
+bench_name="server bench"
+# shellcheck source=bench/server/common.sh
+. "$here/common.sh"
 
 for n in $subscribers; do
   for transport in $transports; do
@@ -99,7 +86,8 @@ for n in $subscribers; do
         flags=()
         [ "$transport" = udp ] && flags+=(--udp)
         [ "$mode" = shared ] && flags+=(--shared)
-        start_server
+        start_server "$server_cpus" --http-port -1 --max-connections 30000 --max-connections-per-address 0 \
+          --max-pending-handshakes 30000 --send-budget 0 --log-level warn
         per_process=$(clients_per_process)
         processes=$(( (n + per_process - 1) / per_process ))
         pids=(); parts=()
