@@ -23,7 +23,7 @@ struct SendCalibration {
 // TCP streams at saturation (1,000 subscribers at 120 Hz: 98.5-99.9% of
 // their frames delivered; 3,000: 124,760 frames/s), and this calibration
 // measured 3,350 ns per send there (3,344-3,357 ns in five starts of six,
-// 3,631 once). The budget is 0.9 of what it sends: 108,000 frames/s (900
+// 3,631 once; over the day now and then a start up to 16% slower). The budget is 0.9 of what it sends: 108,000 frames/s (900
 // subscribers), which admits every load of that day's grid that got every
 // frame (1,000 subscribers of each other kind) and refuses part of every
 // load past saturation. The calibration before it (one connection, each
