@@ -23,11 +23,14 @@ struct SendCalibration {
 // TCP streams at saturation (1,000 subscribers at 120 Hz: 98.5-99.9% of
 // their frames delivered; 3,000: 124,760 frames/s), and this calibration
 // measured 3,350 ns per send there (3,344-3,357 ns in five starts of six,
-// 3,631 once; over the day now and then a start up to 16% slower). The budget is 0.9 of what it sends: 108,000 frames/s
-// (900 subscribers), which admits every load of that day's grid that got every frame (1,000 subscribers of each other
-// kind) and refuses part of every load past saturation. The calibration before it (one connection, each frame read back
-// at once) measured 6,811-8,393 ns that day against 3,550 on an earlier one, while the server's CPU per own TCP frame
-// at 1,000-3,000 subscribers was 4-17% above that day's: its budget had halved (43,000-54,000 frames/s).
+// 3,631 once; over the day, now and then a start up to 16% slower). The
+// budget is 0.9 of what it sends: 108,000 frames/s (900 subscribers), which
+// admits every load of that day's grid that got every frame (1,000
+// subscribers of each other kind) and refuses part of every load past
+// saturation. The calibration before it (one connection, each frame read
+// back at once) measured 6,811-8,393 ns that day against 3,550 on an earlier
+// one, while the server's CPU per own TCP frame at 1,000-3,000 subscribers
+// was 4-17% above the earlier day's: its budget had halved (43,000-54,000).
 inline constexpr double kReferenceBudget = 108000;
 inline constexpr double kReferenceNsPerSend = 3350;
 
