@@ -50,7 +50,6 @@ class MarkerFeed {
   // The calibration's outcome: the solver from now on, or why there is none
   // (the error says on how many frames it failed).
   Status calibrated(Result<MarkerFrameSolver> solver);
-  bool is_calibrated() const { return solver_.has_value(); }
 
   const Skeleton& skeleton() const { return solver_->skeleton(); }
   double metres_per_unit() const { return unit_mm_ / 1000.0; }
