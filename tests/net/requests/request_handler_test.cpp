@@ -8,6 +8,9 @@
 
 #include <deque>
 #include <limits>
+#include <new>
+#include <stdexcept>
+#include <thread>
 
 #include "gmr/relay/v1/relay.pb.h"
 #include "gmr/wire/convert.h"
@@ -15,6 +18,7 @@
 #include "gmr/wire/frames.h"
 #include "net_test_util.h"
 #include "recording_outbox.h"
+#include "requests/off_loop.h"
 #include "server_parts.h"
 
 namespace gmr::test {
@@ -329,6 +333,40 @@ TEST_F(RequestHandlerTest, RelayedAnnouncesAreCheckedAsPublishesAreAndBounded) {
   server_.replicas.on_relay(end);
   EXPECT_TRUE(source->ended());
   EXPECT_FALSE(server_.catalog.live_sources().contains("remote/walk"));
+}
+
+// Work taken off the control loop (long edits, marker calibrations): its
+// outcome comes back on the loop's thread, and nothing it throws escapes the
+// pool's thread: running out of memory and any other exception become errors
+// that say what was being done.
+TEST(OffLoop, TheOutcomeComesBackOnTheLoopAndThrowsBecomeErrors) {
+  server::net::io_context io;
+  server::net::thread_pool pool(1);
+  std::vector<Result<int>> outcomes;
+  std::vector<std::thread::id> where;
+  auto done = [&](Result<int> r) {
+    outcomes.push_back(std::move(r));
+    where.push_back(std::this_thread::get_id());
+  };
+  server::run_off_loop<int>(
+      pool, io, "the sum", [] { return Result<int>(42); }, done);
+  server::run_off_loop<int>(
+      pool, io, "the sum", []() -> Result<int> { throw std::runtime_error("a bad part"); }, done);
+  server::run_off_loop<int>(
+      pool, io, "the sum", []() -> Result<int> { throw std::bad_alloc(); }, done);
+  pool.join();  // the three outcomes are posted to io, which nothing has run yet
+  EXPECT_TRUE(outcomes.empty()) << "an outcome ran off the loop";
+  io.run();
+  ASSERT_EQ(outcomes.size(), 3u);
+  ASSERT_TRUE(outcomes[0].ok());
+  EXPECT_EQ(*outcomes[0], 42);
+  ASSERT_FALSE(outcomes[1].ok());
+  EXPECT_EQ(outcomes[1].error().kind, ErrorKind::kFailedPrecondition);
+  EXPECT_EQ(outcomes[1].error().message, "the sum failed: a bad part");
+  ASSERT_FALSE(outcomes[2].ok());
+  EXPECT_EQ(outcomes[2].error().kind, ErrorKind::kResourceExhausted);
+  EXPECT_EQ(outcomes[2].error().message, "the server ran out of memory computing the sum");
+  for (const auto& id : where) EXPECT_EQ(id, std::this_thread::get_id()) << "the loop's thread";
 }
 
 }  // namespace
