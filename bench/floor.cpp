@@ -17,15 +17,16 @@
 //
 // Each frame carries the time its burst began (CLOCK_MONOTONIC, in its first
 // 8 bytes); the receiver reports the latency of the measured window's frames
-// (p50, p99, p99.9, max): how long the kernel alone makes the last of a
-// burst wait, the bound a fan-out on this core cannot beat.
+// (p50, p99, p99.9, max, from gmr-load's histogram, so they read as its do):
+// how long the kernel alone makes the last of a burst wait, the bound a
+// fan-out on this core cannot beat.
 //
 //   gmr-floor --transport udp|tcp --sockets N [--rate 120] [--bytes 510] [--phases 1]
 //             [--seconds 10] [--warmup 2] [--send-cpu 0] [--receive-cpu 1] [--json FILE]
 //
 // Prints one line; --json writes {"transport", "sockets", "rate_hz", "bytes",
 // "phases", "frames", "seconds", "cpu_seconds", "ns_per_frame", "late_ticks",
-// "received", "latency_ms": {"p50", "p99", "p99.9", "max"}}.
+// "timed", "latency_ms": {"p50", "p99", "p99.9", "max"}}.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -51,6 +52,8 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "report.h"  // gmr-load's latency histogram
 
 namespace {
 
@@ -122,12 +125,12 @@ struct StreamPlace {
   std::vector<epoll_event> ready(1024);
   std::vector<char> buf(1 << 16);
   std::vector<StreamPlace> place(static_cast<std::size_t>(*std::max_element(fds.begin(), fds.end())) + 1);
-  std::vector<std::int64_t> latencies;
+  gmr::load::Histogram latencies;
   std::int64_t window = std::numeric_limits<std::int64_t>::max();
   auto timed = [&](const char* stamp) {
     std::int64_t sent = 0;
     std::memcpy(&sent, stamp, sizeof sent);
-    if (sent >= window) latencies.push_back(now_ns() - sent);
+    if (sent >= window) latencies.add(now_ns() - sent);
   };
   for (;;) {
     const int n = ::epoll_wait(ep, ready.data(), static_cast<int>(ready.size()), -1);
@@ -139,14 +142,9 @@ struct StreamPlace {
         continue;
       }
       if (fd == stop_fd) {
-        std::int64_t out[5] = {0, 0, 0, 0, static_cast<std::int64_t>(latencies.size())};
-        if (!latencies.empty()) {
-          std::sort(latencies.begin(), latencies.end());
-          const auto at = [&](double q) {
-            return latencies[std::min(latencies.size() - 1, static_cast<std::size_t>(q * latencies.size()))];
-          };
-          out[0] = at(0.5), out[1] = at(0.99), out[2] = at(0.999), out[3] = latencies.back();
-        }
+        const auto at = [&](double q) { return static_cast<std::int64_t>(latencies.quantile_ns(q)); };
+        const std::int64_t out[5] = {at(0.5), at(0.99), at(0.999), latencies.max(),
+                                     static_cast<std::int64_t>(latencies.count())};
         (void)!::write(result_fd, out, sizeof out);
         ::_exit(0);
       }
@@ -348,7 +346,7 @@ int main(int argc, char** argv) {
     const double ns = r.frames > 0 ? 1e9 * r.cpu / static_cast<double>(r.frames) : 0.0;
     std::printf(
         "gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes, %d phase%s: %llu frames in %.2f s, %.3f cores, %.0f ns "
-        "per frame, %llu late ticks; %lld received, latency p50 %.3f ms p99 %.3f ms p99.9 %.3f ms max %.3f ms\n",
+        "per frame, %llu late ticks; %lld timed, latency p50 %.3f ms p99 %.3f ms p99.9 %.3f ms max %.3f ms\n",
         transport.c_str(), sockets, rate, bytes, phases, phases == 1 ? "" : "s",
         static_cast<unsigned long long>(r.frames), r.seconds, r.cpu / r.seconds, ns,
         static_cast<unsigned long long>(r.late_ticks), static_cast<long long>(latency[4]), ms(0), ms(1), ms(2), ms(3));
@@ -357,7 +355,7 @@ int main(int argc, char** argv) {
       out << "{\"transport\": \"" << transport << "\", \"sockets\": " << sockets << ", \"rate_hz\": " << rate
           << ", \"bytes\": " << bytes << ", \"phases\": " << phases << ", \"frames\": " << r.frames
           << ", \"seconds\": " << r.seconds << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns
-          << ", \"late_ticks\": " << r.late_ticks << ", \"received\": " << latency[4]
+          << ", \"late_ticks\": " << r.late_ticks << ", \"timed\": " << latency[4]
           << ", \"latency_ms\": {\"p50\": " << ms(0) << ", \"p99\": " << ms(1) << ", \"p99.9\": " << ms(2)
           << ", \"max\": " << ms(3) << "}"
           << "}\n";

@@ -25,7 +25,7 @@
 # the CSV gives the ratio to that floor too (phased_floor_*).
 #
 # Writes OUT_DIR/runs/*.json (every run, gmr-load --json; the floor's in
-# runs/floor/), OUT_DIR/grid.csv (one row per point, medians over the
+# runs/floor/, in phases in runs/floor/phased/), OUT_DIR/grid.csv (one row per point, medians over the
 # repeats) and OUT_DIR/grid.png. No send
 # budget (--send-budget 0): the grid means to find where the server stops
 # keeping up. The full grid takes about 45 minutes and both cores; it is a
@@ -71,7 +71,7 @@ bench_name="server bench"
 for n in $subscribers; do
   for transport in $transports; do
     for rep in $(seq "$repeats"); do
-      [ "$run_floor" = 1 ] || continue
+      [ "$run_floor" = 1 ] || break
       "$bin/gmr-floor" --transport "$transport" --sockets "$n" --rate "$rate" --bytes "$bytes" --seconds "$seconds" \
         --send-cpu 0 --receive-cpu 1 --json "$out/runs/floor/$transport-$n-$rep.json" | sed "s/^/floor $transport-$n-$rep: /"
       if [[ " $modes " == *" own "* ]] && [ "$phases" -gt 1 ]; then

@@ -28,9 +28,10 @@ def load(runs_dir):
 
 
 def floors(runs_dir, sub="", field=lambda r: r["ns_per_frame"]):
-    """gmr-floor's median `field` (ns per frame) by (transport, subscribers):
-    its runs in runs/floor, or with sub="phased" those sent in phases
-    (run.sh, PHASES). Runs without the field (older gmr-floor) are left out."""
+    """gmr-floor's median `field` (by default its ns per frame) by (transport,
+    subscribers): its runs in runs/floor, or with sub="phased" those sent in
+    phases (run.sh, PHASES). Runs without the field (an older gmr-floor's) are
+    left out."""
     found = {}
     floor_dir = os.path.join(runs_dir, "floor", sub)
     if os.path.isdir(floor_dir):
