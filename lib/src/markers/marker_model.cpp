@@ -24,9 +24,14 @@ namespace {
 //   medial, posterior and inferior of their midpoint (lengths in
 //   half-widths). Bell and Harrington's regression from the ASIS says 0.36,
 //   0.19, 0.30; CMU's front waist markers sit higher and further back;
-// - knees 90 mm, ankles 50 mm, elbows 65 mm medial of the lateral marker
-//   (medial: toward the other side's twin). CMU's centres are deeper than
-//   half a joint width plus a marker radius (60, 42, 40 mm);
+// - knees 90 mm medial of the lateral marker (toward the other knee); ankles
+//   48 mm and elbows 63 mm deep of theirs, in the limb segment's own frame:
+//   x up the segment (toward the knee, the shoulder), y across it toward the
+//   shin or upper-arm marker, z = x cross y (so z flips between the sides).
+//   A direction toward the other side's twin swings with every step and arm
+//   swing, and its median over a short walk falls short (02_01's ankles sat
+//   7-16 mm across the shank from the marker). CMU's centres are deeper
+//   than half a joint width plus a marker radius (60, 42, 40 mm);
 // - shoulders: 65 mm below the acromion marker, down the thorax;
 // - wrists: from the midpoint of the wrist-bar markers, 0.3 of the way to the
 //   elbow and 40 mm to the palm side (the bar sits on the back of the wrist):
@@ -61,22 +66,22 @@ part rhand rradius RFIN
 joint root in pelvis at mean(LFWT, RFWT, LBWT, RBWT)
 joint lhipjoint parent root in pelvis centre lthigh prior local(mean(LFWT, RFWT), LFWT, mean(LBWT, RBWT), 0.72, 0.1, -0.87)
 joint lfemur parent lhipjoint in lthigh centre lshank hinge prior along(LKNE, LKNE, RKNE, 90mm)
-joint ltibia parent lfemur in lshank centre lfoot hinge prior along(LANK, LANK, RANK, 50mm)
+joint ltibia parent lfemur in lshank centre lfoot hinge prior local(LANK, lfemur, LSHN, -3mm, -42mm, 23mm)
 joint lfoot parent ltibia in lfoot at mean(LTOE, LMT5)
 joint rhipjoint parent root in pelvis centre rthigh prior local(mean(LFWT, RFWT), RFWT, mean(LBWT, RBWT), 0.72, 0.1, 0.87)
 joint rfemur parent rhipjoint in rthigh centre rshank hinge prior along(RKNE, RKNE, LKNE, 90mm)
-joint rtibia parent rfemur in rshank centre rfoot hinge prior along(RANK, RANK, LANK, 50mm)
+joint rtibia parent rfemur in rshank centre rfoot hinge prior local(RANK, rfemur, RSHN, -3mm, -42mm, -23mm)
 joint rfoot parent rtibia in rfoot at mean(RTOE, RMT5)
 joint lowerback parent root in pelvis centre thorax prior along(mean(LBWT, RBWT), mean(LBWT, RBWT), T10, 0.3)
 joint thorax parent lowerback in thorax at mean(C7, CLAV)
 joint upperneck parent thorax in thorax centre head prior along(mean(C7, CLAV), mean(C7, CLAV), mean(LFHD, RFHD, LBHD, RBHD), 0.5)
 joint head parent upperneck in head at mean(LFHD, RFHD, LBHD, RBHD)
 joint lclavicle parent thorax in lshoulder centre lupperarm prior along(LSHO, mean(C7, CLAV), mean(T10, STRN), 65mm)
-joint lhumerus parent lclavicle in lupperarm centre lforearm hinge prior along(LELB, LELB, RELB, 65mm)
+joint lhumerus parent lclavicle in lupperarm centre lforearm hinge prior local(LELB, lclavicle, LUPA, 12mm, -55mm, 30mm)
 joint lradius parent lhumerus in lforearm at local(mean(LWRA, LWRB), lhumerus, LWRB, 0.3, 0, 40mm)
 joint lhand parent lradius in lhand at LFIN
 joint rclavicle parent thorax in rshoulder centre rupperarm prior along(RSHO, mean(C7, CLAV), mean(T10, STRN), 65mm)
-joint rhumerus parent rclavicle in rupperarm centre rforearm hinge prior along(RELB, RELB, LELB, 65mm)
+joint rhumerus parent rclavicle in rupperarm centre rforearm hinge prior local(RELB, rclavicle, RUPA, 12mm, -55mm, -30mm)
 joint rradius parent rhumerus in rforearm at local(mean(RWRA, RWRB), rhumerus, RWRB, 0.3, 0, -40mm)
 joint rhand parent rradius in rhand at RFIN
 )";

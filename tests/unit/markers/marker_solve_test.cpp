@@ -357,6 +357,8 @@ struct TakeComparison {
   Matrix3d rotation;
   Vector3d translation;
   std::vector<JointError> errors;
+  double pooled_median_mm = 0;  // over every compared joint and frame
+  double pooled_p95_mm = 0;
   std::vector<BoneAngle> angles;
   MarkerSolveResult solved;
 };
@@ -494,9 +496,13 @@ TakeComparison compare_take(const std::string& c3d, const Reference& ref) {
   for (std::size_t i = 0; i < a.size(); ++i) {
     per_joint[i % oj.size()].push_back((a[i] - (out.declared_scale * out.rotation * b[i] + out.translation)).norm());
   }
+  std::vector<double> pooled;
   for (std::size_t k = 0; k < oj.size(); ++k) {
     out.errors.push_back({kComparedJoints[k], quantile(per_joint[k], 0.5), quantile(per_joint[k], 0.95)});
+    pooled.insert(pooled.end(), per_joint[k].begin(), per_joint[k].end());
   }
+  out.pooled_median_mm = quantile(pooled, 0.5);
+  out.pooled_p95_mm = quantile(pooled, 0.95);
   // Bone directions (independent of bone lengths): thighs, shanks, upper
   // arms, forearms, after the same rotation.
   for (const auto& [bone, parent] : kComparedBones) {
@@ -526,6 +532,7 @@ void report(const std::string& take, const TakeComparison& c) {
               take.c_str(), c.frame_offset, c.declared_scale, c.free_scale);
   std::printf("  %-10s %9s %9s\n", "joint", "median", "p95");
   for (const JointError& e : c.errors) std::printf("  %-10s %7.1fmm %7.1fmm\n", e.joint.c_str(), e.median_mm, e.p95_mm);
+  std::printf("  %-10s %7.2fmm %7.2fmm\n", "all", c.pooled_median_mm, c.pooled_p95_mm);
   std::printf("  %-10s %9s %9s  (angle between the bone's directions) %9s %9s (length)\n", "bone", "median", "p95",
               "ours", "reference");
   for (const BoneAngle& a : c.angles) {
@@ -577,6 +584,7 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
   // The C3D's first frame (capture frame 40) is the AMC's frame 1.
   EXPECT_EQ(c.frame_offset, 0);
   expect_reached(c, 30.0, 60.0);
+  EXPECT_LE(c.pooled_median_mm, 20.0);  // issue 37's 2 cm over all compared joints
 
   // The motion moved to other roots keeps every joint's position.
   const Motion& m = c.solved.motion;
@@ -600,10 +608,10 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
 
 // 02_01 against subject 02's own skeleton (02.asf, in the corpus since
 // 2026-11-27; before, the AMC was played on subject 12's, whose femur is
-// 85 mm short). Bounds: what the model reaches today, not issue 37's 30 mm
-// median and 60 mm p95 per joint: the ankles sit 37-40 mm lateral of
-// CMU's (docs/markers.md, "Accuracy on CMU takes"), the other joints within
-// 33 mm (median).
+// 85 mm short). No constant of cmu41 was set on this take. Bounds: issue
+// 37's 60 mm p95 per joint and 2 cm over all joints; its 30 mm median per
+// joint holds for every joint but the right knee, which sits about 23 mm
+// up the thigh from CMU's (docs/markers.md, "Accuracy on CMU takes").
 TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
   GMR_REQUIRE_DATA();
   const TakeComparison c = compare_take("c3d/cmu_02_01.c3d", {"asfamc/02/02_01.amc", "asfamc/02/02.asf"});
@@ -613,14 +621,13 @@ TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
   // pairing the residual picks).
   EXPECT_GE(c.frame_offset, 0);
   EXPECT_LE(c.frame_offset, 1);
-  expect_reached(c, 45.0, 60.0);
-  std::vector<double> medians;
+  expect_reached(c, 35.0, 60.0);
   for (const JointError& e : c.errors) {
-    if (e.joint != "ltibia" && e.joint != "rtibia") EXPECT_LE(e.median_mm, 35.0) << e.joint;
-    medians.push_back(e.median_mm);
+    if (e.joint != "rfemur") {
+      EXPECT_LE(e.median_mm, 30.0) << e.joint;
+    }
   }
-  std::sort(medians.begin(), medians.end());
-  EXPECT_LE(medians[medians.size() / 2], 25.0);  // the middle joint
+  EXPECT_LE(c.pooled_median_mm, 20.0);
 }
 
 // The same take against subject 02's own limbs. CMU's BVH conversion of
@@ -630,8 +637,9 @@ TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
 // so its shoulders sit about 10 cm closer to the hips than any ASF's and no
 // single rigid fit can bring all twelve joints within 3 cm. What subject 02's
 // own skeleton does decide is asserted: every limb bone's length within
-// 25 mm (measured: 4-21 mm; subject 12's femur is 85 mm off), and its
-// direction as for 01_01.
+// 30 mm (measured: 0-25 mm; the shanks are the longest, their knees 10-24
+// mm further up and their ankles 6-12 mm further down than CMU's; subject
+// 12's femur is 85 mm off), and its direction as for 01_01.
 TEST(MarkerSolveCmu, Take02_01MatchesSubject02sLimbsInItsBvh) {
   GMR_REQUIRE_DATA();
   // The premise, on subject 01: the BVH conversion keeps the ASF's limbs.
@@ -674,7 +682,7 @@ TEST(MarkerSolveCmu, Take02_01MatchesSubject02sLimbsInItsBvh) {
   ASSERT_EQ(c.angles.size(), kComparedBones.size());
   report("02_01 (BVH)", c);
   for (const BoneAngle& a : c.angles) {
-    EXPECT_NEAR(a.ours_mm, a.reference_mm, 25.0) << a.bone;
+    EXPECT_NEAR(a.ours_mm, a.reference_mm, 30.0) << a.bone;
     EXPECT_LE(a.median_deg, 15.0) << a.bone;
     EXPECT_LE(a.p95_deg, 20.0) << a.bone;
   }
