@@ -60,8 +60,11 @@ double thread_cpu_ns() {
 // fan-out does, timed by the thread's CPU clock; the readers are drained
 // after it, untimed. What a pass costs is the kernel's send path and the
 // loopback delivery it does in the sender's context; a pass that something
-// else interfered with only comes out slower, so starts agree.
-Result<double> ns_per_send(std::size_t bytes, std::size_t connections, int passes) {
+// else interfered with only comes out slower, so starts agree. The passes go
+// in `rounds` groups with `gap` between them, so a disturbance that lasts a
+// while spares some of them.
+Result<double> ns_per_send(std::size_t bytes, std::size_t connections, int passes, int rounds,
+                           std::chrono::milliseconds gap) {
   Fd listener(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
   if (listener.get() < 0) return system_error("socket");
   sockaddr_in address{};
@@ -94,6 +97,7 @@ Result<double> ns_per_send(std::size_t bytes, std::size_t connections, int passe
   std::vector<char> back(4 * bytes);
   double fastest = std::numeric_limits<double>::infinity();
   for (int p = 0; p < passes; ++p) {
+    if (p > 0 && p % std::max(1, passes / rounds) == 0) std::this_thread::sleep_for(gap);
     const double start = thread_cpu_ns();
     for (const Fd& writer : writers) {
       for (std::size_t sent = 0; sent < frame.size();) {
@@ -114,9 +118,10 @@ Result<double> ns_per_send(std::size_t bytes, std::size_t connections, int passe
 
 }  // namespace
 
-Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t connections, int passes) {
-  if (bytes == 0 || connections == 0 || passes <= 0) {
-    return make_error(ErrorKind::kInvalidArgument, "send calibration: needs bytes, connections and passes");
+Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t connections, int passes, int rounds,
+                                              std::chrono::milliseconds gap) {
+  if (bytes == 0 || connections == 0 || passes <= 0 || rounds <= 0 || gap.count() < 0) {
+    return make_error(ErrorKind::kInvalidArgument, "send calibration: needs bytes, connections, passes and rounds");
   }
   const auto began = std::chrono::steady_clock::now();
   // The CPUs this process may run on (at most 16 are measured).
@@ -140,7 +145,7 @@ Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t con
         CPU_SET(cpu, &one);
         ::pthread_setaffinity_np(::pthread_self(), sizeof one, &one);
       }
-      ns = ns_per_send(bytes, connections, passes);
+      ns = ns_per_send(bytes, connections, passes, rounds, gap);
     });
     t.join();
     if (!ns.ok()) return ns.error();

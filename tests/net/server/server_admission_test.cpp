@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <sstream>
 #include <thread>
@@ -342,6 +343,12 @@ TEST(Admission, AnAutoBudgetIsMeasuredAtStart) {
   EXPECT_EQ(c->sends, 64u * 30u * c->cpus);
   EXPECT_DOUBLE_EQ(c->budget, server::kReferenceBudget * server::kReferenceNsPerSend / c->fastest_ns_per_send);
   EXPECT_FALSE(server::calibrate_send_budget(480, 0, 3).ok());
+  // The passes are spread: 10 passes in 5 rounds 20 ms apart wait 4 gaps on
+  // each CPU, so a start's passes are not all caught by one disturbance.
+  auto spread = server::calibrate_send_budget(480, 8, 10, 5, std::chrono::milliseconds(20));
+  ASSERT_TRUE(spread.ok()) << spread.error().to_string();
+  EXPECT_GE(spread->seconds, 0.080 * static_cast<double>(spread->cpus));
+  EXPECT_FALSE(server::calibrate_send_budget(480, 8, 10, 0).ok());
 
   std::ostringstream log;
   auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
