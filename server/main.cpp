@@ -121,7 +121,8 @@ int main(int argc, char** argv) {
   std::string send_budget = "auto";
   app.add_option("--send-budget", send_budget,
                  "Frames/s all subscriptions together may ask for; past it a subscription is refused. auto: "
-                 "measured at start (about 0.1 s); 0: no limit, for load tests that mean to overload")
+                 "measured at start (about 0.5 s) and again over the first minute; 0: no limit, for load tests that "
+                 "mean to overload")
       ->capture_default_str()
       ->check([](const std::string& v) -> std::string {
         double x = 0;

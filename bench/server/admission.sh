@@ -8,17 +8,22 @@
 # past saturation (frames lost) should be refused in part.
 #
 #   bench/server/admission.sh [BUILD_DIR] [OUT_DIR]
-#     GRID=docs/server-grid.csv  STARTS=3  RATE=120
+#     GRID=docs/server-grid.csv  STARTS=3  RATE=120  SETTLE=0
 #     MOTION_FILE=../shared/data/bvh/cmu/01_01.bvh
 #
-# Writes OUT_DIR/admission.csv: one row per point and start (the budget that
-# start calibrated, subscriptions asked and admitted, what the grid delivered
-# there, and the verdict). A few minutes; a benchmark, not a CI step.
+# SETTLE=S asks S seconds after the server started, once it has measured its
+# budget again (1, 2, 4 ... 32 s after start; S=8 sees three).
+#
+# Writes OUT_DIR/admission.csv: one row per point and start (the budget when
+# asked and the one the start calibrated, subscriptions asked and admitted,
+# what the grid delivered there, and the verdict). A few minutes (and 33
+# times SETTLE); a benchmark, not a CI step.
 set -euo pipefail
 build=${1:-build}
 out=${2:-bench/server/results}
 grid=${GRID:-docs/server-grid.csv}
 starts=${STARTS:-3}
+settle=${SETTLE:-0}
 rate=${RATE:-120}
 motion_file=${MOTION_FILE:-../shared/data/bvh/cmu/01_01.bvh}
 bin="$build/bin"
@@ -36,7 +41,7 @@ bench_name="admission bench"
 . "$(dirname "$0")/common.sh"
 
 csv="$out/admission.csv"
-echo "transport,stream,subscribers,start,budget_fps,asked,admitted,grid_delivered_pct,verdict" >"$csv"
+echo "transport,stream,subscribers,start,budget_fps,asked,admitted,grid_delivered_pct,verdict,start_budget_fps" >"$csv"
 # The grid's points, by transport and stream in subscriber order: each one's
 # delivered share, and whether it is the first past saturation.
 saturated=""
@@ -50,7 +55,10 @@ while IFS=, read -r transport stream n expected delivered _; do
   for s in $(seq "$starts"); do
     start_server 0 --http-port -1 --max-connections 30000 --max-connections-per-address 0 \
       --max-pending-handshakes 30000 --log-level info
-    budget=$(sed -n 's/.*send budget \([0-9]*\) frames\/s.*/\1/p' "$library/server.log" | head -1)
+    [ "$settle" = 0 ] || sleep "$settle"
+    start_budget=$(sed -n 's/.*send budget \([0-9]*\) frames\/s.*/\1/p' "$library/server.log" | head -1)
+    budget=$(sed -n 's/.*send budget raised from [0-9]* to \([0-9]*\) frames\/s.*/\1/p' "$library/server.log" | tail -1)
+    budget=${budget:-$start_budget}
     flags=()
     [ "$transport" = udp ] && flags+=(--udp)
     [ "$stream" = shared ] && flags+=(--shared)
@@ -65,6 +73,6 @@ while IFS=, read -r transport stream n expected delivered _; do
     fi
     if [ "$held" = 1 ]; then verdict=$([ "$admitted" = "$n" ] && echo "held, admitted" || echo "held, REFUSED IN PART")
     else verdict=$([ "$admitted" -lt "$n" ] && echo "past saturation, refused in part" || echo "past saturation, ADMITTED"); fi
-    echo "$transport,$stream,$n,$s,$budget,$n,$admitted,$pct,$verdict" | tee -a "$csv"
+    echo "$transport,$stream,$n,$s,$budget,$n,$admitted,$pct,$verdict,$start_budget" | tee -a "$csv"
   done
 done < <(tail -n +2 "$grid" | sort -t, -k1,1 -k2,2 -k3,3n)

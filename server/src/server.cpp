@@ -135,6 +135,7 @@ void Server::Impl::begin_stop() {
   streams.stop_all();
   replicas.stop();
   beacon.stop();
+  budget_refresh.stop();
   auto open = admission.connections();
   for (auto& [id, entry] : open) {
     if (auto c = entry.connection.lock()) c->finish();
@@ -261,6 +262,7 @@ void Server::start() {
         "{:.2f} s; --send-budget N to set it)",
         d.cfg.send_budget, c->fastest_ns_per_send, c->cpus, c->ns_per_send, kReferenceNsPerSend, kReferenceBudget,
         c->seconds);
+    d.budget_refresh.start(d.cfg.send_budget);  // before io runs: nothing else touches it yet
   }
   d.tls = make_tls_context(d.cfg);
   boost::system::error_code ec;

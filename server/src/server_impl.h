@@ -17,6 +17,7 @@
 // state; Admission::buffers is atomic.
 #pragma once
 
+#include <cmath>
 #include <future>
 #include <memory>
 #include <string>
@@ -36,6 +37,8 @@
 #include "streams/stream_registry.h"
 #include "streams/targets.h"
 #include "transport/beacon.h"
+#include "transport/budget_refresh.h"
+#include "transport/calibrate.h"
 #include "transport/connection.h"
 #include "transport/io_threads.h"
 #include "transport/net.h"
@@ -82,6 +85,10 @@ struct Server::Impl {
   net::thread_pool json_pool{1};
   Services services{cfg, io,        edit_pool, catalog,    admission, streams, counters,
                     udp, multicast, replicas,  recordings, metrics,   lanes};
+  // --send-budget auto: measured again on the edit thread over the first
+  // minute, raising the budget when a measurement is faster (start() starts it).
+  BudgetRefresh budget_refresh{io, edit_pool, &measure_send_budget,
+                               [this](double budget) { cfg.send_budget = std::floor(budget); }};
   std::thread thread;
   std::uint16_t tcp_port = 0;
   bool started = false;

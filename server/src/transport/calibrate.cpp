@@ -55,65 +55,82 @@ double thread_cpu_ns() {
   return static_cast<double>(t.tv_sec) * 1e9 + static_cast<double>(t.tv_nsec);
 }
 
-// The fastest pass's ns per send on the calling thread: a pass writes one
-// frame to each of `connections` loopback TCP connections, as a stream's
-// fan-out does, timed by the thread's CPU clock; the readers are drained
-// after it, untimed. What a pass costs is the kernel's send path and the
-// loopback delivery it does in the sender's context; a pass that something
-// else interfered with only comes out slower, so starts agree. The passes go
-// in `rounds` groups with `gap` between them, so a disturbance that lasts a
-// while spares some of them.
-Result<double> ns_per_send(std::size_t bytes, std::size_t connections, int passes, int rounds,
-                           std::chrono::milliseconds gap) {
-  Fd listener(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-  if (listener.get() < 0) return system_error("socket");
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t length = sizeof address;
-  if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) return system_error("bind");
-  if (::listen(listener.get(), static_cast<int>(std::min<std::size_t>(connections, 4096))) != 0) {
-    return system_error("listen");
-  }
-  if (::getsockname(listener.get(), reinterpret_cast<sockaddr*>(&address), &length) != 0) {
-    return system_error("getsockname");
-  }
-  std::vector<Fd> writers, readers;
-  for (std::size_t k = 0; k < connections; ++k) {
-    Fd writer(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    if (writer.get() < 0) return system_error("socket");
-    const int one = 1;
-    ::setsockopt(writer.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-    if (::connect(writer.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
-      return system_error("connect");
+// `connections` loopback TCP connections (TCP_NODELAY; the readers
+// non-blocking).
+class Loopback {
+ public:
+  Status open(std::size_t connections) {
+    Fd listener(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+    if (listener.get() < 0) return system_error("socket");
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t length = sizeof address;
+    if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+      return system_error("bind");
     }
-    Fd reader(::accept4(listener.get(), nullptr, nullptr, SOCK_CLOEXEC | SOCK_NONBLOCK));
-    if (reader.get() < 0) return system_error("accept");
-    writers.push_back(std::move(writer));
-    readers.push_back(std::move(reader));
+    if (::listen(listener.get(), static_cast<int>(std::min<std::size_t>(connections, 4096))) != 0) {
+      return system_error("listen");
+    }
+    if (::getsockname(listener.get(), reinterpret_cast<sockaddr*>(&address), &length) != 0) {
+      return system_error("getsockname");
+    }
+    for (std::size_t k = 0; k < connections; ++k) {
+      Fd writer(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+      if (writer.get() < 0) return system_error("socket");
+      const int one = 1;
+      ::setsockopt(writer.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+      if (::connect(writer.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+        return system_error("connect");
+      }
+      Fd reader(::accept4(listener.get(), nullptr, nullptr, SOCK_CLOEXEC | SOCK_NONBLOCK));
+      if (reader.get() < 0) return system_error("accept");
+      writers_.push_back(std::move(writer));
+      readers_.push_back(std::move(reader));
+    }
+    return Ok{};
   }
 
-  const std::string frame(bytes, 'f');
-  std::vector<char> back(4 * bytes);
-  double fastest = std::numeric_limits<double>::infinity();
-  for (int p = 0; p < passes; ++p) {
-    if (p > 0 && p % std::max(1, passes / rounds) == 0) std::this_thread::sleep_for(gap);
-    const double start = thread_cpu_ns();
-    for (const Fd& writer : writers) {
-      for (std::size_t sent = 0; sent < frame.size();) {
-        const ssize_t n = ::send(writer.get(), frame.data() + sent, frame.size() - sent, MSG_NOSIGNAL);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) return system_error("send");
-        sent += static_cast<std::size_t>(n);
+  // The fastest of `passes` passes, in ns per send on the calling thread: a
+  // pass writes one frame to each connection, as a stream's fan-out does,
+  // timed by the thread's CPU clock; the readers are drained after it,
+  // untimed. What a pass costs is the kernel's send path and the loopback
+  // delivery it does in the sender's context; a pass that something else
+  // interfered with only comes out slower.
+  Result<double> fastest_pass(const std::string& frame, int passes) {
+    back_.resize(4 * frame.size());
+    double fastest = std::numeric_limits<double>::infinity();
+    for (int p = 0; p < passes; ++p) {
+      const double start = thread_cpu_ns();
+      for (const Fd& writer : writers_) {
+        for (std::size_t sent = 0; sent < frame.size();) {
+          const ssize_t n = ::send(writer.get(), frame.data() + sent, frame.size() - sent, MSG_NOSIGNAL);
+          if (n < 0 && errno == EINTR) continue;
+          if (n <= 0) return system_error("send");
+          sent += static_cast<std::size_t>(n);
+        }
+      }
+      fastest = std::min(fastest, (thread_cpu_ns() - start) / static_cast<double>(writers_.size()));
+      for (const Fd& reader : readers_) {
+        while (::recv(reader.get(), back_.data(), back_.size(), 0) > 0) {
+        }
       }
     }
-    fastest = std::min(fastest, (thread_cpu_ns() - start) / static_cast<double>(connections));
-    for (const Fd& reader : readers) {
-      while (::recv(reader.get(), back.data(), back.size(), 0) > 0) {
-      }
-    }
+    return std::max(1.0, fastest);
   }
-  return std::max(1.0, fastest);
+
+ private:
+  std::vector<Fd> writers_, readers_;
+  std::vector<char> back_;
+};
+
+// Pins the calling thread to `cpu` (-1: leaves it where it is).
+void pin(int cpu) {
+  if (cpu < 0) return;
+  cpu_set_t one;
+  CPU_ZERO(&one);
+  CPU_SET(cpu, &one);
+  ::pthread_setaffinity_np(::pthread_self(), sizeof one, &one);
 }
 
 }  // namespace
@@ -134,29 +151,47 @@ Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t con
     }
   }
   if (cpus.empty()) cpus.push_back(-1);  // unknown: wherever the thread runs
-  SendCalibration out;
-  out.fastest_ns_per_send = std::numeric_limits<double>::infinity();
-  for (const int cpu : cpus) {
-    Result<double> ns = make_error("not measured");
-    std::thread t([&] {
-      if (cpu >= 0) {
-        cpu_set_t one;
-        CPU_ZERO(&one);
-        CPU_SET(cpu, &one);
-        ::pthread_setaffinity_np(::pthread_self(), sizeof one, &one);
+  // One thread, pinned to each CPU in turn for a round of passes, then a
+  // gap: a disturbance that lasts a while (the previous run's sockets
+  // closing as the server starts) spares some rounds, and the whole takes
+  // about `rounds` gaps however many CPUs there are.
+  std::vector<double> fastest(cpus.size(), std::numeric_limits<double>::infinity());
+  Status status = Ok{};
+  std::thread t([&] {
+    Loopback loopback;
+    status = loopback.open(connections);
+    if (!status) return;
+    const std::string frame(bytes, 'f');
+    const int per_round = std::max(1, passes / rounds);
+    for (int done = 0; done < passes; done += per_round) {
+      if (done > 0) std::this_thread::sleep_for(gap);
+      for (std::size_t c = 0; c < cpus.size(); ++c) {
+        pin(cpus[c]);
+        auto ns = loopback.fastest_pass(frame, std::min(per_round, passes - done));
+        if (!ns.ok()) {
+          status = ns.error();
+          return;
+        }
+        fastest[c] = std::min(fastest[c], *ns);
       }
-      ns = ns_per_send(bytes, connections, passes, rounds, gap);
-    });
-    t.join();
-    if (!ns.ok()) return ns.error();
-    out.ns_per_send = std::max(out.ns_per_send, *ns);
-    out.fastest_ns_per_send = std::min(out.fastest_ns_per_send, *ns);
-  }
+    }
+  });
+  t.join();
+  if (!status) return status.error();
+  SendCalibration out;
+  out.ns_per_send = *std::max_element(fastest.begin(), fastest.end());
+  out.fastest_ns_per_send = *std::min_element(fastest.begin(), fastest.end());
   out.cpus = cpus.size();
   out.budget = kReferenceBudget * kReferenceNsPerSend / out.fastest_ns_per_send;
   out.sends = connections * static_cast<std::size_t>(passes) * cpus.size();
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count();
   return out;
+}
+
+Result<double> measure_send_budget() {
+  auto c = calibrate_send_budget(480, 64, 10, 1);
+  if (!c.ok()) return c.error();
+  return c->budget;
 }
 
 }  // namespace gmr::server

@@ -24,7 +24,7 @@ struct SendCalibration {
 // TCP streams at saturation (1,000 subscribers at 120 Hz: 98.5-99.9% of
 // their frames delivered; 3,000: 124,760 frames/s), and this calibration
 // measured 3,350 ns per send there (3,344-3,357 ns in five starts of six,
-// 3,631 once; the next day 3,330-3,390 ns with its passes spread, below). The
+// 3,631 once; in a later session 3,330-3,390 ns, spread as below). The
 // budget is 0.9 of what it sends: 108,000 frames/s (900 subscribers), which
 // admits every load of that day's grid that got every frame (1,000
 // subscribers of each other kind) and refuses part of every load past
@@ -43,14 +43,19 @@ inline constexpr double kReferenceNsPerSend = 3350;
 // frame costs the server. Each CPU's fastest pass is its figure
 // (interference only slows a pass down); the fastest CPU's figure scales the
 // budget: kReferenceBudget times kReferenceNsPerSend / that. The passes run
-// in `rounds` groups `gap` apart (about 0.5 s per CPU): whatever else keeps a
-// CPU busy as the server starts (another process's sockets closing, a
-// previous run's server exiting) rarely lasts through every round. Back to
-// back (0.05 s), 13 starts of 36 came out 1-27% slow; spread, none of 33
-// did (docs/performance.md, "Admission against the grid"). An error when
-// no loopback connection can be made.
+// in `rounds` rounds `gap` apart, each round visiting every CPU (about 0.5 s
+// in all, 0.6 s on 2 CPUs): whatever else keeps a CPU busy as the server
+// starts (another process's sockets closing, a previous run's server
+// exiting) rarely lasts through every round. Back to back (0.05 s a CPU),
+// 13 starts of 36 came out 1-27% slow; spread, none of 33 did
+// (docs/performance.md, "Admission against the grid"). An error when no
+// loopback connection can be made.
 Result<SendCalibration> calibrate_send_budget(std::size_t bytes = 480, std::size_t connections = 64, int passes = 100,
                                               int rounds = 10,
                                               std::chrono::milliseconds gap = std::chrono::milliseconds(50));
+
+// A quick measurement while the server runs (BudgetRefresh): one round of 10
+// passes on each CPU, a few milliseconds; the budget it gives.
+Result<double> measure_send_budget();
 
 }  // namespace gmr::server

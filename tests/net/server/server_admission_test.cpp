@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <sstream>
@@ -19,6 +20,7 @@
 
 #include "gmr/wire/framing.h"
 
+#include "transport/budget_refresh.h"
 #include "transport/calibrate.h"
 #include "transport/net.h"
 #include "net_test_util.h"
@@ -329,6 +331,43 @@ TEST(Admission, ASubscriberOfASharedStreamCostsItsShare) {
   ASSERT_TRUE(c->subscribe(v->id, o, [](const client::ReceivedFrame&) {}).ok()) << "20 own frames/s still fit";
 }
 
+// --send-budget auto measures again while the server runs: a budget only
+// rises (a slowed measurement is not the machine), a failed measurement is
+// logged and skipped, and stop() ends it.
+TEST(Admission, TheMeasuredBudgetIsMeasuredAgainAndOnlyRises) {
+  server::net::io_context io;
+  server::net::thread_pool worker(1);
+  auto guard = server::net::make_work_guard(io);
+  std::vector<Result<double>> answers = {95000.0, 110000.0, make_error("no loopback"), 100000.0};
+  std::atomic<int> asked{0};
+  std::vector<double> raised;
+  server::BudgetRefresh refresh(
+      io, worker, [&]() -> Result<double> { return answers[static_cast<std::size_t>(asked++) % answers.size()]; },
+      [&](double b) { raised.push_back(b); }, 4, std::chrono::milliseconds(5));
+  refresh.start(100000);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (refresh.measured() < 4 && std::chrono::steady_clock::now() < deadline) {
+    io.run_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(refresh.measured(), 4);
+  EXPECT_EQ(asked.load(), 4);
+  EXPECT_EQ(raised, std::vector<double>{110000.0});  // 95,000 and 100,000 are below it
+  EXPECT_EQ(refresh.budget(), 110000.0);
+  io.run_for(std::chrono::milliseconds(200));  // its four are done: nothing more
+  EXPECT_EQ(asked.load(), 4);
+
+  server::BudgetRefresh stopped(
+      io, worker, [&]() -> Result<double> { return answers[static_cast<std::size_t>(asked++) % answers.size()]; },
+      [&](double b) { raised.push_back(b); }, 4, std::chrono::milliseconds(5));
+  stopped.start(1000);
+  stopped.stop();
+  io.run_for(std::chrono::milliseconds(200));
+  EXPECT_EQ(stopped.measured(), 0);
+  EXPECT_EQ(asked.load(), 4);
+  EXPECT_EQ(raised.size(), 1u);
+  worker.join();
+}
+
 // --send-budget auto (gmr-server's default): the budget is measured at start.
 TEST(Admission, AnAutoBudgetIsMeasuredAtStart) {
   auto c = server::calibrate_send_budget(480, 64, 30);
@@ -343,11 +382,13 @@ TEST(Admission, AnAutoBudgetIsMeasuredAtStart) {
   EXPECT_EQ(c->sends, 64u * 30u * c->cpus);
   EXPECT_DOUBLE_EQ(c->budget, server::kReferenceBudget * server::kReferenceNsPerSend / c->fastest_ns_per_send);
   EXPECT_FALSE(server::calibrate_send_budget(480, 0, 3).ok());
-  // The passes are spread: 10 passes in 5 rounds 20 ms apart wait 4 gaps on
-  // each CPU, so a start's passes are not all caught by one disturbance.
+  // The passes are spread: 10 passes in 5 rounds 20 ms apart (each round
+  // visiting every CPU) wait 4 gaps, so a start's passes are not all caught
+  // by one disturbance.
   auto spread = server::calibrate_send_budget(480, 8, 10, 5, std::chrono::milliseconds(20));
   ASSERT_TRUE(spread.ok()) << spread.error().to_string();
-  EXPECT_GE(spread->seconds, 0.080 * static_cast<double>(spread->cpus));
+  EXPECT_GE(spread->seconds, 0.080);
+  EXPECT_EQ(spread->sends, 8u * 10u * spread->cpus);
   EXPECT_FALSE(server::calibrate_send_budget(480, 8, 10, 0).ok());
 
   std::ostringstream log;
