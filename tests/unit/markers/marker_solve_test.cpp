@@ -610,7 +610,7 @@ TEST(MarkerSolveCmu, Take01_01MatchesItsAmcJointByJoint) {
 // 2026-11-27; before, the AMC was played on subject 12's, whose femur is
 // 85 mm short). No constant of cmu41 was set on this take. Bounds: issue
 // 37's 60 mm p95 per joint and 2 cm over all joints; its 30 mm median per
-// joint holds for every joint but the right knee, which sits about 23 mm
+// joint holds for every joint but the right knee, which sits about 24 mm
 // up the thigh from CMU's (docs/markers.md, "Accuracy on CMU takes").
 TEST(MarkerSolveCmu, Take02_01MatchesItsAmcJointByJoint) {
   GMR_REQUIRE_DATA();
