@@ -55,8 +55,8 @@ double thread_cpu_ns() {
   return static_cast<double>(t.tv_sec) * 1e9 + static_cast<double>(t.tv_nsec);
 }
 
-// `connections` loopback TCP connections (TCP_NODELAY; the readers
-// non-blocking).
+// Loopback TCP connections, each a writer (TCP_NODELAY) and a non-blocking
+// reader, made by open().
 class Loopback {
  public:
   Status open(std::size_t connections) {
