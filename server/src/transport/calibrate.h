@@ -35,8 +35,8 @@ struct SendCalibration {
 inline constexpr double kReferenceBudget = 108000;
 inline constexpr double kReferenceNsPerSend = 3350;
 
-// On each CPU the process may use (at most 16), a thread pinned there times
-// `passes` passes, each a write of `bytes` bytes to every one of
+// On each CPU the process may use (at most 16), a thread pinned there in
+// turn times `passes` passes, each a write of `bytes` bytes to every one of
 // `connections` loopback TCP connections (TCP_NODELAY; the readers drained
 // after each pass, untimed), by its CPU clock: what the kernel's send path
 // costs this machine for a fan-out, which is most of what a subscriber's
