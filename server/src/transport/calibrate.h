@@ -47,7 +47,7 @@ inline constexpr double kReferenceNsPerSend = 3350;
 // in all, 0.6 s on 2 CPUs): whatever else keeps a CPU busy as the server
 // starts (another process's sockets closing, a previous run's server
 // exiting) rarely lasts through every round. Back to back (0.05 s a CPU),
-// 13 starts of 36 came out 1-27% slow; spread, 0 to 11 of 33 in four runs
+// 13 starts of 33 came out 8-26% slow; spread, 0 to 8 of 33 in four runs
 // (the machine's slow spells last seconds), which BudgetRefresh corrects
 // (docs/performance.md, "Admission against the grid"). An error when no
 // loopback connection can be made.
