@@ -162,7 +162,7 @@ Result<SendCalibration> calibrate_send_budget(std::size_t bytes, std::size_t con
     status = loopback.open(connections);
     if (!status) return;
     const std::string frame(bytes, 'f');
-    const int per_round = std::max(1, passes / rounds);
+    const int per_round = (passes + rounds - 1) / rounds;  // so there are at most `rounds`
     for (int done = 0; done < passes; done += per_round) {
       if (done > 0) std::this_thread::sleep_for(gap);
       for (std::size_t c = 0; c < cpus.size(); ++c) {
