@@ -90,16 +90,16 @@ std::string fit_report(const MarkerSolveResult& r, const std::string& units) {
     out += line;
   }
   out += "(distances in " + u + "; motion rms: measured markers against the markers the motion carries)\n";
-  std::snprintf(line, sizeof line, "%-11s %-10s %10s %10s %10s %10s %10s\n", "joint", "found by", "determined",
-                "from prior", "fit rms", "bone", "bone rms");
+  std::snprintf(line, sizeof line, "%-11s %-10s %10s %10s %10s %10s %10s %10s\n", "joint", "found by", "determined",
+                "from prior", "fit rms", "split", "bone", "bone rms");
   out += line;
   for (const JointFit& j : r.joints) {
     if (j.functional) {
-      std::snprintf(line, sizeof line, "%-11s %-10s %8d/3 %10.2f %10.2f %10.2f %10.2f\n", j.name.c_str(), "centre",
-                    j.determined, j.prior_distance, j.fit_rms, j.bone_length, j.bone_rms);
+      std::snprintf(line, sizeof line, "%-11s %-10s %8d/3 %10.2f %10.2f %10.2f %10.2f %10.2f\n", j.name.c_str(),
+                    "centre", j.determined, j.prior_distance, j.fit_rms, j.split_shift, j.bone_length, j.bone_rms);
     } else {
-      std::snprintf(line, sizeof line, "%-11s %-10s %10s %10s %10s %10.2f %10.2f\n", j.name.c_str(), "markers", "-",
-                    "-", "-", j.bone_length, j.bone_rms);
+      std::snprintf(line, sizeof line, "%-11s %-10s %10s %10s %10s %10.2f %10.2f %10.2f\n", j.name.c_str(), "markers",
+                    "-", "-", "-", j.split_shift, j.bone_length, j.bone_rms);
     }
     out += line;
   }

@@ -9,8 +9,10 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
+#include <optional>
 
 #include "gmr/kinematics/forward_kinematics.h"
 #include "gmr/ops/set_roots.h"
@@ -115,6 +117,9 @@ class Solver {
   Status calibrate(int index);
   void fill(Part& p, std::size_t& interpolated, std::size_t& held) const;
   Status place_joint(int index);
+  void reset();
+  Status place_all();
+  bool split_chains();
   Result<Motion> build_motion();
   void report_motion(MarkerSolveResult& r) const;
 
@@ -125,8 +130,9 @@ class Solver {
   std::vector<Part> parts_;
   std::vector<PartFit> part_fits_;
   std::vector<JointFit> joint_fits_;
-  std::vector<std::vector<Vector3d>> joint_world_;  // per joint, per frame
-  std::vector<Vector3d> joint_local_;               // per joint, in its part
+  std::vector<std::vector<Vector3d>> joint_world_;    // per joint, per frame
+  std::vector<Vector3d> joint_local_;                 // per joint, in its part
+  std::vector<std::optional<Vector3d>> split_local_;  // per joint: where its split puts it, in its part
   Warnings warnings_;
 };
 
@@ -449,11 +455,106 @@ Status Solver::place_joint(int index) {
     }
     jf.prior_distance = (local - expr_local).norm();
   }
+  if (const auto& split = split_local_[static_cast<std::size_t>(index)]) {
+    jf.split_shift = (*split - local).norm();
+    local = *split;
+  }
   joint_local_[static_cast<std::size_t>(index)] = local;
   std::vector<Vector3d>& world = joint_world_[static_cast<std::size_t>(index)];
   world.resize(frames);
   for (std::size_t f = 0; f < frames; ++f) world[f] = p.poses[f].apply(local);
   return Ok{};
+}
+
+void Solver::reset() {
+  parts_.assign(model_.parts.size(), Part{});
+  part_fits_.assign(model_.parts.size(), PartFit{});
+  for (std::size_t i = 0; i < model_.parts.size(); ++i) {
+    const ModelPart& mp = model_.parts[i];
+    part_fits_[i].name = mp.name;
+    for (std::size_t k = 0; k < mp.points.size(); ++k) {
+      const bool joint = mp.point_is_joint[k];
+      parts_[i].joint_of.push_back(joint ? model_.find_joint(mp.points[k]) : -1);
+      parts_[i].marker_of.push_back(joint ? -1 : marker_index_.find(mp.points[k])->second);
+    }
+  }
+  joint_fits_.assign(model_.joints.size(), JointFit{});
+  joint_world_.assign(model_.joints.size(), {});
+  joint_local_.assign(model_.joints.size(), Vector3d::Zero());
+  for (std::size_t j = 0; j < model_.joints.size(); ++j) joint_fits_[j].name = model_.joints[j].name;
+}
+
+Status Solver::place_all() {
+  for (std::size_t j = 0; j < model_.joints.size(); ++j) {
+    if (auto s = place_joint(static_cast<int>(j)); !s) return s;
+  }
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    if (!parts_[i].solved) {
+      if (auto s = solve_part(static_cast<int>(i)); !s) return s;
+    }
+  }
+  return Ok{};
+}
+
+// After a pass: each split joint's place in its part, on the line from its
+// parent (where the part carries it, the median over the take) through where
+// the pass found it, so that the bone parent -> joint is its fraction of the
+// chain's length, that bone plus joint -> end (the median over the take;
+// moving the joint along the line changes both). Bone lengths hold whether
+// or not the take ever straightens the chain. A joint the fraction would move
+// by more than half its bone keeps where the pass found it, with a warning.
+// True when a joint moved.
+bool Solver::split_chains() {
+  bool moved = false;
+  for (std::size_t j = 0; j < model_.joints.size(); ++j) {
+    const ModelJoint& mj = model_.joints[j];
+    if (mj.split < 0) continue;
+    const std::vector<Vector3d>& parent = joint_world_[static_cast<std::size_t>(mj.parent)];
+    const std::vector<Vector3d>& end = joint_world_[static_cast<std::size_t>(mj.split)];
+    const Part& p = parts_[static_cast<std::size_t>(mj.part)];
+    std::vector<double> xs, ys, zs;
+    for (std::size_t f = 0; f < m_.frame_count; ++f) {
+      if (!finite(parent[f])) continue;
+      const Vector3d h = p.poses[f].local(parent[f]);
+      xs.push_back(h.x());
+      ys.push_back(h.y());
+      zs.push_back(h.z());
+    }
+    const Vector3d from(median(xs), median(ys), median(zs));
+    const Vector3d along = joint_local_[j] - from;
+    const double bone = along.norm();
+    if (!(bone > 0)) continue;
+    const Vector3d u = along / bone;
+    // g(s) = (1 - fraction) * upper - fraction * lower with the joint moved
+    // by s: it rises with s (the upper bone grows, the lower shrinks).
+    std::vector<double> lower;
+    auto g = [&](double shift) {
+      const Vector3d local = joint_local_[j] + shift * u;
+      lower.clear();
+      for (std::size_t f = 0; f < m_.frame_count; ++f) {
+        if (finite(end[f])) lower.push_back((end[f] - p.poses[f].apply(local)).norm());
+      }
+      return (1 - mj.split_fraction) * (bone + shift) - mj.split_fraction * median(lower);
+    };
+    double lo = -bone / 2, hi = bone / 2;
+    const double g_lo = g(lo), g_hi = g(hi);
+    if (!(g_lo <= 0 && g_hi >= 0)) {
+      char fraction[32];
+      std::snprintf(fraction, sizeof fraction, "%g", mj.split_fraction);
+      warnings_.push_back(error("joint '" + mj.name + "': its split (" + fraction + " of the chain to '" +
+                                    model_.joints[static_cast<std::size_t>(mj.split)].name +
+                                    "') would move it by more than half its bone; it stays where it was found",
+                                mj.line));
+      continue;
+    }
+    for (int i = 0; i < 60 && hi - lo > 1e-9 * bone; ++i) {
+      const double mid = (lo + hi) / 2;
+      (g(mid) < 0 ? lo : hi) = mid;
+    }
+    split_local_[j] = joint_local_[j] + (lo + hi) / 2 * u;
+    moved = true;
+  }
+  return moved;
 }
 
 Result<Motion> Solver::build_motion() {
@@ -552,28 +653,20 @@ Result<MarkerSolveResult> Solver::run(const MarkerSolveOptions& options) {
       return make_error(ErrorKind::kNotFound, "unknown joint '" + name + "' (not in marker model " + model_.name + ")");
     roots.push_back(j);
   }
-  parts_.assign(model_.parts.size(), Part{});
-  part_fits_.assign(model_.parts.size(), PartFit{});
-  for (std::size_t i = 0; i < model_.parts.size(); ++i) {
-    const ModelPart& mp = model_.parts[i];
-    part_fits_[i].name = mp.name;
-    for (std::size_t k = 0; k < mp.points.size(); ++k) {
-      const bool joint = mp.point_is_joint[k];
-      parts_[i].joint_of.push_back(joint ? model_.find_joint(mp.points[k]) : -1);
-      parts_[i].marker_of.push_back(joint ? -1 : marker_index_.find(mp.points[k])->second);
-    }
-  }
-  joint_fits_.assign(model_.joints.size(), JointFit{});
-  joint_world_.assign(model_.joints.size(), {});
-  joint_local_.assign(model_.joints.size(), Vector3d::Zero());
-  for (std::size_t j = 0; j < model_.joints.size(); ++j) {
-    joint_fits_[j].name = model_.joints[j].name;
-    if (auto s = place_joint(static_cast<int>(j)); !s) return s.error();
-  }
-  for (std::size_t i = 0; i < parts_.size(); ++i) {
-    if (!parts_[i].solved) {
-      if (auto s = solve_part(static_cast<int>(i)); !s) return s.error();
-    }
+  // Splits need the whole chain found: a first pass finds every joint, the
+  // second places the split joints where their chains' lengths put them
+  // (and the parts that carry them are fitted again).
+  split_local_.assign(model_.joints.size(), std::nullopt);
+  const std::size_t warnings_before = warnings_.size();
+  reset();
+  if (auto s = place_all(); !s) return s.error();
+  const std::size_t warnings_after = warnings_.size();
+  if (split_chains()) {
+    // The first pass's warnings come again from the second.
+    warnings_.erase(warnings_.begin() + static_cast<std::ptrdiff_t>(warnings_before),
+                    warnings_.begin() + static_cast<std::ptrdiff_t>(warnings_after));
+    reset();
+    if (auto s = place_all(); !s) return s.error();
   }
   auto motion = build_motion();
   if (!motion) return motion.error();

@@ -68,6 +68,7 @@ struct JointFit {
   int determined = 0;         // centre: directions (0..3) the take determined; the rest from the prior
   double prior_distance = 0;  // centre: distance from the prior (file units)
   double fit_rms = 0;         // centre: RMS of the marker-distance residuals (file units)
+  double split_shift = 0;     // split: how far the chain's proportion moved it (file units)
   // RMS variation of the bone parent -> joint over the take (file units),
   // made constant in the motion.
   double bone_rms = 0;
