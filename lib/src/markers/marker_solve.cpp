@@ -120,6 +120,7 @@ class Solver {
   void reset();
   Status place_all();
   bool split_chains();
+  Status place_again(std::size_t first_warning, std::size_t end_warning);
   Result<Motion> build_motion();
   void report_motion(MarkerSolveResult& r) const;
 
@@ -557,6 +558,61 @@ bool Solver::split_chains() {
   return moved;
 }
 
+// After split_chains() moved joints: those joints, the parts that carry a
+// joint placed again as a point (calibrated and fitted again), the joints
+// fixed in such a part or whose expression uses a joint placed again, in the
+// model's order (parents, and the joints a part carries, come first). The
+// rest of the first pass stands: for cmu41 the shanks and feet are done
+// again, not the other 13 parts. The first pass's warnings about a joint
+// placed again are dropped (the second gives them again).
+Status Solver::place_again(std::size_t first_warning, std::size_t end_warning) {
+  const std::size_t joints = model_.joints.size();
+  std::vector<char> again(joints, 0), part_again(parts_.size(), 0);
+  auto uses_again = [&](const auto& self, const PointExpr& e) -> bool {
+    if (e.kind == PointExpr::Kind::kJoint && again[static_cast<std::size_t>(model_.find_joint(e.name))]) return true;
+    return std::any_of(e.args.begin(), e.args.end(), [&](const PointExpr& a) { return self(self, a); });
+  };
+  for (std::size_t j = 0; j < joints; ++j) {
+    const ModelJoint& mj = model_.joints[j];
+    if (!split_local_[j] && !part_again[static_cast<std::size_t>(mj.part)] && !uses_again(uses_again, mj.where)) {
+      continue;
+    }
+    again[j] = 1;
+    for (std::size_t i = 0; i < parts_.size(); ++i) {
+      const std::vector<int>& of = parts_[i].joint_of;
+      if (std::find(of.begin(), of.end(), static_cast<int>(j)) != of.end()) part_again[i] = 1;
+    }
+  }
+  std::vector<Error> kept(warnings_.begin(), warnings_.begin() + static_cast<std::ptrdiff_t>(first_warning));
+  for (std::size_t w = first_warning; w < warnings_.size(); ++w) {
+    bool stale = false;
+    for (std::size_t j = 0; j < joints && w < end_warning && !stale; ++j) {
+      stale = again[j] && warnings_[w].message.rfind("joint '" + model_.joints[j].name + "':", 0) == 0;
+    }
+    if (!stale) kept.push_back(std::move(warnings_[w]));
+  }
+  warnings_ = std::move(kept);
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    if (!part_again[i]) continue;
+    parts_[i].solved = false;
+    part_fits_[i] = PartFit{};
+    part_fits_[i].name = model_.parts[i].name;
+  }
+  for (std::size_t j = 0; j < joints; ++j) {
+    if (!again[j]) continue;
+    joint_fits_[j] = JointFit{};
+    joint_fits_[j].name = model_.joints[j].name;
+    joint_world_[j].clear();
+    if (auto s = place_joint(static_cast<int>(j)); !s) return s;
+  }
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    if (!parts_[i].solved) {
+      if (auto s = solve_part(static_cast<int>(i)); !s) return s;
+    }
+  }
+  return Ok{};
+}
+
 Result<Motion> Solver::build_motion() {
   const std::size_t frames = m_.frame_count;
   const std::size_t n = model_.joints.size();
@@ -653,20 +709,15 @@ Result<MarkerSolveResult> Solver::run(const MarkerSolveOptions& options) {
       return make_error(ErrorKind::kNotFound, "unknown joint '" + name + "' (not in marker model " + model_.name + ")");
     roots.push_back(j);
   }
-  // Splits need the whole chain found: a first pass finds every joint, the
-  // second places the split joints where their chains' lengths put them
-  // (and the parts that carry them are fitted again).
+  // Splits need the whole chain found: a first pass finds every joint, then
+  // the split joints move and what depends on them is placed again.
   split_local_.assign(model_.joints.size(), std::nullopt);
   const std::size_t warnings_before = warnings_.size();
   reset();
   if (auto s = place_all(); !s) return s.error();
   const std::size_t warnings_after = warnings_.size();
   if (split_chains()) {
-    // The first pass's warnings come again from the second.
-    warnings_.erase(warnings_.begin() + static_cast<std::ptrdiff_t>(warnings_before),
-                    warnings_.begin() + static_cast<std::ptrdiff_t>(warnings_after));
-    reset();
-    if (auto s = place_all(); !s) return s.error();
+    if (auto s = place_again(warnings_before, warnings_after); !s) return s.error();
   }
   auto motion = build_motion();
   if (!motion) return motion.error();
