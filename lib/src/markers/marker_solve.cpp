@@ -119,8 +119,8 @@ class Solver {
   Status place_joint(int index);
   void reset();
   Status place_all();
-  bool split_chains();
-  Status place_again(std::size_t first_warning, std::size_t end_warning);
+  bool split_chains(bool first_round, bool apply);
+  Status place_again(std::size_t first_warning);
   Result<Motion> build_motion();
   void report_motion(MarkerSolveResult& r) const;
 
@@ -131,10 +131,20 @@ class Solver {
   std::vector<Part> parts_;
   std::vector<PartFit> part_fits_;
   std::vector<JointFit> joint_fits_;
-  std::vector<std::vector<Vector3d>> joint_world_;    // per joint, per frame
-  std::vector<Vector3d> joint_local_;                 // per joint, in its part
-  std::vector<std::optional<Vector3d>> split_local_;  // per joint: where its split puts it, in its part
+  std::vector<std::vector<Vector3d>> joint_world_;  // per joint, per frame
+  std::vector<Vector3d> joint_local_;               // per joint, in its part
+  // Splits, per joint: where place_joint found it before its split, where the
+  // split puts it, the last round's offset along the bone and how far that
+  // was from the split's target (for the secant step).
+  struct SplitRound {
+    bool seen = false;
+    double offset = 0, gap = 0;
+  };
+  std::vector<Vector3d> found_local_;
+  std::vector<std::optional<Vector3d>> split_local_;
+  std::vector<SplitRound> split_rounds_;
   Warnings warnings_;
+  Warnings split_warnings_;  // after the others: rounds of placing again do not repeat them
 };
 
 Vector3d Solver::eval(const PointExpr& e, std::size_t f) const {
@@ -456,6 +466,7 @@ Status Solver::place_joint(int index) {
     }
     jf.prior_distance = (local - expr_local).norm();
   }
+  found_local_[static_cast<std::size_t>(index)] = local;
   if (const auto& split = split_local_[static_cast<std::size_t>(index)]) {
     jf.split_shift = (*split - local).norm();
     local = *split;
@@ -497,19 +508,24 @@ Status Solver::place_all() {
   return Ok{};
 }
 
-// After a pass: each split joint's place in its part, on the line from its
+// After a pass: each split joint's target in its part, on the line from its
 // parent (where the part carries it, the median over the take) through where
-// the pass found it, so that the bone parent -> joint is its fraction of the
-// chain's length, that bone plus joint -> end (the median over the take;
+// place_joint found it, so that the bone parent -> joint is its fraction of
+// the chain's length, that bone plus joint -> end (the median over the take;
 // moving the joint along the line changes both). Bone lengths hold whether
-// or not the take ever straightens the chain. A joint the fraction would move
-// by more than half its bone keeps where the pass found it, with a warning.
-// True when a joint moved.
-bool Solver::split_chains() {
+// or not the take ever straightens the chain. Placing the joint there moves
+// what hangs below it (a part that carries it is fitted again, and the end
+// joint with it), so the target moves too: rounds repeat until the joint
+// sits within 1e-4 of its bone of its target, each round's step a secant
+// step from the last two (plain on the first). A joint the fraction would
+// move by more than half its bone keeps where it was found, with a warning.
+// True when a joint moved (another round is due); with `apply` false, when
+// one would, moving none.
+bool Solver::split_chains(bool first_round, bool apply) {
   bool moved = false;
   for (std::size_t j = 0; j < model_.joints.size(); ++j) {
     const ModelJoint& mj = model_.joints[j];
-    if (mj.split < 0) continue;
+    if (mj.split < 0 || (!first_round && !split_local_[j])) continue;
     const std::vector<Vector3d>& parent = joint_world_[static_cast<std::size_t>(mj.parent)];
     const std::vector<Vector3d>& end = joint_world_[static_cast<std::size_t>(mj.split)];
     const Part& p = parts_[static_cast<std::size_t>(mj.part)];
@@ -522,38 +538,51 @@ bool Solver::split_chains() {
       zs.push_back(h.z());
     }
     const Vector3d from(median(xs), median(ys), median(zs));
-    const Vector3d along = joint_local_[j] - from;
-    const double bone = along.norm();
+    const Vector3d base = found_local_[j];
+    const double bone = (base - from).norm();
     if (!(bone > 0)) continue;
-    const Vector3d u = along / bone;
-    // g(s) = (1 - fraction) * upper - fraction * lower with the joint moved
-    // by s: it rises with s (the upper bone grows, the lower shrinks).
+    const Vector3d u = (base - from) / bone;
+    // g(s) = (1 - fraction) * upper - fraction * lower with the joint s
+    // along the line from where it was found: it rises with s (the upper
+    // bone grows, the lower shrinks).
     std::vector<double> lower;
     auto g = [&](double shift) {
-      const Vector3d local = joint_local_[j] + shift * u;
+      const Vector3d local = base + shift * u;
       lower.clear();
       for (std::size_t f = 0; f < m_.frame_count; ++f) {
         if (finite(end[f])) lower.push_back((end[f] - p.poses[f].apply(local)).norm());
       }
-      return (1 - mj.split_fraction) * (bone + shift) - mj.split_fraction * median(lower);
+      return (1 - mj.split_fraction) * (local - from).norm() - mj.split_fraction * median(lower);
     };
     double lo = -bone / 2, hi = bone / 2;
-    const double g_lo = g(lo), g_hi = g(hi);
-    if (!(g_lo <= 0 && g_hi >= 0)) {
-      char fraction[32];
-      std::snprintf(fraction, sizeof fraction, "%g", mj.split_fraction);
-      warnings_.push_back(error("joint '" + mj.name + "': its split (" + fraction + " of the chain to '" +
-                                    model_.joints[static_cast<std::size_t>(mj.split)].name +
-                                    "') would move it by more than half its bone; it stays where it was found",
-                                mj.line));
-      continue;
+    if (!(g(lo) <= 0 && g(hi) >= 0)) {
+      if (first_round) {
+        char fraction[32];
+        std::snprintf(fraction, sizeof fraction, "%g", mj.split_fraction);
+        split_warnings_.push_back(error("joint '" + mj.name + "': its split (" + fraction + " of the chain to '" +
+                                            model_.joints[static_cast<std::size_t>(mj.split)].name +
+                                            "') would move it by more than half its bone; it stays where it was found",
+                                        mj.line));
+      }
+      continue;  // a later round keeps the last place
     }
     for (int i = 0; i < 60 && hi - lo > 1e-9 * bone; ++i) {
       const double mid = (lo + hi) / 2;
       (g(mid) < 0 ? lo : hi) = mid;
     }
-    split_local_[j] = joint_local_[j] + (lo + hi) / 2 * u;
+    const double target = (lo + hi) / 2;
+    const double offset = split_local_[j] ? (*split_local_[j] - base).dot(u) : 0;
+    const double gap = target - offset;
+    if (std::abs(gap) <= 1e-4 * bone) continue;
     moved = true;
+    if (!apply) continue;
+    SplitRound& last = split_rounds_[j];
+    double next = target;
+    if (last.seen && std::abs(gap - last.gap) > 1e-9 * bone) {
+      next = offset - gap * (offset - last.offset) / (gap - last.gap);
+    }
+    last = SplitRound{true, offset, gap};
+    split_local_[j] = base + std::clamp(next, -bone / 2, bone / 2) * u;
   }
   return moved;
 }
@@ -563,9 +592,9 @@ bool Solver::split_chains() {
 // fixed in such a part or whose expression uses a joint placed again, in the
 // model's order (parents, and the joints a part carries, come first). The
 // rest of the first pass stands: for cmu41 the shanks and feet are done
-// again, not the other 13 parts. The first pass's warnings about a joint
-// placed again are dropped (the second gives them again).
-Status Solver::place_again(std::size_t first_warning, std::size_t end_warning) {
+// again, not the other 13 parts. Earlier warnings about a joint placed
+// again are dropped (this round gives them again).
+Status Solver::place_again(std::size_t first_warning) {
   const std::size_t joints = model_.joints.size();
   std::vector<char> again(joints, 0), part_again(parts_.size(), 0);
   auto uses_again = [&](const auto& self, const PointExpr& e) -> bool {
@@ -586,7 +615,7 @@ Status Solver::place_again(std::size_t first_warning, std::size_t end_warning) {
   std::vector<Error> kept(warnings_.begin(), warnings_.begin() + static_cast<std::ptrdiff_t>(first_warning));
   for (std::size_t w = first_warning; w < warnings_.size(); ++w) {
     bool stale = false;
-    for (std::size_t j = 0; j < joints && w < end_warning && !stale; ++j) {
+    for (std::size_t j = 0; j < joints && !stale; ++j) {
       stale = again[j] && warnings_[w].message.rfind("joint '" + model_.joints[j].name + "':", 0) == 0;
     }
     if (!stale) kept.push_back(std::move(warnings_[w]));
@@ -711,14 +740,22 @@ Result<MarkerSolveResult> Solver::run(const MarkerSolveOptions& options) {
   }
   // Splits need the whole chain found: a first pass finds every joint, then
   // the split joints move and what depends on them is placed again.
+  found_local_.assign(model_.joints.size(), Vector3d::Zero());
   split_local_.assign(model_.joints.size(), std::nullopt);
+  split_rounds_.assign(model_.joints.size(), SplitRound{});
   const std::size_t warnings_before = warnings_.size();
   reset();
   if (auto s = place_all(); !s) return s.error();
-  const std::size_t warnings_after = warnings_.size();
-  if (split_chains()) {
-    if (auto s = place_again(warnings_before, warnings_after); !s) return s.error();
+  constexpr int kMaxSplitRounds = 10;
+  int round = 0;
+  for (; round < kMaxSplitRounds && split_chains(round == 0, true); ++round) {
+    if (auto s = place_again(warnings_before); !s) return s.error();
   }
+  if (round == kMaxSplitRounds && split_chains(false, false)) {
+    split_warnings_.push_back(error("the splits had not settled after " + std::to_string(kMaxSplitRounds) +
+                                    " rounds; their joints stay where the last round put them"));
+  }
+  warnings_.insert(warnings_.end(), split_warnings_.begin(), split_warnings_.end());
   auto motion = build_motion();
   if (!motion) return motion.error();
   MarkerSolveResult r;

@@ -171,6 +171,13 @@ std::vector<Vector3d> joint_track(const Motion& m, const std::string& name) {
   return out;
 }
 
+double median_distance(const std::vector<Vector3d>& a, const std::vector<Vector3d>& b) {
+  std::vector<double> d;
+  for (std::size_t i = 0; i < a.size(); ++i) d.push_back((a[i] - b[i]).norm());
+  std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2), d.end());
+  return d[d.size() / 2];
+}
+
 double max_distance(const std::vector<Vector3d>& a, const std::vector<Vector3d>& b) {
   double d = 0;
   for (std::size_t i = 0; i < a.size(); ++i) d = std::max(d, (a[i] - b[i]).norm());
@@ -342,6 +349,21 @@ joint j1 parent root in base centre arm prior along(mean(B1, B2, B3, B4), B1, B2
   EXPECT_LT(max_distance(joint_track(r->motion, "j2"), s.j2), 1e-3);
   EXPECT_NEAR(r->joints[j2_index].split_shift, 40.0, 1e-3);
   EXPECT_EQ(p->joints[j2_index].split_shift, 0.0);
+
+  // When the fore carries j2 as a point, moving j2 moves the fore's fit and
+  // the tip with it: the split is repeated until it holds in the result.
+  std::string coupled = model_text(" split tip 0.5");
+  coupled.replace(coupled.find("part fore F1"), 12, "part fore j2 F1");
+  auto c_model = parse_marker_model(coupled, "chain");
+  ASSERT_TRUE(c_model.ok()) << c_model.error().to_string();
+  auto c = solve_markers(s.markers, *c_model);
+  ASSERT_TRUE(c.ok()) << c.error().to_string();
+  EXPECT_TRUE(c->warnings.empty());
+  const double up = median_distance(joint_track(c->motion, "j1"), joint_track(c->motion, "j2"));
+  const double down = median_distance(joint_track(c->motion, "j2"), joint_track(c->motion, "tip"));
+  std::printf("coupled split: %.4f mm + %.4f mm, fraction %.6f, moved %.3f mm\n", up, down, up / (up + down),
+              c->joints[j2_index].split_shift);
+  EXPECT_NEAR(up / (up + down), 0.5, 1e-4);
 
   // 0.9 of the chain would take j2 past half its bone: refused with a
   // warning, j2 where its markers put it.

@@ -79,7 +79,8 @@ struct ModelJoint {
   // `split END FRACTION`: once found, the joint slides along the line from
   // its parent so that the bone parent -> joint is FRACTION of the chain's
   // length parent -> joint -> END (END: a joint further down the tree; both
-  // bones' median lengths over the take). It fixes the coordinate along the
+  // bones' median lengths over the take; repeated while moving the joint
+  // moves END, until it holds). It fixes the coordinate along the
   // bone that neither a lateral marker nor a short flexion does, from the
   // limb's proportions. -1: no split.
   int split = -1;
