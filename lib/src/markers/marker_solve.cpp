@@ -71,6 +71,24 @@ double median(std::vector<double> v) {
   return v[mid];
 }
 
+// The median of each coordinate of a point in a part's frame, over the
+// frames where `world(f)` (the point in the world) is finite; nullopt when
+// it never is.
+template <class World>
+std::optional<Vector3d> median_in_part(const std::vector<marker_detail::Pose>& poses, std::size_t frames, World world) {
+  std::vector<double> xs, ys, zs;
+  for (std::size_t f = 0; f < frames; ++f) {
+    const Vector3d w = world(f);
+    if (!finite(w)) continue;
+    const Vector3d l = poses[f].local(w);
+    xs.push_back(l.x());
+    ys.push_back(l.y());
+    zs.push_back(l.z());
+  }
+  if (xs.empty()) return std::nullopt;
+  return Vector3d(median(xs), median(ys), median(zs));
+}
+
 class Solver {
  public:
   Solver(const MarkerTrajectories& m, const MarkerModel& model) : m_(m), model_(model) {}
@@ -374,21 +392,13 @@ Status Solver::place_joint(int index) {
   const std::size_t frames = m_.frame_count;
   // The expression (position or prior) in the part's frame: the median of
   // each coordinate over the frames it can be evaluated in.
-  std::vector<double> xs, ys, zs;
-  for (std::size_t f = 0; f < frames; ++f) {
-    const Vector3d w = eval(mj.where, f);
-    if (!finite(w)) continue;
-    const Vector3d l = p.poses[f].local(w);
-    xs.push_back(l.x());
-    ys.push_back(l.y());
-    zs.push_back(l.z());
-  }
-  if (xs.empty()) {
+  const auto in_part = median_in_part(p.poses, frames, [&](std::size_t f) { return eval(mj.where, f); });
+  if (!in_part) {
     return error("joint '" + mj.name + "': its " + (mj.rule == ModelJoint::Rule::kAt ? "position" : "prior") +
                      " needs markers that are never all visible in one frame",
                  mj.line);
   }
-  const Vector3d expr_local(median(xs), median(ys), median(zs));
+  const Vector3d expr_local = *in_part;
   Vector3d local = expr_local;
   if (mj.rule == ModelJoint::Rule::kCentre) {
     jf.functional = true;
@@ -529,15 +539,9 @@ bool Solver::split_chains(bool first_round, bool apply) {
     const std::vector<Vector3d>& parent = joint_world_[static_cast<std::size_t>(mj.parent)];
     const std::vector<Vector3d>& end = joint_world_[static_cast<std::size_t>(mj.split)];
     const Part& p = parts_[static_cast<std::size_t>(mj.part)];
-    std::vector<double> xs, ys, zs;
-    for (std::size_t f = 0; f < m_.frame_count; ++f) {
-      if (!finite(parent[f])) continue;
-      const Vector3d h = p.poses[f].local(parent[f]);
-      xs.push_back(h.x());
-      ys.push_back(h.y());
-      zs.push_back(h.z());
-    }
-    const Vector3d from(median(xs), median(ys), median(zs));
+    const auto parent_in_part = median_in_part(p.poses, m_.frame_count, [&](std::size_t f) { return parent[f]; });
+    if (!parent_in_part) continue;
+    const Vector3d from = *parent_in_part;
     const Vector3d base = found_local_[j];
     const double bone = (base - from).norm();
     if (!(bone > 0)) continue;

@@ -192,7 +192,7 @@ Result<double> measure_send_budget() {
   // Ten rounds of two passes (the first warms what a millisecond asleep
   // cooled), 1 ms apart: a running server's I/O threads wait at most two
   // passes (about 0.5 ms) for it. One pass a round measured 3-8% slow.
-  auto c = calibrate_send_budget(480, 64, 20, 10, std::chrono::milliseconds(1));
+  auto c = calibrate_send_budget(kCalibrationBytes, kCalibrationConnections, 20, 10, std::chrono::milliseconds(1));
   if (!c.ok()) return c.error();
   return c->budget;
 }

@@ -35,6 +35,11 @@ struct SendCalibration {
 inline constexpr double kReferenceBudget = 108000;
 inline constexpr double kReferenceNsPerSend = 3350;
 
+// A frame-sized message and a fan-out's width: the start's calibration and
+// measure_send_budget() use the same.
+inline constexpr std::size_t kCalibrationBytes = 480;
+inline constexpr std::size_t kCalibrationConnections = 64;
+
 // On each CPU the process may use (at most 16), a thread pinned there in
 // turn times `passes` passes, each a write of `bytes` bytes to every one of
 // `connections` loopback TCP connections (TCP_NODELAY; the readers drained
@@ -51,7 +56,8 @@ inline constexpr double kReferenceNsPerSend = 3350;
 // (the machine's slow spells last seconds), which BudgetRefresh corrects
 // (docs/performance.md, "Admission against the grid"). An error when no
 // loopback connection can be made.
-Result<SendCalibration> calibrate_send_budget(std::size_t bytes = 480, std::size_t connections = 64, int passes = 100,
+Result<SendCalibration> calibrate_send_budget(std::size_t bytes = kCalibrationBytes,
+                                              std::size_t connections = kCalibrationConnections, int passes = 100,
                                               int rounds = 10,
                                               std::chrono::milliseconds gap = std::chrono::milliseconds(50));
 
