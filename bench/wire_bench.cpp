@@ -4,7 +4,8 @@
 // (the browser viewer) costs per frame (docs/protocol.md, "WebSocket"): by
 // protobuf's MessageToJsonString, and by the server's frame_to_json.
 // A frame of 38 joints (CMU's BVH skeleton with its end sites), float64;
-// the body also as a pb::Frame serialized (what encode_frame_body did once).
+// the body also as a pb::Frame serialized (what encode_frame_body did once);
+// and a client's decoding of a frame, two ways.
 #include <benchmark/benchmark.h>
 #include <google/protobuf/util/json_util.h>
 
@@ -69,6 +70,47 @@ void BM_Head(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(wire::frame_head_for(1, 2, 3, b.size(), false).size());
 }
 BENCHMARK(BM_Head)->Name("frame/subscriber_head");
+
+// What a client does with each frame that arrives: a CMU 01_01 frame as
+// gmr-load and the plugins get it (float32 positions), whole ServerMessage
+// bytes to values. Through protobuf (parse, then decode_frame: what the C++
+// client did) and read in place into a FrameValues kept between frames.
+std::string float32_message() {
+  static const std::vector<double> p = positions();
+  const std::vector<float> pf(p.begin(), p.end());
+  wire::FrameContent c;
+  c.skeleton_version = 3;
+  c.frame_index = 1234;
+  c.motion_time = 10.28;
+  c.sequence = 99999;
+  c.server_send_time_ns = 1795000000000000000;
+  c.positions = pf;
+  return wire::frame_message_for(1, 2, 3, wire::encode_frame_body(c), 1795000000000100000);
+}
+
+void BM_DecodeByProtobuf(benchmark::State& state) {
+  const std::string message = float32_message();
+  for (auto _ : state) {
+    ::gmr::stream::v1::ServerMessage m;
+    m.ParseFromArray(message.data(), static_cast<int>(message.size()));
+    auto values = wire::decode_frame(m.frame());
+    benchmark::DoNotOptimize(values->positions.data());
+  }
+  state.counters["bytes"] = static_cast<double>(message.size());
+}
+BENCHMARK(BM_DecodeByProtobuf)->Name("frame/decode_through_protobuf");
+
+void BM_DecodeInPlace(benchmark::State& state) {
+  const std::string message = float32_message();
+  wire::FrameValues values;
+  for (auto _ : state) {
+    wire::FrameFields fields;
+    if (!wire::read_frame_message(message, fields)) state.SkipWithError("not read");
+    (void)wire::unpack_frame(fields, values);
+    benchmark::DoNotOptimize(values.positions.data());
+  }
+}
+BENCHMARK(BM_DecodeInPlace)->Name("frame/decode_read_in_place");
 
 void BM_ToJson(benchmark::State& state) {
   const std::string message = wire::frame_message_for(1, 2, 3, body());

@@ -1,9 +1,12 @@
 // What a server or client reads from the network: the first byte picks the
 // decoder (length prefix, ClientMessage, ServerMessage and its frames and
 // skeletons, UDP registration, UDP fragments), the rest is its input. Any
-// bytes give a value or an error, never a crash or unbounded memory.
+// bytes give a value or an error, never a crash or unbounded memory; and a
+// frame the client reads in place holds what protobuf parses from it.
 #include <array>
 #include <cstdint>
+#include <cstdlib>
+#include <cstring>
 #include <span>
 #include <string>
 
@@ -14,6 +17,23 @@
 #include "gmr/wire/udp.h"
 
 namespace pb = gmr::stream::v1;
+
+namespace {
+
+// Bit for bit (NaNs too).
+bool same_frame(const gmr::wire::FrameValues& a, const gmr::wire::FrameValues& b) {
+  auto same = [](const auto& x, const auto& y) {
+    return x.size() == y.size() && (x.empty() || std::memcmp(x.data(), y.data(), x.size() * sizeof x[0]) == 0);
+  };
+  return a.view_id == b.view_id && a.subscription_id == b.subscription_id && a.stream_id == b.stream_id &&
+         a.skeleton_version == b.skeleton_version && a.frame_index == b.frame_index &&
+         std::memcmp(&a.motion_time, &b.motion_time, sizeof a.motion_time) == 0 && a.sequence == b.sequence &&
+         a.server_send_time_ns == b.server_send_time_ns && a.server_write_time_ns == b.server_write_time_ns &&
+         a.float64 == b.float64 && same(a.positions, b.positions) && same(a.orientations, b.orientations) &&
+         same(a.local_rotations, b.local_rotations) && same(a.local_translations, b.local_translations);
+}
+
+}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;
@@ -33,8 +53,23 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       break;
     }
     case 2: {  // a reply as the client decodes it
+      // A frame read in place must be the frame protobuf parses (checked: a
+      // difference aborts).
+      gmr::wire::FrameFields fields;
+      const bool read = gmr::wire::read_frame_message(body, fields);
       pb::ServerMessage m;
-      if (!m.ParseFromString(body)) break;
+      if (!m.ParseFromString(body)) {
+        if (read) std::abort();
+        break;
+      }
+      if (read) {
+        if (!m.has_frame()) std::abort();
+        gmr::wire::FrameValues in_place;
+        const gmr::Status s = gmr::wire::unpack_frame(fields, in_place);
+        const auto parsed = gmr::wire::decode_frame(m.frame());
+        if (s.ok() != parsed.ok()) std::abort();
+        if (s.ok() && !same_frame(in_place, *parsed)) std::abort();
+      }
       if (m.has_frame()) (void)gmr::wire::decode_frame(m.frame());
       if (m.has_frames()) (void)gmr::wire::decode_block(m.frames());
       if (m.has_view()) (void)gmr::wire::from_proto(m.view().skeleton());

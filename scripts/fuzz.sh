@@ -27,7 +27,7 @@ if [ ! -d "$DATA" ]; then
 fi
 mkdir -p "$BUILD/artifacts" "$BUILD/logs"
 
-# Seeds: files of the harness's kind (the wire harness starts from nothing;
+# Seeds: files of the harness's kind (the wire harness from three frames in fuzz/seeds/wire;
 # the request harness from the sessions its seed program writes).
 seed() {
   local name=$1 dir=$BUILD/corpus/$1

@@ -132,6 +132,9 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
     std::uint64_t arrived = 0;
     std::optional<SubscriptionEnd> ending{};
     std::shared_ptr<net::steady_timer> ending_timer{};
+    // Each frame is decoded into this one (on the strand, one at a time), so
+    // a frame costs no allocation once its lists have grown.
+    ReceivedFrame frame{};
   };
   static constexpr auto kEndGrace = std::chrono::milliseconds(100);
   // The multicast group's socket (the first multicast subscription opens it).
@@ -184,10 +187,17 @@ struct Client::Impl : std::enable_shared_from_this<Impl> {
   void finish_ending(std::uint32_t id, const std::shared_ptr<Sub>& sub, bool now);
 
   void on_message(const pb::ServerMessage& m, bool via_udp);
+  // A whole ServerMessage as it came: a frame in the form servers write it is
+  // read in place (wire::read_frame_message), anything else parsed by
+  // protobuf and handed to on_message (over UDP, only frames). False when it
+  // does not parse.
+  bool take_message(std::string_view message, bool via_udp);
 
-  // Hands a frame to its subscription's on_frame (or drops and counts it);
-  // the subscription it was for, or null.
-  std::shared_ptr<Sub> deliver_frame(const pb::Frame& f, bool via_udp);
+  // Hands a frame to its subscription's on_frame (or drops and counts it, or
+  // holds it while a Subscribe is in flight: `held` is the frame as a
+  // message, made only then); the subscription it was for, or null.
+  std::shared_ptr<Sub> deliver_frame(const wire::FrameFields& f, bool via_udp,
+                                     const std::function<pb::ServerMessage()>& held);
 
   // A reply to a request (its caller's promise), or a push (an end, a new
   // skeleton, the UDP registration, an error).

@@ -32,7 +32,8 @@ std::string Client::Impl::bad_joints(const google::protobuf::RepeatedField<std::
 
 void Client::Impl::on_message(const pb::ServerMessage& m, bool via_udp) {
   if (m.has_frame()) {
-    if (auto sub = deliver_frame(m.frame(), via_udp)) finish_ending(m.frame().subscription_id(), sub, false);
+    if (auto sub = deliver_frame(wire::frame_fields(m.frame()), via_udp, [&] { return m; }))
+      finish_ending(m.frame().subscription_id(), sub, false);
     return;
   }
   if (m.request_id() != 0) {
@@ -42,25 +43,41 @@ void Client::Impl::on_message(const pb::ServerMessage& m, bool via_udp) {
   }
 }
 
-std::shared_ptr<Client::Impl::Sub> Client::Impl::deliver_frame(const pb::Frame& f, bool via_udp) {
+bool Client::Impl::take_message(std::string_view message, bool via_udp) {
+  wire::FrameFields f;
+  if (wire::read_frame_message(message, f)) {
+    auto held = [message] {
+      pb::ServerMessage m;
+      m.ParseFromArray(message.data(), static_cast<int>(message.size()));  // as read_frame_message read it
+      return m;
+    };
+    if (auto sub = deliver_frame(f, via_udp, held)) finish_ending(f.subscription_id, sub, false);
+    return true;
+  }
+  pb::ServerMessage m;
+  if (!m.ParseFromArray(message.data(), static_cast<int>(message.size()))) return false;
+  if (!via_udp || m.has_frame()) on_message(m, via_udp);
+  return true;
+}
+
+std::shared_ptr<Client::Impl::Sub> Client::Impl::deliver_frame(const wire::FrameFields& f, bool via_udp,
+                                                               const std::function<pb::ServerMessage()>& held) {
   std::shared_ptr<Sub> sub;
   std::size_t values = 0;  // what the frame must carry (0: not stated)
   {
     std::lock_guard lock(mutex);
     (via_udp ? counters.frames_udp : counters.frames_tcp)++;
-    if (auto it = subs.find(f.subscription_id()); it != subs.end()) {
+    if (auto it = subs.find(f.subscription_id); it != subs.end()) {
       sub = it->second;
       values = sub->values;
       ++sub->arrived;
-      if (f.skeleton_version() != sub->skeleton_version) {
+      if (f.skeleton_version != sub->skeleton_version) {
         ++counters.frames_other_skeleton;
         return sub;
       }
     } else if (subscribes_in_flight > 0) {
       if (early_frames.size() == kMaxEarlyFrames) early_frames.pop_front();
-      pb::ServerMessage held;
-      *held.mutable_frame() = f;
-      early_frames.emplace_back(std::move(held), via_udp);
+      early_frames.emplace_back(held(), via_udp);
       (via_udp ? counters.frames_udp : counters.frames_tcp)--;  // counted when replayed
       return nullptr;
     }
@@ -69,19 +86,17 @@ std::shared_ptr<Client::Impl::Sub> Client::Impl::deliver_frame(const pb::Frame& 
   const std::int64_t received = now_ns();
   // Older than its bound (it waited in the kernel's buffers while this
   // client was not reading): dropped, counted.
-  if (sub->max_age_ns > 0 && received + hello.clock_offset_ns - f.server_send_time_ns() > sub->max_age_ns) {
+  if (sub->max_age_ns > 0 && received + hello.clock_offset_ns - f.server_send_time_ns > sub->max_age_ns) {
     std::lock_guard lock(mutex);
     ++counters.frames_stale;
     return sub;
   }
-  auto decoded = wire::decode_frame(f);
-  if (!decoded.ok() || (values != 0 && decoded->positions.size() != values)) {
+  ReceivedFrame& r = sub->frame;
+  if (!wire::unpack_frame(f, r).ok() || (values != 0 && r.positions.size() != values)) {
     std::lock_guard lock(mutex);
     ++counters.frames_malformed;
     return sub;
   }
-  ReceivedFrame r;
-  static_cast<wire::FrameValues&>(r) = std::move(decoded).value();
   r.receive_time_ns = received;
   r.udp = via_udp;
   sub->on_frame(r);

@@ -75,13 +75,12 @@ bool Client::Impl::take_messages() {
     }
     whole = in_end_ - at - wire::kLengthPrefixBytes >= next;
     if (!whole) break;
-    pb::ServerMessage m;
-    if (!m.ParseFromArray(in_.data() + at + wire::kLengthPrefixBytes, static_cast<int>(next))) {
+    const std::string_view message(in_.data() + at + wire::kLengthPrefixBytes, next);
+    at += wire::kLengthPrefixBytes + next;
+    if (!take_message(message, false)) {
       fail("the server sent a message that does not parse");
       return false;
     }
-    at += wire::kLengthPrefixBytes + next;
-    on_message(m, false);
     if (!open) return false;
   }
   // What is left (part of a message) moves to the front.

@@ -17,8 +17,7 @@ void Client::Impl::read_udp() {
                                       boost::system::error_code send_ec;
                                       self->udp_socket.send_to(net::buffer(confirm), self->server_udp, 0, send_ec);
                                     } else if (auto msg = self->reassembler.add(d)) {
-                                      pb::ServerMessage m;
-                                      if (m.ParseFromString(*msg) && m.has_frame()) self->on_message(m, true);
+                                      self->take_message(*msg, true);
                                     }
                                     std::lock_guard lock(self->mutex);
                                     self->counters.udp_incomplete_dropped = self->reassembler.dropped();

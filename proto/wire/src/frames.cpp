@@ -229,28 +229,226 @@ Status unpack_locals(const Values& rotations, const Values& translations, std::s
 
 }  // namespace
 
-Result<FrameValues> decode_frame(const pb::Frame& f) {
-  FrameValues d;
-  d.view_id = f.view_id();
-  d.subscription_id = f.subscription_id();
-  d.stream_id = f.stream_id();
-  d.skeleton_version = f.skeleton_version();
-  d.frame_index = f.frame_index();
-  d.motion_time = f.motion_time();
-  d.sequence = f.sequence();
-  d.server_send_time_ns = f.server_send_time_ns();
-  d.server_write_time_ns = f.server_write_time_ns();
-  d.float64 = f.positions_f64_size() > 0;
-  Status s = d.float64 ? unpack(f.positions_f64(), f.orientations_f64(), d.positions, d.orientations)
-                       : unpack(f.positions(), f.orientations(), d.positions, d.orientations);
+FrameFields frame_fields(const pb::Frame& f) {
+  FrameFields r;
+  r.view_id = f.view_id();
+  r.subscription_id = f.subscription_id();
+  r.stream_id = f.stream_id();
+  r.server_write_time_ns = f.server_write_time_ns();
+  r.skeleton_version = f.skeleton_version();
+  r.frame_index = f.frame_index();
+  r.motion_time = f.motion_time();
+  r.sequence = f.sequence();
+  r.server_send_time_ns = f.server_send_time_ns();
+  auto packed = [](const auto& list) {
+    using T = std::decay_t<decltype(*list.data())>;
+    return Packed<T>(list.data(), static_cast<std::size_t>(list.size()));
+  };
+  r.positions = packed(f.positions());
+  r.orientations = packed(f.orientations());
+  r.local_rotations = packed(f.local_rotations());
+  r.local_translations = packed(f.local_translations());
+  r.positions_f64 = packed(f.positions_f64());
+  r.orientations_f64 = packed(f.orientations_f64());
+  r.local_rotations_f64 = packed(f.local_rotations_f64());
+  r.local_translations_f64 = packed(f.local_translations_f64());
+  return r;
+}
+
+namespace {
+
+// Protobuf's wire format, read as protobuf reads it, for the fields a frame
+// has; anything it would read otherwise (or refuse) makes read() false.
+class FrameReader {
+ public:
+  explicit FrameReader(std::string_view bytes) : p_(bytes.data()), end_(bytes.data() + bytes.size()) {}
+
+  // The ServerMessage's one field: the frame, to the end of the bytes.
+  bool read_message(FrameFields& out) {
+    std::uint64_t t = 0, n = 0;
+    if (!varint(t, 5) || t != tag(pb::ServerMessage::kFrameFieldNumber, 2) || !varint(n, 5) || n != left()) {
+      return false;
+    }
+    return read_frame(out);
+  }
+
+ private:
+  bool read_frame(FrameFields& out) {
+    using F = pb::Frame;
+    std::uint32_t lists_seen = 0;  // a list in two pieces is appended by protobuf: not done here
+    while (p_ != end_) {
+      std::uint64_t t = 0;
+      if (!varint(t, 5) || t > 0xffffffffu || (t >> 3) == 0) return false;
+      const auto number = static_cast<int>(t >> 3);
+      const auto wire_type = static_cast<int>(t & 7);
+      std::uint64_t v = 0;
+      bool ok = true;
+      switch (t) {
+        case tag(F::kViewIdFieldNumber, 0):
+          ok = uint32(out.view_id);
+          break;
+        case tag(F::kSubscriptionIdFieldNumber, 0):
+          ok = uint32(out.subscription_id);
+          break;
+        case tag(F::kStreamIdFieldNumber, 0):
+          ok = varint(out.stream_id);
+          break;
+        case tag(F::kServerWriteTimeNsFieldNumber, 1):
+          ok = fixed64(v);
+          out.server_write_time_ns = static_cast<std::int64_t>(v);
+          break;
+        case tag(F::kSkeletonVersionFieldNumber, 0):
+          ok = uint32(out.skeleton_version);
+          break;
+        case tag(F::kFrameIndexFieldNumber, 0):
+          ok = varint(out.frame_index);
+          break;
+        case tag(F::kMotionTimeFieldNumber, 1):
+          ok = fixed64(v);
+          std::memcpy(&out.motion_time, &v, sizeof v);
+          break;
+        case tag(F::kSequenceFieldNumber, 0):
+          ok = varint(out.sequence);
+          break;
+        case tag(F::kServerSendTimeNsFieldNumber, 0):
+          ok = varint(v);
+          out.server_send_time_ns = static_cast<std::int64_t>(v);
+          break;
+        case tag(F::kPositionsFieldNumber, 2):
+          ok = list(number, lists_seen, out.positions);
+          break;
+        case tag(F::kOrientationsFieldNumber, 2):
+          ok = list(number, lists_seen, out.orientations);
+          break;
+        case tag(F::kLocalRotationsFieldNumber, 2):
+          ok = list(number, lists_seen, out.local_rotations);
+          break;
+        case tag(F::kLocalTranslationsFieldNumber, 2):
+          ok = list(number, lists_seen, out.local_translations);
+          break;
+        case tag(F::kPositionsF64FieldNumber, 2):
+          ok = list(number, lists_seen, out.positions_f64);
+          break;
+        case tag(F::kOrientationsF64FieldNumber, 2):
+          ok = list(number, lists_seen, out.orientations_f64);
+          break;
+        case tag(F::kLocalRotationsF64FieldNumber, 2):
+          ok = list(number, lists_seen, out.local_rotations_f64);
+          break;
+        case tag(F::kLocalTranslationsF64FieldNumber, 2):
+          ok = list(number, lists_seen, out.local_translations_f64);
+          break;
+        default:
+          // A list's values one by one (unpacked): protobuf appends them.
+          if (number >= F::kPositionsFieldNumber && number <= F::kLocalTranslationsF64FieldNumber) return false;
+          // Any other field, or a known one of another wire type, is an
+          // unknown field to protobuf: skipped.
+          ok = skip(wire_type);
+      }
+      if (!ok) return false;
+    }
+    return true;
+  }
+
+  std::size_t left() const { return static_cast<std::size_t>(end_ - p_); }
+
+  // A value: at most 10 bytes and 64 bits (protobuf drops bits past 64: not
+  // done here). Tags and lengths: at most 5 bytes, as protobuf reads them.
+  bool varint(std::uint64_t& v, int max_bytes = 10) {
+    v = 0;
+    for (int i = 0; i < max_bytes; ++i) {
+      if (p_ == end_) return false;
+      const auto b = static_cast<std::uint8_t>(*p_++);
+      if (i == 9 && b > 1) return false;
+      v |= static_cast<std::uint64_t>(b & 0x7f) << (7 * i);
+      if (b < 0x80) return true;
+    }
+    return false;
+  }
+  // A uint32 field (protobuf keeps the low 32 bits of a longer value: not done here).
+  bool uint32(std::uint32_t& v) {
+    std::uint64_t w = 0;
+    if (!varint(w) || w > 0xffffffffu) return false;
+    v = static_cast<std::uint32_t>(w);
+    return true;
+  }
+  bool fixed64(std::uint64_t& v) {
+    if (left() < sizeof v) return false;
+    std::memcpy(&v, p_, sizeof v);  // little-endian, as the host (static_assert in write_body)
+    p_ += sizeof v;
+    return true;
+  }
+  bool length(std::uint64_t& n) { return varint(n, 5) && n <= left(); }
+  template <class T>
+  bool list(int number, std::uint32_t& seen, Packed<T>& out) {
+    const std::uint32_t bit = 1u << (number - pb::Frame::kPositionsFieldNumber);
+    std::uint64_t n = 0;
+    if ((seen & bit) != 0 || !length(n) || n % sizeof(T) != 0) return false;
+    seen |= bit;
+    out = Packed<T>(p_, n / sizeof(T));
+    p_ += n;
+    return true;
+  }
+  bool skip(int wire_type) {
+    std::uint64_t n = 0;
+    switch (wire_type) {
+      case 0:
+        return varint(n);
+      case 1:
+        n = 8;
+        break;
+      case 2:
+        if (!varint(n, 5)) return false;
+        break;
+      case 5:
+        n = 4;
+        break;
+      default:
+        return false;  // groups (3, 4) and the unused 6, 7
+    }
+    if (n > left()) return false;
+    p_ += n;
+    return true;
+  }
+
+  const char* p_;
+  const char* end_;
+};
+
+}  // namespace
+
+bool read_frame_message(std::string_view message, FrameFields& out) {
+  out = FrameFields{};
+  return FrameReader(message).read_message(out);
+}
+
+Status unpack_frame(const FrameFields& f, FrameValues& d) {
+  d.view_id = f.view_id;
+  d.subscription_id = f.subscription_id;
+  d.stream_id = f.stream_id;
+  d.skeleton_version = f.skeleton_version;
+  d.frame_index = f.frame_index;
+  d.motion_time = f.motion_time;
+  d.sequence = f.sequence;
+  d.server_send_time_ns = f.server_send_time_ns;
+  d.server_write_time_ns = f.server_write_time_ns;
+  d.float64 = !f.positions_f64.empty();
+  Status s = d.float64 ? unpack(f.positions_f64, f.orientations_f64, d.positions, d.orientations)
+                       : unpack(f.positions, f.orientations, d.positions, d.orientations);
   if (s.ok()) {
-    s = d.float64 ? unpack_locals(f.local_rotations_f64(), f.local_translations_f64(), d.positions.size(),
+    s = d.float64 ? unpack_locals(f.local_rotations_f64, f.local_translations_f64, d.positions.size(),
                                   d.local_rotations, d.local_translations)
-                  : unpack_locals(f.local_rotations(), f.local_translations(), d.positions.size(), d.local_rotations,
+                  : unpack_locals(f.local_rotations, f.local_translations, d.positions.size(), d.local_rotations,
                                   d.local_translations);
   }
   if (!s.ok())
     return make_error(ErrorKind::kInvalidData, "frame " + std::to_string(d.frame_index) + ": " + s.error().message);
+  return Ok{};
+}
+
+Result<FrameValues> decode_frame(const pb::Frame& f) {
+  FrameValues d;
+  if (auto s = unpack_frame(frame_fields(f), d); !s.ok()) return s.error();
   return d;
 }
 

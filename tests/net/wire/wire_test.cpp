@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstring>
 #include <limits>
 #include <random>
 
@@ -282,6 +283,167 @@ TEST(FrameEncoding, TheBodyIsWhatProtobufWrites) {
     ++cases;
   }
   EXPECT_EQ(cases, 64);
+}
+
+// Two decodings of a frame hold the same values, bit for bit (NaNs too).
+bool same_values(const gmr::wire::FrameValues& a, const gmr::wire::FrameValues& b) {
+  auto same = [](const auto& x, const auto& y) {
+    return x.size() == y.size() && (x.empty() || std::memcmp(x.data(), y.data(), x.size() * sizeof x[0]) == 0);
+  };
+  return a.view_id == b.view_id && a.subscription_id == b.subscription_id && a.stream_id == b.stream_id &&
+         a.skeleton_version == b.skeleton_version && a.frame_index == b.frame_index &&
+         std::memcmp(&a.motion_time, &b.motion_time, sizeof a.motion_time) == 0 && a.sequence == b.sequence &&
+         a.server_send_time_ns == b.server_send_time_ns && a.server_write_time_ns == b.server_write_time_ns &&
+         a.float64 == b.float64 && same(a.positions, b.positions) && same(a.orientations, b.orientations) &&
+         same(a.local_rotations, b.local_rotations) && same(a.local_translations, b.local_translations);
+}
+
+enum class Reading { kRead, kLeftToProtobuf };
+
+// What read_frame_message does with `bytes`, having checked that when it
+// reads them protobuf parses the same frame: the same values, or the same
+// error. `kept` is decoded into again, as a client does.
+Reading read_as_protobuf_does(const std::string& bytes, gmr::wire::FrameValues& kept) {
+  gmr::wire::FrameFields fields;
+  if (!gmr::wire::read_frame_message(bytes, fields)) return Reading::kLeftToProtobuf;
+  pb::ServerMessage m;
+  EXPECT_TRUE(m.ParseFromString(bytes) && m.has_frame()) << "read what protobuf does not parse as a frame";
+  const auto by_protobuf = gmr::wire::decode_frame(m.frame());
+  const gmr::Status read = gmr::wire::unpack_frame(fields, kept);
+  EXPECT_EQ(read.ok(), by_protobuf.ok());
+  if (read.ok() && by_protobuf.ok()) {
+    EXPECT_TRUE(same_values(kept, *by_protobuf)) << "frame " << kept.frame_index;
+  } else if (!read.ok() && !by_protobuf.ok()) {
+    EXPECT_EQ(read.error().message, by_protobuf.error().message);
+  }
+  return Reading::kRead;
+}
+
+// Every frame a server writes, of every kind, is read in place with
+// protobuf's values, into one FrameValues after another of other sizes.
+TEST(FrameReading, ReadsEveryFrameAServerWritesWithProtobufsValues) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> value(-1e4, 1e4);
+  gmr::wire::FrameValues kept;
+  int read = 0;
+  for (int k = 0; k < 128; ++k) {
+    const bool float64 = (k & 1) != 0, orientations = (k & 2) != 0, locals = (k & 4) != 0, zeros = (k & 8) != 0;
+    const std::size_t joints = zeros ? 0 : static_cast<std::size_t>(1 + (k * 7) % 40);
+    std::vector<double> p(3 * joints), q(orientations ? 4 * joints : 0), lr(locals ? 4 * joints : 0),
+        lt(locals ? 3 * joints : 0);
+    for (auto* v : {&p, &q, &lr, &lt}) {
+      for (auto& x : *v) x = value(rng);
+    }
+    const std::vector<float> pf(p.begin(), p.end()), qf(q.begin(), q.end()), lrf(lr.begin(), lr.end()),
+        ltf(lt.begin(), lt.end());
+    gmr::wire::FrameContent c;
+    c.skeleton_version = zeros ? 0 : static_cast<std::uint32_t>(k) << (k % 25);
+    c.frame_index = zeros ? 0 : (std::uint64_t{1} << (k % 64));
+    c.motion_time = zeros ? 0.0 : value(rng);
+    c.sequence = zeros ? 0 : std::numeric_limits<std::uint64_t>::max() - static_cast<std::uint64_t>(k);
+    c.server_send_time_ns = zeros ? 0 : (k % 3 == 0 ? -123456789 : 1'700'000'000'000'000'000 + k);
+    c.float64 = float64;
+    if (float64) {
+      c.positions_f64 = p;
+      c.orientations_f64 = q;
+      c.local_rotations_f64 = lr;
+      c.local_translations_f64 = lt;
+    } else {
+      c.positions = pf;
+      c.orientations = qf;
+      c.local_rotations = lrf;
+      c.local_translations = ltf;
+    }
+    const std::uint32_t id = zeros ? 0 : std::numeric_limits<std::uint32_t>::max() >> (k % 32);
+    const std::string message = gmr::wire::frame_message_for(id, id / 2 + 1, std::uint64_t{id} << (k % 32),
+                                                             gmr::wire::encode_frame_body(c), zeros ? 0 : -k);
+    ASSERT_EQ(read_as_protobuf_does(message, kept), Reading::kRead) << "case " << k;
+    EXPECT_EQ(kept.positions.size(), joints);
+    EXPECT_EQ(kept.float64, float64 && joints > 0);
+    ++read;
+  }
+  EXPECT_EQ(read, 128);
+}
+
+// Bytes that are not quite what a server writes: read in place only where
+// protobuf parses the same frame (an unknown field, a field repeated: the
+// last value), left to protobuf otherwise (an unpacked list, a list in two
+// pieces, a request id beside the frame, varints protobuf would truncate or
+// refuse), and never read differently; then every cut and one-byte change of
+// a real frame, and random bytes after a frame's tag.
+TEST(FrameReading, LeavesToProtobufWhatItDoesNotReadAndNeverDisagrees) {
+  gmr::wire::FrameContent c;
+  c.skeleton_version = 2;
+  c.frame_index = 40;
+  c.sequence = 7;
+  c.server_send_time_ns = 1'700'000'000'000'000'000;
+  const std::vector<float> p{1, 2, 3, 4, 5, 6};
+  c.positions = p;
+  const std::string body = gmr::wire::encode_frame_body(c);
+  auto frame_of = [](const std::string& frame_fields) {
+    std::string m = "\xb2\x01";  // ServerMessage.frame, length-delimited
+    std::uint64_t n = frame_fields.size();
+    for (; n >= 0x80; n >>= 7) m += static_cast<char>((n & 0x7f) | 0x80);
+    return m + static_cast<char>(n) + frame_fields;
+  };
+  const std::string floats(reinterpret_cast<const char*>(p.data()), 24);
+  struct Case {
+    const char* what;
+    std::string bytes;
+    Reading expected;
+  };
+  const std::vector<Case> cases{
+      {"a server's frame", frame_of("\x08\x01\x10\x02" + body), Reading::kRead},
+      {"an unknown varint field", frame_of(body + std::string("\xa8\x06\x05", 3)), Reading::kRead},
+      {"an unknown length-delimited field", frame_of(body + std::string("\xaa\x06\x02xy", 5)), Reading::kRead},
+      {"a known field of another wire type", frame_of(std::string("\x0d\x01\x02\x03\x04", 5) + body), Reading::kRead},
+      {"a field given twice (the last counts)", frame_of(body + std::string("\x98\x01\x09", 3)), Reading::kRead},
+      {"an empty frame", frame_of(""), Reading::kRead},
+      {"a non-minimal varint", frame_of(std::string("\x08\x81\x80\x00", 4) + body), Reading::kRead},
+      {"positions unpacked", frame_of(std::string("\xad\x01", 2) + floats.substr(0, 4)), Reading::kLeftToProtobuf},
+      {"positions in two pieces",
+       frame_of(std::string("\xaa\x01\x0c", 3) + floats.substr(0, 12) + std::string("\xaa\x01\x0c", 3) +
+                floats.substr(12)),
+       Reading::kLeftToProtobuf},
+      {"a request id beside the frame", std::string("\x08\x05", 2) + frame_of(body), Reading::kLeftToProtobuf},
+      {"bytes after the frame", frame_of(body) + std::string("\x08\x05", 2), Reading::kLeftToProtobuf},
+      {"another message", std::string("\xa2\x01\x00", 3), Reading::kLeftToProtobuf},
+      {"a uint32 past 32 bits", frame_of(std::string("\x08\x80\x80\x80\x80\x10", 6) + body), Reading::kLeftToProtobuf},
+      {"a varint past 64 bits", frame_of(std::string("\x18\xff\xff\xff\xff\xff\xff\xff\xff\xff\x7f", 11)),
+       Reading::kLeftToProtobuf},
+      {"a tag of six bytes", frame_of(std::string("\x88\x80\x80\x80\x80\x00\x01", 7)), Reading::kLeftToProtobuf},
+      {"a group", frame_of(std::string("\xab\x06\xac\x06", 4)), Reading::kLeftToProtobuf},
+      {"positions of 5 bytes", frame_of(std::string("\xaa\x01\x05", 3) + floats.substr(0, 5)),
+       Reading::kLeftToProtobuf},
+      {"a length past the end", frame_of(body).substr(0, 10), Reading::kLeftToProtobuf},
+  };
+  gmr::wire::FrameValues kept;
+  for (const Case& k : cases) EXPECT_EQ(read_as_protobuf_does(k.bytes, kept), k.expected) << k.what;
+
+  // Every cut and every one-byte change of a whole frame (ids, stamp, body).
+  const std::string whole = gmr::wire::frame_message_for(300, 70000, 5, body, 99);
+  int read = 0, left = 0;
+  auto count = [&](const std::string& bytes) {
+    (read_as_protobuf_does(bytes, kept) == Reading::kRead ? read : left)++;
+  };
+  for (std::size_t n = 0; n < whole.size(); ++n) count(whole.substr(0, n));
+  for (std::size_t i = 0; i < whole.size(); ++i) {
+    for (int b : {0x00, 0x01, 0x07, 0x08, 0x7f, 0x80, 0xff}) {
+      std::string changed = whole;
+      changed[i] = static_cast<char>(b);
+      count(changed);
+    }
+  }
+  std::mt19937 rng(5);
+  for (int k = 0; k < 20000; ++k) {
+    std::string fields(static_cast<std::size_t>(rng() % 40), '\0');
+    for (auto& ch : fields) ch = static_cast<char>(rng() % 4 == 0 ? rng() % 0x40 : rng());
+    count(frame_of(fields));
+  }
+  EXPECT_EQ(read + left, static_cast<int>(whole.size() * 8) + 20000);
+  // Both ways taken many times: the comparisons above were made.
+  EXPECT_GT(read, 1000);
+  EXPECT_GT(left, 1000);
 }
 
 TEST(FrameDecoding, RefusesCountsThatDoNotFormWholeValues) {

@@ -273,6 +273,9 @@ struct Publication {
   std::string recording;  // with PublishOptions::record: the file the server will write
 };
 
+// Runs on the client's I/O thread for each frame; the ReceivedFrame is the
+// subscription's own, decoded into again for the next frame, so it is valid
+// during the call only (copy what is kept).
 using FrameCallback = std::function<void(const ReceivedFrame&)>;
 using EndCallback = std::function<void(const SubscriptionEnd&)>;
 

@@ -17,6 +17,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <cstring>
 #include <span>
 #include <string>
 #include <string_view>
@@ -58,10 +59,62 @@ std::string encode_frame_body(const FrameContent& content);
 std::string frame_message_for(std::uint32_t view_id, std::uint32_t subscription_id, std::uint64_t stream_id,
                               std::string_view body, std::int64_t write_ns = 0);
 
-// A pushed frame as values, from whichever precision it carries. Fails
-// (kInvalidData) when the value counts do not form whole positions and
-// quaternions, or the orientations or local transforms are neither absent nor
-// one per position.
+// A packed list of floats or doubles where it lies: in a pb::Frame's
+// RepeatedField, or in a message's bytes as they came (unaligned,
+// little-endian, as protobuf writes them).
+template <class T>
+class Packed {
+ public:
+  Packed() = default;
+  Packed(const void* data, std::size_t count) : data_(static_cast<const char*>(data)), count_(count) {}
+  std::size_t size() const { return count_; }
+  bool empty() const { return count_ == 0; }
+  T Get(std::size_t i) const {
+    T v;
+    std::memcpy(&v, data_ + i * sizeof(T), sizeof(T));
+    return v;
+  }
+
+ private:
+  const char* data_ = nullptr;
+  std::size_t count_ = 0;
+};
+
+// A pushed frame's fields, its lists where they lie (valid while the pb::Frame
+// or the bytes they were read from are).
+struct FrameFields {
+  std::uint32_t view_id = 0;
+  std::uint32_t subscription_id = 0;
+  std::uint64_t stream_id = 0;
+  std::int64_t server_write_time_ns = 0;
+  std::uint32_t skeleton_version = 0;
+  std::uint64_t frame_index = 0;
+  double motion_time = 0.0;
+  std::uint64_t sequence = 0;
+  std::int64_t server_send_time_ns = 0;
+  Packed<float> positions, orientations, local_rotations, local_translations;
+  Packed<double> positions_f64, orientations_f64, local_rotations_f64, local_translations_f64;
+};
+
+FrameFields frame_fields(const stream::v1::Frame& frame);
+
+// Reads a serialized ServerMessage holding a pushed frame and nothing else,
+// as servers write them (frame_head_for and a body), without protobuf: true
+// with `out` filled, with exactly the values protobuf would parse. False for
+// anything else (another message, a request id beside the frame, a list
+// written unpacked or in two pieces, a value protobuf would truncate, bytes
+// that do not parse): parse those with protobuf, which decides.
+bool read_frame_message(std::string_view message, FrameFields& out);
+
+// The frame's values into `out`, reusing its lists' storage (a subscriber
+// decodes every frame into the same FrameValues). Fails (kInvalidData) when
+// the value counts do not form whole positions and quaternions, or the
+// orientations or local transforms are neither absent nor one per position;
+// `out` is then unspecified.
+Status unpack_frame(const FrameFields& frame, FrameValues& out);
+
+// A pushed frame as values, from whichever precision it carries; fails as
+// unpack_frame.
 Result<FrameValues> decode_frame(const stream::v1::Frame& frame);
 
 // A query's frames as values: frame-major, joints.size() per frame.
