@@ -15,16 +15,20 @@
 // Fewer frames per burst mean more wake-ups of the receiver, which on
 // loopback the sender pays for.
 //
+// TCP's writes can also go to the kernel as io_uring SENDMSG operations, one
+// per connection and all of a tick's group in one submission (--tcp-send
+// io_uring): one system call a burst instead of one a connection.
+//
 // Each frame carries the time its burst began (CLOCK_MONOTONIC, in its first
 // 8 bytes); the receiver reports the latency of the measured window's frames
 // (p50, p99, p99.9, max, from gmr-load's histogram, so they read as its do):
 // how long the kernel alone makes the last of a burst wait, the bound a
 // fan-out on this core cannot beat.
 //
-//   gmr-floor --transport udp|tcp --sockets N [--rate 120] [--bytes 510] [--phases 1]
+//   gmr-floor --transport udp|tcp --sockets N [--rate 120] [--bytes 510] [--phases 1] [--tcp-send writev|io_uring]
 //             [--seconds 10] [--warmup 2] [--send-cpu 0] [--receive-cpu 1] [--json FILE]
 //
-// Prints one line; --json writes {"transport", "sockets", "rate_hz", "bytes",
+// Prints one line; --json writes {"transport", "tcp_send", "sockets", "rate_hz", "bytes",
 // "phases", "frames", "seconds", "cpu_seconds", "ns_per_frame", "late_ticks",
 // "timed", "latency_ms": {"p50", "p99", "p99.9", "max"}}.
 #include <arpa/inet.h>
@@ -47,6 +51,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -54,6 +59,9 @@
 #include <vector>
 
 #include "report.h"  // gmr-load's latency histogram
+#ifdef GMR_HAVE_LIBURING
+#include <liburing.h>
+#endif
 
 namespace {
 
@@ -196,6 +204,10 @@ int main(int argc, char** argv) {
   app.add_option("--send-cpu", send_cpu, "CPU the sender is pinned to (-1: none)");
   app.add_option("--receive-cpu", receive_cpu, "CPU the receiver is pinned to (-1: none)");
   app.add_option("--json", json, "Also write the result as JSON");
+  std::string tcp_send = "writev";
+  app.add_option("--tcp-send", tcp_send,
+                 "TCP: one writev per connection, or io_uring (a tick's group in one submission)")
+      ->check(CLI::IsMember({"writev", "io_uring"}));
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -274,6 +286,44 @@ int main(int argc, char** argv) {
           count * static_cast<std::size_t>(g) / static_cast<std::size_t>(phases),
           count * static_cast<std::size_t>(g + 1) / static_cast<std::size_t>(phases));
     };
+    const bool uring = !udp && tcp_send == "io_uring";
+    std::function<void(std::pair<std::size_t, std::size_t>)> send_uring;
+#ifdef GMR_HAVE_LIBURING
+    io_uring ring{};
+    std::vector<msghdr> hdrs(send_fds.size());
+    if (uring) {
+      if (const int e =
+              io_uring_queue_init(static_cast<unsigned>(std::min<std::size_t>(send_fds.size(), 4096)), &ring, 0);
+          e < 0) {
+        errno = -e;
+        fail("io_uring_queue_init");
+      }
+      const unsigned depth = std::min<unsigned>(static_cast<unsigned>(send_fds.size()), 4096);
+      send_uring = [&, depth](std::pair<std::size_t, std::size_t> range) {
+        for (std::size_t first = range.first; first < range.second; first += depth) {
+          const std::size_t n = std::min<std::size_t>(depth, range.second - first);
+          for (std::size_t i = first; i < first + n; ++i) {
+            iovs[0] = {const_cast<char*>(head.data()), head.size()};
+            iovs[1] = {const_cast<char*>(body.data()), body.size()};
+            hdrs[i] = {};
+            hdrs[i].msg_iov = iovs.data();
+            hdrs[i].msg_iovlen = 2;
+            io_uring_prep_sendmsg(io_uring_get_sqe(&ring), send_fds[i], &hdrs[i], MSG_DONTWAIT);
+          }
+          io_uring_submit_and_wait(&ring, static_cast<unsigned>(n));
+          io_uring_cqe* cqe = nullptr;
+          unsigned at = 0, seen = 0;
+          io_uring_for_each_cqe(&ring, at, cqe) {
+            if (cqe->res == static_cast<int>(bytes)) ++r.frames;
+            ++seen;
+          }
+          io_uring_cq_advance(&ring, seen);
+        }
+      };
+    }
+#else
+    if (uring) throw std::runtime_error("built without liburing-dev: no --tcp-send io_uring");
+#endif
     auto tick = [&](int g) {
       const std::int64_t stamp = now_ns();
       std::memcpy(head.data(), &stamp, sizeof stamp);
@@ -298,6 +348,8 @@ int main(int argc, char** argv) {
             r.frames += static_cast<std::uint64_t>(k);
           }
         }
+      } else if (uring) {
+        send_uring(group(g, send_fds.size()));
       } else {
         iovec v[2] = {{const_cast<char*>(head.data()), head.size()}, {const_cast<char*>(body.data()), body.size()}};
         const auto [begin, end] = group(g, send_fds.size());
@@ -345,19 +397,19 @@ int main(int argc, char** argv) {
 
     const double ns = r.frames > 0 ? 1e9 * r.cpu / static_cast<double>(r.frames) : 0.0;
     std::printf(
-        "gmr-floor: %s to %d sockets, %.0f Hz, %zu bytes, %d phase%s: %llu frames in %.2f s, %.3f cores, %.0f ns "
+        "gmr-floor: %s%s to %d sockets, %.0f Hz, %zu bytes, %d phase%s: %llu frames in %.2f s, %.3f cores, %.0f ns "
         "per frame, %llu late ticks; %lld timed, latency p50 %.3f ms p99 %.3f ms p99.9 %.3f ms max %.3f ms\n",
-        transport.c_str(), sockets, rate, bytes, phases, phases == 1 ? "" : "s",
+        transport.c_str(), uring ? " (io_uring)" : "", sockets, rate, bytes, phases, phases == 1 ? "" : "s",
         static_cast<unsigned long long>(r.frames), r.seconds, r.cpu / r.seconds, ns,
         static_cast<unsigned long long>(r.late_ticks), static_cast<long long>(latency[4]), ms(0), ms(1), ms(2), ms(3));
     if (!json.empty()) {
       std::ofstream out(json + ".partial");
-      out << "{\"transport\": \"" << transport << "\", \"sockets\": " << sockets << ", \"rate_hz\": " << rate
-          << ", \"bytes\": " << bytes << ", \"phases\": " << phases << ", \"frames\": " << r.frames
-          << ", \"seconds\": " << r.seconds << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns
-          << ", \"late_ticks\": " << r.late_ticks << ", \"timed\": " << latency[4]
-          << ", \"latency_ms\": {\"p50\": " << ms(0) << ", \"p99\": " << ms(1) << ", \"p99.9\": " << ms(2)
-          << ", \"max\": " << ms(3) << "}"
+      out << "{\"transport\": \"" << transport << "\", \"tcp_send\": \"" << (udp ? "" : tcp_send.c_str())
+          << "\", \"sockets\": " << sockets << ", \"rate_hz\": " << rate << ", \"bytes\": " << bytes
+          << ", \"phases\": " << phases << ", \"frames\": " << r.frames << ", \"seconds\": " << r.seconds
+          << ", \"cpu_seconds\": " << r.cpu << ", \"ns_per_frame\": " << ns << ", \"late_ticks\": " << r.late_ticks
+          << ", \"timed\": " << latency[4] << ", \"latency_ms\": {\"p50\": " << ms(0) << ", \"p99\": " << ms(1)
+          << ", \"p99.9\": " << ms(2) << ", \"max\": " << ms(3) << "}"
           << "}\n";
       out.close();
       if (!out || std::rename((json + ".partial").c_str(), json.c_str()) != 0) fail("cannot write " + json);
