@@ -209,6 +209,29 @@ void BM_ServerFrame(benchmark::State& state) {
 }
 BENCHMARK(BM_ServerFrame)->Name("server_frame/bvh")->ArgName("unreal")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
+// The view alone, for what most streams ask (world coordinates, native
+// conventions, positions only: the grid's frames): one frame's FK output to
+// the 38 joints sent, in cache.
+void BM_ViewWorldPositions(benchmark::State& state) {
+  const Motion& m = bvh();
+  auto cm = CompiledMotion::compile(m).value();
+  const std::size_t n = cm.joint_count();
+  if (n == 0 || n > (std::size_t{1} << 20)) {
+    state.SkipWithError("the benchmark motion has no joints, or too many");
+    return;
+  }
+  std::vector<float> ws(fast::fk_workspace_size(cm)), pos(n * 3), rot(n * 9), out_p(n * 3);
+  FkFrameJob{.motion = &cm, .frame = 100, .out_positions = pos, .out_orientations = rot, .workspace = ws}.run();
+  std::vector<int> joints(n);
+  for (std::size_t j = 0; j < n; ++j) joints[j] = static_cast<int>(j);
+  for (auto _ : state) {
+    view_frame_float(pos, {}, -1, joints, out_p, {});
+    benchmark::DoNotOptimize(out_p.data());
+  }
+  state.counters["joints"] = static_cast<double>(n);
+}
+BENCHMARK(BM_ViewWorldPositions)->Name("view/world_positions");
+
 // The floor for every path: writing the output bytes. In cache (the 2752
 // frames' positions, 1.25 MB, fit L2+L3) and from a 64 MB buffer (DRAM).
 void BM_Memcpy(benchmark::State& state) {

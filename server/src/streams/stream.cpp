@@ -145,13 +145,13 @@ bool Stream::mark_ready(const std::vector<Entry>& targets) {
   return anyone;
 }
 
-void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<const std::string>& body) {
+void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<const std::string>& body,
+                     Clock::time_point made) {
   // The fan-out starts one target further each tick: waiting behind the
   // others' sends is shared by all of a shared stream's subscribers rather
   // than always borne by the last ones.
   const std::size_t n = targets.size();
   const std::size_t first = fan_out_start_++ % n;
-  const Clock::time_point made = Clock::now();
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t i = first + k < n ? first + k : first + k - n;
     if (ready_[i]) {
@@ -165,9 +165,12 @@ void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<co
 void Stream::on_tick() {
   if (paused_ || targets_.empty()) return;
   saw_dead_ = true;  // not known until mark_ready() runs
+  // The tick's clock readings: its start, and its fan-out's (after the FK
+  // and the encoding), which also serves the catch-up check at its end.
+  Clock::time_point now = Clock::now();
   if (counters_.tick_lateness != nullptr) {
     // A tick runs up to StreamClock::kGrain early: on time, for lateness.
-    counters_.tick_lateness->Observe(std::max(0.0, std::chrono::duration<double>(Clock::now() - due(tick_)).count()));
+    counters_.tick_lateness->Observe(std::max(0.0, std::chrono::duration<double>(now - due(tick_)).count()));
   }
   const Schedule& sched = settings_.schedule;
   const double pos = position(tick_);
@@ -187,11 +190,14 @@ void Stream::on_tick() {
     const std::uint64_t frame = sched.start + offset;
     if (!(sched.skip_repeats && static_cast<std::int64_t>(frame) == last_frame_)) {
       // Copy the targets first: a target may end a subscription re-entrantly.
-      const auto targets = targets_;
+      visiting_ = targets_;
+      const std::vector<Entry>& targets = visiting_;
       std::uint64_t ticks = 1;  // this one, and when nobody takes frames the skipped ones after it
       if (mark_ready(targets)) {
         last_frame_ = static_cast<std::int64_t>(frame);
-        fan_out(targets, encode(frame, frame));
+        const auto body = encode(frame, frame);
+        now = Clock::now();
+        fan_out(targets, body, now);
       } else {
         ticks += congested_ticks();
         sequence_ += ticks;
@@ -200,6 +206,7 @@ void Stream::on_tick() {
         }
         tick_ += ticks - 1;
       }
+      visiting_.clear();
       for (auto& e : targets_) {
         e.sent += ticks;
         if (e.max_frames != 0 && e.sent >= e.max_frames) ended.emplace_back(e.target, e.sent);
@@ -215,7 +222,6 @@ void Stream::on_tick() {
   // tick due now rather than burst through the backlog.
   // The ticks jumped over are not hidden: sequence numbers advance (clients
   // see the gap) and each target counts them as skipped, apart from drops.
-  const auto now = Clock::now();
   if (due(tick_) + std::max<Clock::duration>(period(), settings_.max_catch_up) < now) {
     const double behind = std::chrono::duration<double>(now - base_time_).count() * sched.rate;
     const std::uint64_t to = std::max(tick_, base_tick_ + static_cast<std::uint64_t>(behind));
@@ -253,15 +259,18 @@ void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_
   content_ = std::move(content);
   if (paused_ || targets_.empty()) return;
   // Copy the targets first: a target may end a subscription re-entrantly.
-  const auto targets = targets_;
+  visiting_ = targets_;
+  const std::vector<Entry>& targets = visiting_;
   if (mark_ready(targets)) {
-    fan_out(targets, encode(0, index));
+    const auto body = encode(0, index);
+    fan_out(targets, body, Clock::now());
   } else {
     ++sequence_;
     for (std::size_t i = 0; i < targets.size(); ++i) {
       if (alive_[i]) targets[i].target->skipped(1);
     }
   }
+  visiting_.clear();
   std::vector<std::pair<std::shared_ptr<Target>, std::uint64_t>> ended;
   for (auto& e : targets_) {
     ++e.sent;

@@ -168,8 +168,9 @@ class Stream : public std::enable_shared_from_this<Stream> {
   // ready_[i]: target i is alive and takes a frame now; true when any does.
   bool mark_ready(const std::vector<Entry>& targets);
   // `body` to the ready targets (the others that are alive count a skip),
-  // starting one further each time.
-  void fan_out(const std::vector<Entry>& targets, const std::shared_ptr<const std::string>& body);
+  // starting one further each time; `made`: now, the frame's fan-out time.
+  void fan_out(const std::vector<Entry>& targets, const std::shared_ptr<const std::string>& body,
+               Clock::time_point made);
 
   StreamClock& clock_;
   std::uint64_t id_;
@@ -179,6 +180,10 @@ class Stream : public std::enable_shared_from_this<Stream> {
   StreamCounters& counters_;
   std::uint64_t armed_ = 0;  // the generation of its tick waiting on the clock
   std::vector<Entry> targets_;
+  // targets_ as a tick (or a live frame) found them, which it goes through:
+  // a target may end a subscription re-entrantly. Kept between ticks, empty,
+  // so a tick allocates nothing for it.
+  std::vector<Entry> visiting_;
   std::string share_key_;
 
   Clock::time_point base_time_{};

@@ -6,19 +6,20 @@ namespace gmr::server {
 
 void StreamClock::schedule(std::weak_ptr<Stream> stream, Clock::time_point due, std::uint64_t generation) {
   if (stopped_) return;
-  heap_.push(Entry{due, next_order_++, generation, std::move(stream)});
+  heap_.push_back(Entry{due, next_order_++, generation, std::move(stream)});
+  std::push_heap(heap_.begin(), heap_.end(), std::greater<>());
   if (!in_pass_) arm();  // a pass arms once, at its end
 }
 
 void StreamClock::stop() {
   stopped_ = true;
-  heap_ = {};
+  heap_.clear();
   timer_.cancel();
 }
 
 void StreamClock::arm() {
-  if (heap_.empty() || (waiting_ && armed_at_ <= heap_.top().due)) return;
-  armed_at_ = heap_.top().due;
+  if (heap_.empty() || (waiting_ && armed_at_ <= heap_.front().due)) return;
+  armed_at_ = heap_.front().due;
   waiting_ = true;
   // Setting the expiry cancels a wait already pending: its handler sees
   // operation_aborted and leaves the state to this one.
@@ -37,9 +38,10 @@ void StreamClock::run_due() {
   const std::uint64_t pass_end = next_order_;  // ticks scheduled from here on wait for the next pass
   const Clock::time_point horizon = Clock::now() + kGrain;
   std::vector<Entry> later;  // due, but scheduled during this pass
-  while (!heap_.empty() && heap_.top().due <= horizon) {
-    Entry e = heap_.top();
-    heap_.pop();
+  while (!heap_.empty() && heap_.front().due <= horizon) {
+    std::pop_heap(heap_.begin(), heap_.end(), std::greater<>());
+    Entry e = std::move(heap_.back());
+    heap_.pop_back();
     if (e.order >= pass_end) {
       later.push_back(std::move(e));
       continue;
@@ -51,7 +53,10 @@ void StreamClock::run_due() {
     if (stopped_) return;
   }
   in_pass_ = false;
-  for (auto& e : later) heap_.push(std::move(e));
+  for (auto& e : later) {
+    heap_.push_back(std::move(e));
+    std::push_heap(heap_.begin(), heap_.end(), std::greater<>());
+  }
   arm();
 }
 

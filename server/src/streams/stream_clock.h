@@ -18,7 +18,7 @@
 
 #include <cstdint>
 #include <memory>
-#include <queue>
+#include <algorithm>
 #include <vector>
 
 #include "transport/net.h"
@@ -58,7 +58,10 @@ class StreamClock {
   void run_due();
 
   net::steady_timer timer_;
-  std::priority_queue<Entry, std::vector<Entry>, std::greater<>> heap_;
+  // A min-heap by due time (std::push_heap / pop_heap with std::greater): a
+  // tick's entry is moved out of it, not copied (its weak_ptr's count is
+  // shared with every other user of the stream).
+  std::vector<Entry> heap_;
   std::uint64_t next_order_ = 0;
   bool waiting_ = false;  // an async_wait is pending for armed_at_
   Clock::time_point armed_at_{};

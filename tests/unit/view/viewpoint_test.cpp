@@ -74,7 +74,7 @@ TEST(Viewpoint, WorldViewEqualsForwardKinematics) {
 
 // The float path (FkFrameJob, then view_frame_float) agrees with the double
 // path to float round-off, for every viewer, for a subset of joints in any
-// order, with and without quaternions.
+// order, with and without quaternions (then the same positions, bit for bit).
 TEST(Viewpoint, FloatPathMatchesDoublePath) {
   for (std::uint32_t seed = 11; seed <= 13; ++seed) {
     const Motion m = random_pre(seed, 1 + static_cast<int>(seed % 2));
@@ -93,6 +93,12 @@ TEST(Viewpoint, FloatPathMatchesDoublePath) {
         ASSERT_TRUE(job.run()) << job.check().error().to_string();
         view_frame_float(fk_p, fk_o, v, joints, out_p, out_q);
         view_frame(m, v, f, dp, dorient);
+        if (v < 0) {
+          // World positions alone (a shorter path) are the same floats.
+          std::vector<float> alone(3 * joints.size(), -1.0f);
+          view_frame_float(fk_p, {}, -1, joints, alone, {});
+          EXPECT_EQ(alone, out_p) << "frame " << f;
+        }
         for (std::size_t i = 0; i < joints.size(); ++i) {
           const auto j = static_cast<std::size_t>(joints[i]);
           const Eigen::Vector3d got(out_p[3 * i], out_p[3 * i + 1], out_p[3 * i + 2]);
@@ -102,6 +108,16 @@ TEST(Viewpoint, FloatPathMatchesDoublePath) {
           EXPECT_NEAR(std::abs(q.dot(want)), 1.0, 1e-5) << "viewer " << v << " frame " << f << " joint " << j;
         }
       }
+    }
+    // World positions alone are copied run by run of consecutive joints:
+    // every joint in order (one run), and runs cut anywhere.
+    std::vector<int> every(n);
+    for (std::size_t j = 0; j < n; ++j) every[j] = static_cast<int>(j);
+    for (const std::vector<int>& list : {every, std::vector<int>{2, 3, 4, 0, 1, 7}, std::vector<int>{9, 10, 3, 4, 5}}) {
+      std::vector<float> alone(3 * list.size()), with_q(3 * list.size()), q(4 * list.size());
+      view_frame_float(fk_p, {}, -1, list, alone, {});
+      view_frame_float(fk_p, fk_o, -1, list, with_q, q);
+      EXPECT_EQ(alone, with_q) << list.size() << " joints";
     }
     // Without quaternions only positions are written.
     std::vector<float> only_p(3 * joints.size(), -1.0f);
