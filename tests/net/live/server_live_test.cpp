@@ -148,7 +148,19 @@ void publish_frames(Client& c, std::uint32_t id, const Motion& m, std::size_t be
   }
 }
 
-std::chrono::microseconds pace() { return std::chrono::microseconds(kSlowBuild ? 8000 : 2500); }
+// A test publisher's pace for `count` frames of `m`: fast, but never past
+// what the server takes from a source at its declared rate (a token bucket
+// holding a second of frames, at least 16: LiveSource), which drops the
+// rest. The built-in walk (60 Hz, without ../shared/data) needs a slower
+// pace than CMU's 120 Hz takes.
+std::chrono::microseconds pace(const Motion& m, std::size_t count) {
+  const double rate = m.frame_time > 0 ? 1.0 / m.frame_time : 120.0;
+  const double burst = std::max(16.0, rate);
+  const double slowest =
+      count > burst ? 1.1 * (static_cast<double>(count) - burst) / (rate * static_cast<double>(count)) : 0.0;
+  return std::max(std::chrono::microseconds(kSlowBuild ? 8000 : 2500),
+                  std::chrono::microseconds(static_cast<std::int64_t>(slowest * 1e6)));
+}
 
 // A server with tokens, a publishing client and a subscribing ('control') one.
 struct LiveRig {
@@ -244,7 +256,7 @@ TEST(LivePublish, SubscribersOfEveryViewGetThePositionsOfThePublishedFrames) {
   EXPECT_EQ(subs[4].stream_id, subs[5].stream_id) << "the two shared subscriptions share one stream";
   EXPECT_TRUE(subs[5].joined_running);
 
-  publish_frames(*pub, id, *source, 0, n, pace());
+  publish_frames(*pub, id, *source, 0, n, pace(*source, n));
   const Status unpublished = pub->unpublish(id);
   ASSERT_TRUE(unpublished.ok()) << unpublished.error().to_string();
   EXPECT_TRUE(pub->take_errors().empty());
@@ -306,13 +318,13 @@ TEST(LivePublish, AViewEditedMidStreamFollowsOnTheNextFrame) {
   client::SubscribeOptions so;
   so.float64 = true;
   watch(*sub, v, so, w);
-  publish_frames(*pub, id, *source, 0, n / 2, pace());
+  publish_frames(*pub, id, *source, 0, n / 2, pace(*source, n));
   const std::string root = source->skeleton.joint(static_cast<int>(source->skeleton.size()) - 2).name;
   const auto edited = sub->set_roots(v.id, {root});
   ASSERT_TRUE(edited.ok()) << edited.error().to_string();
   EXPECT_EQ(edited->skeleton.roots().size(), 1u);
   EXPECT_EQ(edited->skeleton.joint(edited->skeleton.roots()[0]).name, root);
-  publish_frames(*pub, id, *source, n / 2, n, pace());
+  publish_frames(*pub, id, *source, n / 2, n, pace(*source, n));
   ASSERT_TRUE(pub->unpublish(id).ok());
   const auto end = w.end.wait();
   ASSERT_TRUE(end.has_value());
@@ -355,7 +367,7 @@ TEST(LivePublish, RetargetedViewsGetEachFrameOnTheRigFromOneReplay) {
     so.float64 = true;
     watch(*live.sub, *retargeted, so, w);
   }
-  publish_frames(*live.pub, id, *source, 0, n, pace());
+  publish_frames(*live.pub, id, *source, 0, n, pace(*source, n));
   ASSERT_TRUE(live.pub->unpublish(id).ok());
   std::vector<client::SubscriptionEnd> ends;
   for (Watch& w : watches) {
@@ -393,7 +405,7 @@ TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {
   auto& sub = rig.sub;
   const client::PublishOptions po = live_options(*source, "late");
   const std::uint32_t id = pub->publish(source->skeleton, po).value().id;
-  publish_frames(*pub, id, *source, 0, 10, pace());
+  publish_frames(*pub, id, *source, 0, 10, pace(*source, 12));
   // The server has all ten once it answers a request from the publisher
   // (requests on one connection are answered in order).
   ASSERT_TRUE(pub->list_motions().ok());
@@ -412,7 +424,7 @@ TEST(LivePublish, ALateSubscriberStartsAtTheNewestFrame) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  publish_frames(*pub, id, *source, 10, 12, pace());
+  publish_frames(*pub, id, *source, 10, 12, pace(*source, 12));
   ASSERT_TRUE(pub->unpublish(id).ok());
   ASSERT_TRUE(w.end.wait().has_value());
   std::lock_guard lock(w.mutex);
@@ -442,7 +454,7 @@ TEST(LivePublish, ASourceThatDisconnectsEndsItsSubscribersCleanly) {
   watch(*sub, v, so, tcp);
   so.udp = true;
   watch(*sub, v, so, udp);
-  publish_frames(*pub, id, *source, 0, 30, pace());
+  publish_frames(*pub, id, *source, 0, 30, pace(*source, 30));
   // A round trip: the server has taken all 30 (PublishFrame has no reply,
   // and close() drops what the client has not written yet).
   ASSERT_TRUE(pub->list_motions().ok());
@@ -505,7 +517,7 @@ TEST(LivePublish, TheServerRecordsASourceOnRequestAsAFileItsLibraryLoads) {
   EXPECT_EQ(file.parent_path(), dir.path);
   EXPECT_EQ(file.extension(), ".gmrb");
   EXPECT_EQ(file.filename().string().rfind("stage_take_1-", 0), 0u) << file;
-  for (std::size_t f = 0; f < n; ++f) ASSERT_TRUE(pub->publish_frame(publication->id, source->frame(f)).ok());
+  publish_frames(*pub, publication->id, *source, 0, n, pace(*source, n));
   std::vector<double> nan(source->frame(0).begin(), source->frame(0).end());
   nan[0] = std::nan("");
   ASSERT_TRUE(pub->publish_frame(publication->id, nan).ok());  // refused: not recorded
@@ -835,7 +847,7 @@ TEST(LiveReplicas, ASourcePublishedOnOneReplicaStreamsFromAnotherAndEndsWhenItsR
   v2 = sub->set_roots(v2.id, {root}).value();
   v2 = sub->set_coordinates(v2.id, viewer).value();
   watch(*sub, v2, so, w2);
-  publish_frames(**pub, id, *source, 0, n, pace());
+  publish_frames(**pub, id, *source, 0, n, pace(*source, n));
   for (Watch* w : {&w1, &w2}) {
     // Until the last frame arrived, or none arrived for 3 s: the frames come
     // through NATS and replica B's fan-out, which on a busy machine (a
