@@ -193,13 +193,10 @@ int main(int argc, char** argv) {
   double warmup = 0.5;
   double rate = 0.0;
   bool udp = false, shared = false, orientations = false, float64 = false;
+  // Thousands subscribing to a server already busy with the first ones'
+  // frames wait behind them: a longer wait for each reply than a command's.
+  connect_options.timeout = std::chrono::milliseconds(30000);
   gmr::cli::add_connect_options(app, connect_options);
-  int timeout_ms = 30000;
-  app.add_option("--timeout-ms", timeout_ms,
-                 "How long a client waits to connect and for each reply (thousands subscribing to a server already "
-                 "busy with the first ones' frames wait behind them)")
-      ->capture_default_str()
-      ->check(CLI::Range(100, 600000));
   app.add_option("--clients", clients, "Connections, one subscription each")
       ->capture_default_str()
       ->check(CLI::Range(1, 20000));
@@ -280,7 +277,6 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "gmr-load: %s\n", why.c_str());
     return 1;
   }
-  connect_options.timeout = std::chrono::milliseconds(timeout_ms);
   if (threads > 0) connect_options.loop = std::make_shared<gmr::client::EventLoop>(threads);
 
   const auto setup_started = std::chrono::steady_clock::now();

@@ -72,6 +72,9 @@ TestServer::TestServer(server::ServerConfig cfg, std::vector<server::LibraryEntr
 }
 
 std::unique_ptr<client::Client> TestServer::connect(client::ClientOptions o) {
+  // Under a sanitizer a retarget or a marker calibration takes seconds, and
+  // more with the other tests on both cores: a slow reply, not a lost one.
+  if (kSlowBuild && o.timeout == client::ClientOptions{}.timeout) o.timeout = kSlowBuildReplyTimeout;
   o.host = "127.0.0.1";
   o.port = port();
   auto c = client::Client::connect(o);

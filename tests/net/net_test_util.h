@@ -34,6 +34,9 @@ inline constexpr bool kSlowBuild = true;
 #else
 inline constexpr bool kSlowBuild = false;
 #endif
+// How long a client of a slow build waits for a reply (TestServer::connect,
+// and `--timeout-ms` for the gmr commands the tests run), instead of 5 s.
+inline constexpr std::chrono::milliseconds kSlowBuildReplyTimeout{30000};
 
 // A server started on a free loopback port (TCP and UDP). Streams never skip
 // frames to catch up (max_catch_up is an hour), and there is no send budget

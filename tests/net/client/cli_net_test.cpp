@@ -8,8 +8,13 @@
 #include <algorithm>
 
 #include <array>
+#include <chrono>
 #include <cstdio>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <map>
 #include <mutex>
@@ -34,6 +39,33 @@ namespace {
 // command line.
 CommandRun gmr(const std::string& args, bool prefix_binary = true) {
   return run_command((prefix_binary ? std::string(GMR_CLI_PATH) + " " : std::string()) + args);
+}
+
+// Every command that talks to a server waits --timeout-ms for each reply
+// (default 5 s), then says so: here a listener that never answers.
+TEST(CliNet, ACommandWaitsItsTimeoutForAReplyThenSaysSo) {
+  const int silent = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(silent, 0);
+  sockaddr_in at{};
+  at.sin_family = AF_INET;
+  at.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t at_size = sizeof at;
+  ASSERT_EQ(::bind(silent, reinterpret_cast<sockaddr*>(&at), sizeof at), 0);
+  ASSERT_EQ(::listen(silent, 16), 0);
+  ASSERT_EQ(::getsockname(silent, reinterpret_cast<sockaddr*>(&at), &at_size), 0);
+  const std::string port = " --port " + std::to_string(ntohs(at.sin_port));
+  for (const char* command : {"ls", "query walk --frames 0:1", "stream walk --count 1"}) {
+    const auto started = std::chrono::steady_clock::now();
+    const CommandRun r = gmr(std::string(command) + port + " --timeout-ms 300");
+    const auto took = std::chrono::steady_clock::now() - started;
+    EXPECT_EQ(r.status, 1) << command << ": " << r.out;
+    EXPECT_NE(r.out.find("within 300 ms"), std::string::npos) << command << ": " << r.out;
+    EXPECT_LT(took, std::chrono::seconds(4)) << command << " waited past its 300 ms (the default is 5 s)";
+  }
+  const CommandRun too_short = gmr("ls" + port + " --timeout-ms 5");
+  EXPECT_NE(too_short.status, 0);
+  EXPECT_NE(too_short.out.find("--timeout-ms"), std::string::npos) << too_short.out;
+  ::close(silent);
 }
 
 TEST(CliNet, QueryPrintsExactlyWhatPositionsPrints) {
@@ -504,7 +536,10 @@ TEST(CliNet, PublishCountNeverLoopsWithoutLoop) {
 TEST(CliNet, PublishMarkersServesTheSolvedSkeleton) {
   GMR_REQUIRE_DATA();
   TestServer s(publish_config());
-  const std::string common = " --token " + std::string(kPublishToken) + " --port " + std::to_string(s.port());
+  // The publisher's frames wait unread while the server calibrates: seconds
+  // under a sanitizer.
+  const std::string common = " --token " + std::string(kPublishToken) + " --port " + std::to_string(s.port()) +
+                             (kSlowBuild ? " --timeout-ms " + std::to_string(kSlowBuildReplyTimeout.count()) : "");
   const std::string c3d = test::data_file("c3d/cmu_01_01.c3d").string();
   const CommandRun plain = gmr("publish '" + c3d + "' --count 1" + common);
   EXPECT_EQ(plain.status, 1);
