@@ -48,6 +48,21 @@ struct TestServer {
   std::unique_ptr<client::Client> connect(client::ClientOptions o = {});
 };
 
+// A loopback listener that accepts connections (the kernel's backlog) and
+// never answers: for a client's wait for a reply.
+class SilentListener {
+ public:
+  SilentListener();
+  ~SilentListener();
+  SilentListener(const SilentListener&) = delete;
+  SilentListener& operator=(const SilentListener&) = delete;
+  std::uint16_t port() const { return port_; }
+
+ private:
+  int fd_ = -1;
+  std::uint16_t port_ = 0;
+};
+
 // A blocking TCP connection with deadlines, for sending malformed bytes.
 class RawConnection {
  public:

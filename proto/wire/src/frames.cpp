@@ -452,6 +452,18 @@ Result<FrameValues> decode_frame(const pb::Frame& f) {
   return d;
 }
 
+bool same_bits(const FrameValues& a, const FrameValues& b) {
+  auto same = [](const auto& x, const auto& y) {
+    return x.size() == y.size() && (x.empty() || std::memcmp(x.data(), y.data(), x.size() * sizeof x[0]) == 0);
+  };
+  return a.view_id == b.view_id && a.subscription_id == b.subscription_id && a.stream_id == b.stream_id &&
+         a.skeleton_version == b.skeleton_version && a.frame_index == b.frame_index &&
+         std::memcmp(&a.motion_time, &b.motion_time, sizeof a.motion_time) == 0 && a.sequence == b.sequence &&
+         a.server_send_time_ns == b.server_send_time_ns && a.server_write_time_ns == b.server_write_time_ns &&
+         a.float64 == b.float64 && same(a.positions, b.positions) && same(a.orientations, b.orientations) &&
+         same(a.local_rotations, b.local_rotations) && same(a.local_translations, b.local_translations);
+}
+
 Result<DecodedBlock> decode_block(const pb::FrameBlock& b) {
   DecodedBlock d;
   d.view_id = b.view_id();

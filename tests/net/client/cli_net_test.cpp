@@ -10,11 +10,7 @@
 #include <array>
 #include <chrono>
 #include <cstdio>
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
-#include <unistd.h>
 
 #include <map>
 #include <mutex>
@@ -44,16 +40,9 @@ CommandRun gmr(const std::string& args, bool prefix_binary = true) {
 // Every command that talks to a server waits --timeout-ms for each reply
 // (default 5 s), then says so: here a listener that never answers.
 TEST(CliNet, ACommandWaitsItsTimeoutForAReplyThenSaysSo) {
-  const int silent = ::socket(AF_INET, SOCK_STREAM, 0);
-  ASSERT_GE(silent, 0);
-  sockaddr_in at{};
-  at.sin_family = AF_INET;
-  at.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t at_size = sizeof at;
-  ASSERT_EQ(::bind(silent, reinterpret_cast<sockaddr*>(&at), sizeof at), 0);
-  ASSERT_EQ(::listen(silent, 16), 0);
-  ASSERT_EQ(::getsockname(silent, reinterpret_cast<sockaddr*>(&at), &at_size), 0);
-  const std::string port = " --port " + std::to_string(ntohs(at.sin_port));
+  const SilentListener silent;
+  ASSERT_NE(silent.port(), 0);
+  const std::string port = " --port " + std::to_string(silent.port());
   for (const char* command : {"ls", "query walk --frames 0:1", "stream walk --count 1"}) {
     const auto started = std::chrono::steady_clock::now();
     const CommandRun r = gmr(std::string(command) + port + " --timeout-ms 300");
@@ -65,7 +54,6 @@ TEST(CliNet, ACommandWaitsItsTimeoutForAReplyThenSaysSo) {
   const CommandRun too_short = gmr("ls" + port + " --timeout-ms 5");
   EXPECT_NE(too_short.status, 0);
   EXPECT_NE(too_short.out.find("--timeout-ms"), std::string::npos) << too_short.out;
-  ::close(silent);
 }
 
 TEST(CliNet, QueryPrintsExactlyWhatPositionsPrints) {

@@ -1,11 +1,8 @@
 // gmr-load: its histogram and merge, and the built program against a live
 // server (the first motion by default, the measured window, --json, --merge,
 // --plot).
-#include <arpa/inet.h>
 #include <gtest/gtest.h>
-#include <netinet/in.h>
 #include <nlohmann/json.hpp>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -219,17 +216,12 @@ TEST(LoadTool, MeasuresAWindowWritesJsonMergesAndPlots) {
   EXPECT_EQ(fits.status, 0) << fits.out;
   EXPECT_NE(fits.out.find("200 clients"), std::string::npos) << fits.out;
   // A server that never answers: each client waits --timeout-ms, then says so.
-  const int silent = ::socket(AF_INET, SOCK_STREAM, 0);
-  ASSERT_GE(silent, 0);
-  sockaddr_in at{};
-  at.sin_family = AF_INET;
-  at.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t at_size = sizeof at;
-  ASSERT_EQ(::bind(silent, reinterpret_cast<sockaddr*>(&at), sizeof at), 0);
-  ASSERT_EQ(::listen(silent, 16), 0);
-  ASSERT_EQ(::getsockname(silent, reinterpret_cast<sockaddr*>(&at), &at_size), 0);
-  const ToolRun mute = run("--port " + std::to_string(ntohs(at.sin_port)) + " --clients 1 --timeout-ms 300");
-  ::close(silent);
+  ToolRun mute;
+  {
+    const SilentListener silent;
+    ASSERT_NE(silent.port(), 0);
+    mute = run("--port " + std::to_string(silent.port()) + " --clients 1 --timeout-ms 300");
+  }
   EXPECT_NE(mute.status, 0);
   EXPECT_NE(mute.out.find("within 300 ms"), std::string::npos) << mute.out;
   std::filesystem::remove_all(dir);

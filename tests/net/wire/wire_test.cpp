@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cstring>
 #include <limits>
 #include <random>
 
@@ -285,19 +284,6 @@ TEST(FrameEncoding, TheBodyIsWhatProtobufWrites) {
   EXPECT_EQ(cases, 64);
 }
 
-// Two decodings of a frame hold the same values, bit for bit (NaNs too).
-bool same_values(const gmr::wire::FrameValues& a, const gmr::wire::FrameValues& b) {
-  auto same = [](const auto& x, const auto& y) {
-    return x.size() == y.size() && (x.empty() || std::memcmp(x.data(), y.data(), x.size() * sizeof x[0]) == 0);
-  };
-  return a.view_id == b.view_id && a.subscription_id == b.subscription_id && a.stream_id == b.stream_id &&
-         a.skeleton_version == b.skeleton_version && a.frame_index == b.frame_index &&
-         std::memcmp(&a.motion_time, &b.motion_time, sizeof a.motion_time) == 0 && a.sequence == b.sequence &&
-         a.server_send_time_ns == b.server_send_time_ns && a.server_write_time_ns == b.server_write_time_ns &&
-         a.float64 == b.float64 && same(a.positions, b.positions) && same(a.orientations, b.orientations) &&
-         same(a.local_rotations, b.local_rotations) && same(a.local_translations, b.local_translations);
-}
-
 enum class Reading { kRead, kLeftToProtobuf };
 
 // What read_frame_message does with `bytes`, having checked that when it
@@ -312,7 +298,7 @@ Reading read_as_protobuf_does(const std::string& bytes, gmr::wire::FrameValues& 
   const gmr::Status read = gmr::wire::unpack_frame(fields, kept);
   EXPECT_EQ(read.ok(), by_protobuf.ok());
   if (read.ok() && by_protobuf.ok()) {
-    EXPECT_TRUE(same_values(kept, *by_protobuf)) << "frame " << kept.frame_index;
+    EXPECT_TRUE(gmr::wire::same_bits(kept, *by_protobuf)) << "frame " << kept.frame_index;
   } else if (!read.ok() && !by_protobuf.ok()) {
     EXPECT_EQ(read.error().message, by_protobuf.error().message);
   }

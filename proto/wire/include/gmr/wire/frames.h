@@ -117,6 +117,10 @@ Status unpack_frame(const FrameFields& frame, FrameValues& out);
 // unpack_frame.
 Result<FrameValues> decode_frame(const stream::v1::Frame& frame);
 
+// Whether two frames hold the same values bit for bit (NaNs too, and -0 is
+// not 0): what two ways of decoding the same bytes must give.
+bool same_bits(const FrameValues& a, const FrameValues& b);
+
 // A query's frames as values: frame-major, joints.size() per frame.
 struct DecodedBlock {
   std::uint32_t view_id = 0;
