@@ -409,9 +409,14 @@ server::ServerConfig publish_config() {
   return cfg;
 }
 
-// Waits (5 s at most) until `motion` is listed with a frame published.
+// Waits until `motion` is listed with a frame published: 10 s at most, or
+// as long as a slow build's reply (a marker calibration under a sanitizer,
+// with other tests on both cores, took more than 10 s in CI).
 bool wait_for_frames(client::Client& c, const std::string& motion) {
-  for (int i = 0; i < 500; ++i) {
+  const auto deadline =
+      std::chrono::steady_clock::now() +
+      (kSlowBuild ? std::chrono::milliseconds(kSlowBuildReplyTimeout) : std::chrono::milliseconds(10000));
+  while (std::chrono::steady_clock::now() < deadline) {
     const auto motions = c.list_motions();
     if (!motions.ok()) return false;
     for (const auto& m : *motions) {
