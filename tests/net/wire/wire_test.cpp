@@ -229,54 +229,79 @@ TEST(FrameEncoding, SharedBodyPlusSubscriberHeadDecodesToTheFrame) {
   }
 }
 
-// encode_frame_body writes the fields itself: byte for byte what protobuf
-// writes for the same Frame, zeros and empty lists left out, in both
-// precisions, with and without orientations and local transforms.
-TEST(FrameEncoding, TheBodyIsWhatProtobufWrites) {
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> value(-1e4, 1e4);
-  int cases = 0;
-  for (int k = 0; k < 64; ++k) {
-    const bool float64 = (k & 1) != 0, orientations = (k & 2) != 0, locals = (k & 4) != 0, zeros = (k & 8) != 0;
-    const std::size_t joints = zeros ? 0 : static_cast<std::size_t>(1 + k % 31);
-    std::vector<double> p(3 * joints), q(orientations ? 4 * joints : 0), lr(locals ? 4 * joints : 0),
-        lt(locals ? 3 * joints : 0);
+// Frame k of a series: k's bits choose the precision, orientations, local
+// transforms and all zeros (no joints, every field 0); otherwise `joints`
+// joints of random values and `version`. Its content points into it.
+struct RandomFrame {
+  RandomFrame(int k, std::size_t joints_unless_zeros, std::uint32_t version, std::mt19937& rng)
+      : float64((k & 1) != 0), zeros((k & 8) != 0), joints(zeros ? 0 : joints_unless_zeros) {
+    std::uniform_real_distribution<double> value(-1e4, 1e4);
+    const bool orientations = (k & 2) != 0, locals = (k & 4) != 0;
+    p.resize(3 * joints);
+    q.resize(orientations ? 4 * joints : 0);
+    lr.resize(locals ? 4 * joints : 0);
+    lt.resize(locals ? 3 * joints : 0);
     for (auto* v : {&p, &q, &lr, &lt}) {
       for (auto& x : *v) x = value(rng);
     }
-    const std::vector<float> pf(p.begin(), p.end()), qf(q.begin(), q.end()), lrf(lr.begin(), lr.end()),
-        ltf(lt.begin(), lt.end());
-    gmr::wire::FrameContent c;
-    c.skeleton_version = zeros ? 0 : static_cast<std::uint32_t>(k * 1000);
+    pf.assign(p.begin(), p.end());
+    qf.assign(q.begin(), q.end());
+    lrf.assign(lr.begin(), lr.end());
+    ltf.assign(lt.begin(), lt.end());
+    gmr::wire::FrameContent& c = content;
+    c.skeleton_version = zeros ? 0 : version;
     c.frame_index = zeros ? 0 : (std::uint64_t{1} << (k % 64));
     c.motion_time = zeros ? 0.0 : value(rng);
     c.sequence = zeros ? 0 : std::numeric_limits<std::uint64_t>::max() - static_cast<std::uint64_t>(k);
     c.server_send_time_ns = zeros ? 0 : (k % 3 == 0 ? -123456789 : 1'700'000'000'000'000'000 + k);
     c.float64 = float64;
+    if (float64) {
+      c.positions_f64 = p;
+      c.orientations_f64 = q;
+      c.local_rotations_f64 = lr;
+      c.local_translations_f64 = lt;
+    } else {
+      c.positions = pf;
+      c.orientations = qf;
+      c.local_rotations = lrf;
+      c.local_translations = ltf;
+    }
+  }
+  RandomFrame(const RandomFrame&) = delete;
+  RandomFrame& operator=(const RandomFrame&) = delete;
+
+  bool float64, zeros;
+  std::size_t joints;
+  std::vector<double> p, q, lr, lt;
+  std::vector<float> pf, qf, lrf, ltf;
+  gmr::wire::FrameContent content;
+};
+
+// encode_frame_body writes the fields itself: byte for byte what protobuf
+// writes for the same Frame, zeros and empty lists left out, in both
+// precisions, with and without orientations and local transforms.
+TEST(FrameEncoding, TheBodyIsWhatProtobufWrites) {
+  std::mt19937 rng(7);
+  int cases = 0;
+  for (int k = 0; k < 64; ++k) {
+    const RandomFrame f(k, static_cast<std::size_t>(1 + k % 31), static_cast<std::uint32_t>(k * 1000), rng);
+    const gmr::wire::FrameContent& c = f.content;
     pb::Frame expected;
     expected.set_skeleton_version(c.skeleton_version);
     expected.set_frame_index(c.frame_index);
     expected.set_motion_time(c.motion_time);
     expected.set_sequence(c.sequence);
     expected.set_server_send_time_ns(c.server_send_time_ns);
-    if (float64) {
-      c.positions_f64 = p;
-      c.orientations_f64 = q;
-      c.local_rotations_f64 = lr;
-      c.local_translations_f64 = lt;
-      expected.mutable_positions_f64()->Add(p.begin(), p.end());
-      expected.mutable_orientations_f64()->Add(q.begin(), q.end());
-      expected.mutable_local_rotations_f64()->Add(lr.begin(), lr.end());
-      expected.mutable_local_translations_f64()->Add(lt.begin(), lt.end());
+    if (f.float64) {
+      expected.mutable_positions_f64()->Add(f.p.begin(), f.p.end());
+      expected.mutable_orientations_f64()->Add(f.q.begin(), f.q.end());
+      expected.mutable_local_rotations_f64()->Add(f.lr.begin(), f.lr.end());
+      expected.mutable_local_translations_f64()->Add(f.lt.begin(), f.lt.end());
     } else {
-      c.positions = pf;
-      c.orientations = qf;
-      c.local_rotations = lrf;
-      c.local_translations = ltf;
-      expected.mutable_positions()->Add(pf.begin(), pf.end());
-      expected.mutable_orientations()->Add(qf.begin(), qf.end());
-      expected.mutable_local_rotations()->Add(lrf.begin(), lrf.end());
-      expected.mutable_local_translations()->Add(ltf.begin(), ltf.end());
+      expected.mutable_positions()->Add(f.pf.begin(), f.pf.end());
+      expected.mutable_orientations()->Add(f.qf.begin(), f.qf.end());
+      expected.mutable_local_rotations()->Add(f.lrf.begin(), f.lrf.end());
+      expected.mutable_local_translations()->Add(f.ltf.begin(), f.ltf.end());
     }
     EXPECT_EQ(gmr::wire::encode_frame_body(c), expected.SerializeAsString()) << "case " << k;
     ++cases;
@@ -309,43 +334,16 @@ Reading read_as_protobuf_does(const std::string& bytes, gmr::wire::FrameValues& 
 // protobuf's values, into one FrameValues after another of other sizes.
 TEST(FrameReading, ReadsEveryFrameAServerWritesWithProtobufsValues) {
   std::mt19937 rng(11);
-  std::uniform_real_distribution<double> value(-1e4, 1e4);
   gmr::wire::FrameValues kept;
   int read = 0;
   for (int k = 0; k < 128; ++k) {
-    const bool float64 = (k & 1) != 0, orientations = (k & 2) != 0, locals = (k & 4) != 0, zeros = (k & 8) != 0;
-    const std::size_t joints = zeros ? 0 : static_cast<std::size_t>(1 + (k * 7) % 40);
-    std::vector<double> p(3 * joints), q(orientations ? 4 * joints : 0), lr(locals ? 4 * joints : 0),
-        lt(locals ? 3 * joints : 0);
-    for (auto* v : {&p, &q, &lr, &lt}) {
-      for (auto& x : *v) x = value(rng);
-    }
-    const std::vector<float> pf(p.begin(), p.end()), qf(q.begin(), q.end()), lrf(lr.begin(), lr.end()),
-        ltf(lt.begin(), lt.end());
-    gmr::wire::FrameContent c;
-    c.skeleton_version = zeros ? 0 : static_cast<std::uint32_t>(k) << (k % 25);
-    c.frame_index = zeros ? 0 : (std::uint64_t{1} << (k % 64));
-    c.motion_time = zeros ? 0.0 : value(rng);
-    c.sequence = zeros ? 0 : std::numeric_limits<std::uint64_t>::max() - static_cast<std::uint64_t>(k);
-    c.server_send_time_ns = zeros ? 0 : (k % 3 == 0 ? -123456789 : 1'700'000'000'000'000'000 + k);
-    c.float64 = float64;
-    if (float64) {
-      c.positions_f64 = p;
-      c.orientations_f64 = q;
-      c.local_rotations_f64 = lr;
-      c.local_translations_f64 = lt;
-    } else {
-      c.positions = pf;
-      c.orientations = qf;
-      c.local_rotations = lrf;
-      c.local_translations = ltf;
-    }
-    const std::uint32_t id = zeros ? 0 : std::numeric_limits<std::uint32_t>::max() >> (k % 32);
+    const RandomFrame f(k, static_cast<std::size_t>(1 + (k * 7) % 40), static_cast<std::uint32_t>(k) << (k % 25), rng);
+    const std::uint32_t id = f.zeros ? 0 : std::numeric_limits<std::uint32_t>::max() >> (k % 32);
     const std::string message = gmr::wire::frame_message_for(id, id / 2 + 1, std::uint64_t{id} << (k % 32),
-                                                             gmr::wire::encode_frame_body(c), zeros ? 0 : -k);
+                                                             gmr::wire::encode_frame_body(f.content), f.zeros ? 0 : -k);
     ASSERT_EQ(read_as_protobuf_does(message, kept), Reading::kRead) << "case " << k;
-    EXPECT_EQ(kept.positions.size(), joints);
-    EXPECT_EQ(kept.float64, float64 && joints > 0);
+    EXPECT_EQ(kept.positions.size(), f.joints);
+    EXPECT_EQ(kept.float64, f.float64 && f.joints > 0);
     ++read;
   }
   EXPECT_EQ(read, 128);
