@@ -8,6 +8,7 @@
 #include <deque>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,8 @@
 #include "transport/outbox.h"
 
 namespace gmr::test {
+
+namespace pb = ::gmr::stream::v1;  // as in net_test_util.h
 
 class RecordingOutbox final : public server::Outbox {
  public:
@@ -53,6 +56,10 @@ class RecordingOutbox final : public server::Outbox {
   static pb::ServerMessage unframe(const std::string& framed) {
     pb::ServerMessage m;
     EXPECT_GE(framed.size(), wire::kLengthPrefixBytes);
+    if (framed.size() < wire::kLengthPrefixBytes) return m;
+    EXPECT_EQ(wire::read_length_prefix(std::span<const std::uint8_t, wire::kLengthPrefixBytes>(
+                  reinterpret_cast<const std::uint8_t*>(framed.data()), wire::kLengthPrefixBytes)),
+              framed.size() - wire::kLengthPrefixBytes);
     EXPECT_TRUE(m.ParseFromString(framed.substr(wire::kLengthPrefixBytes)));
     return m;
   }

@@ -20,14 +20,23 @@ void SubscriptionTarget::late(std::uint64_t n) {
   connection_->count_frame_skipped(n);
 }
 
+const wire::FrameHead& SubscriptionTarget::head_for(std::uint64_t stream_id, std::size_t body_size,
+                                                    bool length_prefix) {
+  if (stream_id != head_stream_ || body_size != head_body_size_) {
+    head_ = wire::frame_head_for(view_, subscription_, stream_id, body_size, length_prefix);
+    head_stream_ = stream_id;
+    head_body_size_ = body_size;
+  }
+  return head_;
+}
+
 bool TcpTarget::congested() const { return connection_->congested(subscription_); }
 
 void TcpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std::string>& body,
                         std::chrono::steady_clock::time_point made) {
   // The per-subscriber head (length prefix, ServerMessage tag, ids); the
   // body is shared. A closing connection takes nothing (and says it kept it).
-  if (!connection_->push_frame(subscription_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), true),
-                               body, max_age_, made)) {
+  if (!connection_->push_frame(subscription_, head_for(stream_id, body->size(), true), body, max_age_, made)) {
     ++dropped_;
   }
 }
@@ -36,8 +45,7 @@ void UdpTarget::deliver(std::uint64_t stream_id, const std::shared_ptr<const std
                         std::chrono::steady_clock::time_point made) {
   // The head and the shared body go into the datagrams as they are: no copy
   // of the whole message per subscriber.
-  if (!publisher_.send_frame(
-          endpoint_, wire::frame_head_for(view_, subscription_, stream_id, body->size(), false).view(), *body)) {
+  if (!publisher_.send_frame(endpoint_, head_for(stream_id, body->size(), false).view(), *body)) {
     ++dropped_;
     connection_->count_udp_frame_dropped();
     return;

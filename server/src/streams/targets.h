@@ -58,6 +58,16 @@ class SubscriptionTarget : public Target {
   std::uint64_t dropped_ = 0;
   std::uint64_t late_ = 0;
   std::chrono::steady_clock::duration max_age_{};
+
+  // This subscriber's frame head (frame_head_for) before a body of
+  // `body_size` bytes from `stream_id`: made again only when either changes
+  // (a shared stream's bodies mostly keep their size from frame to frame).
+  const wire::FrameHead& head_for(std::uint64_t stream_id, std::size_t body_size, bool length_prefix);
+
+ private:
+  wire::FrameHead head_;
+  std::uint64_t head_stream_ = 0;
+  std::size_t head_body_size_ = static_cast<std::size_t>(-1);
 };
 
 // Frames go into the connection's outbox (latest wins per subscription).

@@ -101,7 +101,7 @@ void Connection::stop(const std::string& reason) {
     if (stopped_) return;
     stopped_.store(true, std::memory_order_release);
     log_connection(spdlog::level::info, "conn {}: closed: {} (frames sent {}, dropped {})", id_, reason,
-                   counters_.frames_sent, counters_.frames_dropped);
+                   all_frames_sent(), all_frames_dropped());
     std::string().swap(body_);
     body_received_ = 0;
     drop_queued();

@@ -4,7 +4,9 @@
 // records, to run a RequestHandler without sockets.
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -25,12 +27,16 @@ class WaitHistogram {
  public:
   static constexpr std::size_t kBuckets = 20;  // the last from 2^18 us = 0.26 s up
 
-  void add(std::chrono::steady_clock::duration waited) {
+  // The bucket of a wait: the first k with `waited` under 2^k us (its bit
+  // width in microseconds), or the last.
+  static std::size_t bucket(std::chrono::steady_clock::duration waited) {
     const auto us = std::chrono::duration_cast<std::chrono::microseconds>(waited).count();
-    std::size_t k = 0;
-    while (k + 1 < kBuckets && us >= (std::int64_t{1} << k)) ++k;
-    ++counts_[k];
+    const auto width = us <= 0 ? 0 : std::bit_width(static_cast<std::uint64_t>(us));
+    return std::min<std::size_t>(width, kBuckets - 1);
   }
+  void add(std::chrono::steady_clock::duration waited) { ++counts_[bucket(waited)]; }
+  // `n` more waits in bucket `k` (< kBuckets).
+  void add_to_bucket(std::size_t k, std::uint32_t n) { counts_[k] += n; }
   std::uint64_t count() const {
     std::uint64_t n = 0;
     for (auto c : counts_) n += c;

@@ -160,17 +160,11 @@ std::uint64_t QueuedOutbox::end_frames(std::uint32_t key) {
 }
 
 void QueuedOutbox::count_udp_frame_sent(Clock::duration waited) {
-  Lock lock(m_);
-  ++counters_.frames_sent;
-  counters_.frame_wait.add(waited);
-  ++counters_.udp_frames_sent;
+  udp_wait_[WaitHistogram::bucket(waited)].fetch_add(1, std::memory_order_relaxed);
+  udp_sent_.fetch_add(1, std::memory_order_relaxed);
 }
 
-void QueuedOutbox::count_udp_frame_dropped() {
-  Lock lock(m_);
-  ++counters_.frames_dropped;
-  ++counters_.udp_frames_dropped;
-}
+void QueuedOutbox::count_udp_frame_dropped() { udp_dropped_.fetch_add(1, std::memory_order_relaxed); }
 
 void QueuedOutbox::count_frame_dropped(std::uint64_t n) {
   Lock lock(m_);
@@ -186,6 +180,13 @@ ConnectionCounters QueuedOutbox::counters() const {
   Lock lock(m_);
   ConnectionCounters c = counters_;
   c.queued_bytes = queued_bytes();
+  c.udp_frames_sent = udp_sent_.load(std::memory_order_relaxed);
+  c.udp_frames_dropped = udp_dropped_.load(std::memory_order_relaxed);
+  c.frames_sent += c.udp_frames_sent;
+  c.frames_dropped += c.udp_frames_dropped;
+  for (std::size_t k = 0; k < WaitHistogram::kBuckets; ++k) {
+    c.frame_wait.add_to_bucket(k, udp_wait_[k].load(std::memory_order_relaxed));
+  }
   return c;
 }
 

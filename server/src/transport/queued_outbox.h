@@ -6,12 +6,14 @@
 // I/O: how a write goes out (request_flush), how reading resumes (read_more),
 // and how it stops.
 //
-// Threads: every call takes m_, recursive (a stop may come from inside a
-// locked step, a write that failed). Calls may come from the control loop
-// (requests, streams) and from the transport's I/O thread; a transport whose
-// calls all come from one thread (WebSocket) takes an uncontended lock.
+// Threads: every call but the UDP counts (atomic) takes m_, recursive (a
+// stop may come from inside a locked step, a write that failed). Calls may
+// come from the control loop (requests, streams) and from the transport's
+// I/O thread; a transport whose calls all come from one thread (WebSocket)
+// takes an uncontended lock.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -80,6 +82,11 @@ class QueuedOutbox : public Outbox {
   virtual bool link_ready() const { return true; }
 
   std::uint64_t queued_bytes() const { return reply_bytes_ + frames_.bytes() + in_flight_bytes_; }
+  // Frames sent and dropped, over TCP (or WebSocket) and UDP (m_ held).
+  std::uint64_t all_frames_sent() const { return counters_.frames_sent + udp_sent_.load(std::memory_order_relaxed); }
+  std::uint64_t all_frames_dropped() const {
+    return counters_.frames_dropped + udp_dropped_.load(std::memory_order_relaxed);
+  }
   // Bytes held now (queued plus the request being read) into the budget.
   void account();
   void note_queue();
@@ -134,6 +141,10 @@ class QueuedOutbox : public Outbox {
   FrameQueue frames_;
   std::uint64_t in_flight_bytes_ = 0;
   ConnectionCounters counters_;
+  // UDP frames, counted by the streams for each UDP subscriber of every tick:
+  // without the lock, folded into counters().
+  std::atomic<std::uint64_t> udp_sent_{0}, udp_dropped_{0};
+  std::array<std::atomic<std::uint32_t>, WaitHistogram::kBuckets> udp_wait_{};
 
   Clock::time_point started_ = Clock::now();
   Clock::time_point tick_due_ = Clock::time_point::max();  // what watchdog_next_tick last gave

@@ -248,7 +248,7 @@ void WsConnection::stop(const std::string& reason) {
   if (stopped_) return;
   stopped_.store(true, std::memory_order_release);
   log_connection(spdlog::level::info, "conn {}: closed: {} (frames sent {}, dropped {})", id_, reason,
-                 counters_.frames_sent, counters_.frames_dropped);
+                 all_frames_sent(), all_frames_dropped());
   if (handler_) handler_->on_stop();
   drop_queued();
   if (on_closed_) on_closed_(id_);

@@ -145,6 +145,19 @@ TEST(WaitHistogram, AQuantileIsTheUpperBoundOfItsBucket) {
   server::WaitHistogram zero;
   zero.add(microseconds(0));
   EXPECT_DOUBLE_EQ(zero.quantile_seconds(0.5), 1e-6);
+  // Either side of every bound: 2^j - 1 us is under 2^j, 2^j us is not.
+  int sides = 0;
+  for (int j = 1; j < 24; ++j) {
+    for (std::int64_t us : {(std::int64_t{1} << j) - 1, std::int64_t{1} << j}) {
+      server::WaitHistogram one;
+      one.add(microseconds(us));
+      const int bucket = us < (std::int64_t{1} << j) ? j : j + 1;
+      const int bound = bucket < 19 ? bucket : 18;  // the last bucket reports its lower bound
+      EXPECT_DOUBLE_EQ(one.quantile_seconds(0.5), static_cast<double>(std::int64_t{1} << bound) * 1e-6) << us;
+      ++sides;
+    }
+  }
+  EXPECT_EQ(sides, 46);
 }
 
 TEST(ConnectionWatchdog, TicksOfManyConnectionsFallDueTogether) {

@@ -70,6 +70,29 @@ TEST(UdpFragments, TwoPiecesGiveTheDatagramsOfTheJoinedMessage) {
   EXPECT_EQ(cases, 27u);
 }
 
+// The fragments' bytes as docs/protocol.md gives them (what the Python,
+// C# and Godot clients parse): "GMRU", version 2, kind 2, two zero bytes,
+// then message id, index, count and total size big-endian, then the bytes.
+TEST(UdpFragments, EachFragmentIsTheDocumentedHeaderThenItsShareOfTheMessage) {
+  using gmr::wire::kMaxFragmentPayload;
+  const std::string message = random_bytes(2 * kMaxFragmentPayload + 5, 3);
+  std::string out = "before";
+  ASSERT_EQ(gmr::wire::append_fragments(out, 0x01020304u, std::string_view(message).substr(0, 30),
+                                        std::string_view(message).substr(30)),
+            3u);
+  std::string want = "before";
+  const std::uint32_t total = static_cast<std::uint32_t>(message.size());
+  for (std::uint16_t i = 0; i < 3; ++i) {
+    want += std::string("GMRU\x02\x02\x00\x00\x01\x02\x03\x04", 12);
+    want += {'\0', static_cast<char>(i), '\0', '\3'};
+    want += {static_cast<char>(total >> 24), static_cast<char>(total >> 16), static_cast<char>(total >> 8),
+             static_cast<char>(total)};
+    want += message.substr(i * kMaxFragmentPayload, kMaxFragmentPayload);
+  }
+  EXPECT_EQ(out, want);
+  EXPECT_EQ(out.size() - 6, 2 * gmr::wire::kMaxDatagramBytes + gmr::wire::kFragmentHeaderBytes + 5);
+}
+
 TEST(UdpFragments, ReassembleExactlyInAnyOrderWithDuplicates) {
   for (std::size_t size : {std::size_t{0}, std::size_t{1}, gmr::wire::kMaxFragmentPayload,
                            gmr::wire::kMaxFragmentPayload + 1, std::size_t{10000}}) {
