@@ -18,8 +18,8 @@ using prometheus::MetricFamily;
 using prometheus::MetricType;
 
 // Seconds: from 10 us (a request, a frame on an idle loopback) to 1 s.
-const prometheus::Histogram::BucketBoundaries kLatencyBuckets = {1e-5, 2.5e-5, 5e-5,   1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3,
-                                                                 5e-3, 1e-2,   2.5e-2, 5e-2, 0.1,    0.25, 1.0};
+const std::vector<double> kLatencyBuckets = {1e-5, 2.5e-5, 5e-5,   1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3,
+                                             5e-3, 1e-2,   2.5e-2, 5e-2, 0.1,    0.25, 1.0};
 
 // Families built from the server's state at scrape time.
 class Families {
@@ -54,7 +54,11 @@ std::string code_label(pb::ErrorCode code) {
 
 }  // namespace
 
-Metrics::Metrics() : registry_(std::make_shared<prometheus::Registry>()) {
+Metrics::Metrics()
+    : registry_(std::make_shared<prometheus::Registry>()),
+      tick_lateness_(kLatencyBuckets),
+      frame_wait_tcp_(kLatencyBuckets),
+      frame_wait_ws_(kLatencyBuckets) {
   requests_ = &prometheus::BuildCounter()
                    .Name("gmr_requests_total")
                    .Help("Requests answered, by kind (heartbeats not counted)")
@@ -72,19 +76,6 @@ Metrics::Metrics() : registry_(std::make_shared<prometheus::Registry>()) {
                           .Help("Time the server took to answer a request")
                           .Register(*registry_)
                           .Add({}, kLatencyBuckets);
-  tick_lateness_ = &prometheus::BuildHistogram()
-                        .Name("gmr_tick_lateness_seconds")
-                        .Help("How late a stream's tick ran after it was due")
-                        .Register(*registry_)
-                        .Add({}, kLatencyBuckets);
-  auto& wait = prometheus::BuildHistogram()
-                   .Name("gmr_frame_wait_seconds")
-                   .Help(
-                       "From a frame queued for a connection to the end of the write that carried it "
-                       "(the oldest frame of each write)")
-                   .Register(*registry_);
-  frame_wait_tcp_ = &wait.Add({{"transport", "tcp"}}, kLatencyBuckets);
-  frame_wait_ws_ = &wait.Add({{"transport", "websocket"}}, kLatencyBuckets);
 }
 
 void Metrics::request(std::string_view kind, Clock::duration took, pb::ErrorCode code) {
@@ -99,8 +90,8 @@ void Metrics::unparsable_request() {
 
 void Metrics::http_response(unsigned status) { http_responses_->Add({{"status", std::to_string(status)}}).Increment(); }
 
-prometheus::Histogram& Metrics::frame_wait(std::string_view transport) {
-  return transport == "websocket" ? *frame_wait_ws_ : *frame_wait_tcp_;
+LatencyHistogram& Metrics::frame_wait(std::string_view transport) {
+  return transport == "websocket" ? frame_wait_ws_ : frame_wait_tcp_;
 }
 
 std::string Metrics::text(const MetricsSnapshot& s) const {
@@ -270,6 +261,16 @@ std::string Metrics::text(const MetricsSnapshot& s) const {
         static_cast<double>(s.server.view_bytes));
 
   auto families = registry_->Collect();
+  // The histograms filled per frame and per tick, without prometheus-cpp's lock.
+  families.push_back(MetricFamily{"gmr_tick_lateness_seconds",
+                                  "How late a stream's tick ran after it was due",
+                                  T::Histogram,
+                                  {tick_lateness_.collect()}});
+  families.push_back(MetricFamily{
+      "gmr_frame_wait_seconds",
+      "From a frame queued for a connection to the end of the write that carried it (the oldest frame of each write)",
+      T::Histogram,
+      {frame_wait_tcp_.collect({{"transport", "tcp"}}), frame_wait_ws_.collect({{"transport", "websocket"}})}});
   for (auto& family : f.families()) families.push_back(std::move(family));
   std::ostringstream out;
   prometheus::TextSerializer().Serialize(out, families);

@@ -19,6 +19,7 @@
 #include "gmr/markers/marker_frames.h"
 #include "gmr/server/library.h"
 #include "gmr/server/server.h"
+#include "transport/latency_histogram.h"
 #include "requests/services.h"
 #include "transport/net.h"
 #include "transport/outbox.h"
@@ -63,9 +64,9 @@ class Metrics final : public RequestObserver {
 
   // How long frames waited in a connection's queue before the write that
   // carried them completed, per transport ("tcp", "websocket").
-  prometheus::Histogram& frame_wait(std::string_view transport);
+  LatencyHistogram& frame_wait(std::string_view transport);
   // How late streams' ticks ran after their due time.
-  prometheus::Histogram& tick_lateness() { return *tick_lateness_; }
+  LatencyHistogram& tick_lateness() { return tick_lateness_; }
 
   // The Prometheus text exposition format (0.0.4) of everything: the
   // registry's families, then the server's state `s`.
@@ -77,9 +78,9 @@ class Metrics final : public RequestObserver {
   prometheus::Family<prometheus::Counter>* request_errors_;
   prometheus::Family<prometheus::Counter>* http_responses_;
   prometheus::Histogram* request_seconds_;
-  prometheus::Histogram* tick_lateness_;
-  prometheus::Histogram* frame_wait_tcp_;
-  prometheus::Histogram* frame_wait_ws_;
+  LatencyHistogram tick_lateness_;
+  LatencyHistogram frame_wait_tcp_;
+  LatencyHistogram frame_wait_ws_;
 };
 
 }  // namespace gmr::server

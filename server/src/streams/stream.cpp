@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "gmr/view/engine_pose.h"
-#include "prometheus/histogram.h"
+#include "transport/latency_histogram.h"
 #include "streams/frame_encoder.h"
 #include "streams/stream_clock.h"
 
@@ -170,7 +170,7 @@ void Stream::on_tick() {
   Clock::time_point now = Clock::now();
   if (counters_.tick_lateness != nullptr) {
     // A tick runs up to StreamClock::kGrain early: on time, for lateness.
-    counters_.tick_lateness->Observe(std::max(0.0, std::chrono::duration<double>(now - due(tick_)).count()));
+    counters_.tick_lateness->observe(now - due(tick_));
   }
   const Schedule& sched = settings_.schedule;
   const double pos = position(tick_);

@@ -30,11 +30,9 @@
 #include "gmr/view/conventions.h"
 #include "transport/net.h"
 
-namespace prometheus {
-class Histogram;
-}
-
 namespace gmr::server {
+
+class LatencyHistogram;
 
 // Where a stream's frames go: a subscription over TCP or over UDP.
 class Target {
@@ -74,7 +72,7 @@ struct StreamCounters {
   std::uint64_t frames_encoded = 0;         // encodings (one per tick that sends)
   std::uint64_t frames_skipped = 0;         // ticks skipped because the server was late (per target)
   // Observes how late each tick ran after its due time (seconds); may be null.
-  prometheus::Histogram* tick_lateness = nullptr;
+  LatencyHistogram* tick_lateness = nullptr;
   // The float path's FK, kept 16 frames at a time (fk_blocks.h); null: each
   // frame computed on its own.
   FkBlocks* fk_blocks = nullptr;

@@ -29,6 +29,7 @@ struct BufferBudget {
   bool over() const { return limit != 0 && held.load(std::memory_order_relaxed) > limit; }
   // A connection that counted `accounted` bytes now holds `now`.
   void settle(std::uint64_t& accounted, std::uint64_t now) {
+    if (now == accounted) return;  // a write taking the queued frames moves bytes, it adds none
     const std::uint64_t h = held.fetch_add(now - accounted, std::memory_order_relaxed) + (now - accounted);
     std::uint64_t m = max_held.load(std::memory_order_relaxed);
     while (h > m && !max_held.compare_exchange_weak(m, h, std::memory_order_relaxed)) {

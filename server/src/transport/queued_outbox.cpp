@@ -4,7 +4,7 @@
 #include <utility>
 
 #include "gmr/wire/frames.h"
-#include "prometheus/histogram.h"
+#include "transport/latency_histogram.h"
 
 namespace gmr::server {
 
@@ -224,7 +224,7 @@ void QueuedOutbox::wrote(std::size_t n) {
   if (!writing_frames_) return;
   last_frames_written_ = last_write_;
   if (frame_wait_ != nullptr) {
-    frame_wait_->Observe(std::chrono::duration<double>(last_write_ - oldest_frame_in_flight_).count());
+    frame_wait_->observe(last_write_ - oldest_frame_in_flight_);
   }
   oldest_frame_in_flight_ = Clock::time_point::max();
 }

@@ -26,11 +26,9 @@
 #include "transport/link.h"
 #include "transport/outbox.h"
 
-namespace prometheus {
-class Histogram;
-}
-
 namespace gmr::server {
+
+class LatencyHistogram;
 
 class QueuedOutbox : public Outbox {
  public:
@@ -63,7 +61,7 @@ class QueuedOutbox : public Outbox {
 
   // Observes, per write that carried frames, how long its oldest frame
   // waited from push_frame to the write's completion (seconds).
-  void set_frame_wait_histogram(prometheus::Histogram* h) { frame_wait_ = h; }
+  void set_frame_wait_histogram(LatencyHistogram* h) { frame_wait_ = h; }
 
  protected:
   using Lock = std::lock_guard<std::recursive_mutex>;
@@ -151,7 +149,7 @@ class QueuedOutbox : public Outbox {
   Clock::time_point write_started_{}, last_read_{}, last_write_{};
   Clock::time_point last_frames_written_{};  // the last write that held frames completed
   Clock::time_point oldest_frame_in_flight_ = Clock::time_point::max();
-  prometheus::Histogram* frame_wait_ = nullptr;
+  LatencyHistogram* frame_wait_ = nullptr;
 };
 
 }  // namespace gmr::server

@@ -6,7 +6,6 @@
 
 #include "gmr/wire/frames.h"
 #include "gmr/wire/framing.h"
-#include "prometheus/histogram.h"
 #include "transport/connection_log.h"
 
 namespace gmr::server {
