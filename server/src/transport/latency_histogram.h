@@ -3,7 +3,7 @@
 // connection's write, a stream's tick). prometheus::Histogram takes a mutex
 // and adds doubles by compare-and-swap for each observation, shared by every
 // I/O thread: a tenth of a shared frame's instructions in the server's
-// profile (docs/performance.md, "Counted instructions"). Here a bucket's
+// profile (docs/performance.md, "Per subscriber"). Here a bucket's
 // count and the sum (integer nanoseconds) are relaxed atomic additions, and
 // /metrics reads them as a ClientMetric; a scrape while others observe may
 // see a count and the sum a few observations apart, never a torn value.
