@@ -20,11 +20,11 @@ using std::chrono::nanoseconds;
 // more is in the next; past the last bound, +Inf; a negative one is zero.
 TEST(LatencyHistogram, EachValueCountsUpToEveryBoundItIsUnder) {
   server::LatencyHistogram h({1e-5, 1e-3, 0.25});
-  h.observe(microseconds(10));                    // le 1e-5
-  h.observe(microseconds(10) + nanoseconds(1));   // le 1e-3
-  h.observe(microseconds(1000));                  // le 1e-3
+  h.observe(microseconds(10));                                 // le 1e-5
+  h.observe(microseconds(10) + nanoseconds(1));                // le 1e-3
+  h.observe(microseconds(1000));                               // le 1e-3
   h.observe(std::chrono::milliseconds(250) + nanoseconds(1));  // +Inf
-  h.observe(std::chrono::seconds(-3));            // 0: le 1e-5
+  h.observe(std::chrono::seconds(-3));                         // 0: le 1e-5
   const auto m = h.collect({{"transport", "tcp"}});
   ASSERT_EQ(m.label.size(), 1u);
   EXPECT_EQ(m.label[0].name, "transport");
