@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Every C and C++ file git tracks is as clang-format (14, Debian 12's) and
-# .clang-format write it. Prints each file that is not, with the first lines
+# Every C and C++ file of the tree (what git tracks, and new files it does
+# not ignore, so a file is checked before its first commit) is as
+# clang-format (14, Debian 12's) and .clang-format write it. Prints each file that is not, with the first lines
 # that differ, and exits 1; `scripts/check-format.sh --fix` rewrites them.
 # Outside CI, a machine without clang-format skips with a message; under
 # CI=true its absence is a failure.
@@ -18,7 +19,8 @@ if [ -z "$format" ]; then
   echo "check-format: SKIPPED: no clang-format on this machine (scripts/install-deps.sh installs it)"
   exit 0
 fi
-mapfile -t files < <(git ls-files '*.c' '*.cc' '*.cpp' '*.h' | grep -v '/node_modules/')
+mapfile -t files < <(git ls-files --cached --others --exclude-standard '*.c' '*.cc' '*.cpp' '*.h' |
+  grep -v '/node_modules/')
 if [ "${1:-}" = --fix ]; then
   "$format" -i "${files[@]}"
   echo "check-format: formatted ${#files[@]} files"
