@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Every C and C++ file of the tree (what git tracks, and new files it does
 # not ignore, so a file is checked before its first commit) is as
-# clang-format (14, Debian 12's) and .clang-format write it. Prints each file that is not, with the first lines
-# that differ, and exits 1; `scripts/check-format.sh --fix` rewrites them.
+# clang-format (14, Debian 12's) and .clang-format write it. Prints each file
+# that is not, with the first lines that differ, and exits 1; `scripts/check-format.sh --fix` rewrites them.
 # Outside CI, a machine without clang-format skips with a message; under
 # CI=true its absence is a failure.
 set -euo pipefail

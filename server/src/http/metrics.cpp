@@ -18,8 +18,8 @@ using prometheus::MetricFamily;
 using prometheus::MetricType;
 
 // Seconds: from 10 us (a request, a frame on an idle loopback) to 1 s.
-const std::vector<double> kLatencyBuckets = {1e-5, 2.5e-5, 5e-5,   1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3,
-                                             5e-3, 1e-2,   2.5e-2, 5e-2, 0.1,    0.25, 1.0};
+const prometheus::Histogram::BucketBoundaries kLatencyBuckets = {1e-5, 2.5e-5, 5e-5,   1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3,
+                                                                 5e-3, 1e-2,   2.5e-2, 5e-2, 0.1,    0.25, 1.0};
 
 // Families built from the server's state at scrape time.
 class Families {

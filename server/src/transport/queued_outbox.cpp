@@ -161,7 +161,12 @@ std::uint64_t QueuedOutbox::end_frames(std::uint32_t key) {
 
 void QueuedOutbox::count_udp_frame_sent(Clock::duration waited) {
   udp_wait_[WaitHistogram::bucket(waited)].fetch_add(1, std::memory_order_relaxed);
-  udp_sent_.fetch_add(1, std::memory_order_relaxed);
+}
+
+std::uint64_t QueuedOutbox::udp_frames_sent() const {
+  std::uint64_t n = 0;
+  for (const auto& k : udp_wait_) n += k.load(std::memory_order_relaxed);
+  return n;
 }
 
 void QueuedOutbox::count_udp_frame_dropped() { udp_dropped_.fetch_add(1, std::memory_order_relaxed); }
@@ -180,13 +185,14 @@ ConnectionCounters QueuedOutbox::counters() const {
   Lock lock(m_);
   ConnectionCounters c = counters_;
   c.queued_bytes = queued_bytes();
-  c.udp_frames_sent = udp_sent_.load(std::memory_order_relaxed);
+  for (std::size_t k = 0; k < WaitHistogram::kBuckets; ++k) {
+    const std::uint64_t n = udp_wait_[k].load(std::memory_order_relaxed);
+    c.frame_wait.add_to_bucket(k, static_cast<std::uint32_t>(n));
+    c.udp_frames_sent += n;
+  }
   c.udp_frames_dropped = udp_dropped_.load(std::memory_order_relaxed);
   c.frames_sent += c.udp_frames_sent;
   c.frames_dropped += c.udp_frames_dropped;
-  for (std::size_t k = 0; k < WaitHistogram::kBuckets; ++k) {
-    c.frame_wait.add_to_bucket(k, udp_wait_[k].load(std::memory_order_relaxed));
-  }
   return c;
 }
 

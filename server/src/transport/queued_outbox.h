@@ -81,7 +81,7 @@ class QueuedOutbox : public Outbox {
 
   std::uint64_t queued_bytes() const { return reply_bytes_ + frames_.bytes() + in_flight_bytes_; }
   // Frames sent and dropped, over TCP (or WebSocket) and UDP (m_ held).
-  std::uint64_t all_frames_sent() const { return counters_.frames_sent + udp_sent_.load(std::memory_order_relaxed); }
+  std::uint64_t all_frames_sent() const { return counters_.frames_sent + udp_frames_sent(); }
   std::uint64_t all_frames_dropped() const {
     return counters_.frames_dropped + udp_dropped_.load(std::memory_order_relaxed);
   }
@@ -140,9 +140,11 @@ class QueuedOutbox : public Outbox {
   std::uint64_t in_flight_bytes_ = 0;
   ConnectionCounters counters_;
   // UDP frames, counted by the streams for each UDP subscriber of every tick:
-  // without the lock, folded into counters().
-  std::atomic<std::uint64_t> udp_sent_{0}, udp_dropped_{0};
-  std::array<std::atomic<std::uint32_t>, WaitHistogram::kBuckets> udp_wait_{};
+  // without the lock, folded into counters(). Those sent are counted by their
+  // wait's bucket alone (their number is the buckets' sum).
+  std::array<std::atomic<std::uint64_t>, WaitHistogram::kBuckets> udp_wait_{};
+  std::atomic<std::uint64_t> udp_dropped_{0};
+  std::uint64_t udp_frames_sent() const;
 
   Clock::time_point started_ = Clock::now();
   Clock::time_point tick_due_ = Clock::time_point::max();  // what watchdog_next_tick last gave
