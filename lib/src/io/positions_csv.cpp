@@ -109,11 +109,13 @@ void write_positions_csv_header(std::ostream& out) { write_pose_header(out, {});
 
 void write_positions_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
                               std::size_t first_frame) {
-  write_pose_rows(out, skeleton, PoseRows{.positions = positions}, first_frame, {});
+  write_pose_rows(out, skeleton,
+                  PoseRows{.positions = positions, .orientations = {}, .local_rotations = {}, .local_translations = {}},
+                  first_frame, {});
 }
 
 void write_poses_csv_header(std::ostream& out, OrientationColumns columns) {
-  write_pose_header(out, PoseColumns{.orientations = columns});
+  write_pose_header(out, PoseColumns{.orientations = columns, .local_transforms = false});
 }
 
 void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span<const Eigen::Vector3d> positions,
@@ -121,7 +123,10 @@ void write_poses_csv_rows(std::ostream& out, const Skeleton& skeleton, std::span
                           OrientationColumns columns) {
   PoseColumns c;
   if (!orientations.empty()) c.orientations = columns;
-  write_pose_rows(out, skeleton, PoseRows{.positions = positions, .orientations = orientations}, first_frame, c);
+  write_pose_rows(
+      out, skeleton,
+      PoseRows{.positions = positions, .orientations = orientations, .local_rotations = {}, .local_translations = {}},
+      first_frame, c);
 }
 
 namespace {
