@@ -82,8 +82,8 @@ void Connection::flush() {
   }
   writing_ = true;
   write_started_ = write_time;  // the same clock reading as the frames' waits
-  account();
   if (socket_.tls()) {
+    account();
     // TLS writes one buffer at a time: given in one piece, the bytes go out
     // in full records rather than one record (and one send) per buffer.
     tls_out_.clear();
@@ -103,9 +103,10 @@ void Connection::flush() {
   const std::size_t n = socket_.tcp().write_some(std::span<const net::const_buffer>(buffers), ec);
   if (ec == net::error::would_block || ec == net::error::try_again) ec = {};
   if (ec || n == in_flight_bytes_) {
-    wrote_all(ec, n);
+    wrote_all(ec, n);  // and into the budget: nothing in flight
     return;
   }
+  account();  // what is in flight, while the rest is written
   // The buffers the kernel took are done; the first it took part of is cut.
   std::size_t skip = n, first = 0;
   while (skip >= buffers[first].size()) skip -= buffers[first++].size();

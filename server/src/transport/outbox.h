@@ -36,7 +36,7 @@ class WaitHistogram {
   }
   void add(std::chrono::steady_clock::duration waited) { ++counts_[bucket(waited)]; }
   // `n` more waits in bucket `k` (< kBuckets).
-  void add_to_bucket(std::size_t k, std::uint32_t n) { counts_[k] += n; }
+  void add_to_bucket(std::size_t k, std::uint64_t n) { counts_[k] += n; }
   std::uint64_t count() const {
     std::uint64_t n = 0;
     for (auto c : counts_) n += c;
@@ -59,7 +59,8 @@ class WaitHistogram {
   }
 
  private:
-  std::array<std::uint32_t, kBuckets> counts_{};
+  // 64-bit: a 1 kHz live source fills a 32-bit bucket in 50 days.
+  std::array<std::uint64_t, kBuckets> counts_{};
 };
 
 struct ConnectionCounters {

@@ -28,6 +28,21 @@
 
 namespace gmr::server {
 
+// A bool that another thread may read without the owner's lock: its loads
+// and stores are relaxed atomics, so what one sees is a recent value (for a
+// hint, not a decision that needs the lock's order).
+class RelaxedFlag {
+ public:
+  RelaxedFlag& operator=(bool v) {
+    v_.store(v, std::memory_order_relaxed);
+    return *this;
+  }
+  operator bool() const { return v_.load(std::memory_order_relaxed); }
+
+ private:
+  std::atomic<bool> v_{false};
+};
+
 class LatencyHistogram;
 
 class QueuedOutbox : public Outbox {
@@ -129,9 +144,11 @@ class QueuedOutbox : public Outbox {
   bool read_paused_ = false;
   bool reads_held_ = false;  // hold_reading
   bool at_handler_ = false;  // a request body is with the Handler (reading waits)
-  bool writing_ = false;
+  // Set under the lock; congested() reads both without it first (relaxed:
+  // plain loads and stores on x86, so the write path pays nothing).
+  RelaxedFlag writing_;
   bool writing_frames_ = false;  // the write in flight holds frames
-  bool flush_posted_ = false;    // a write was handed to the I/O thread, not taken yet
+  RelaxedFlag flush_posted_;     // a write was handed to the I/O thread, not taken yet
   Clock::time_point flush_asked_{};
 
   std::deque<std::shared_ptr<const std::string>> replies_;  // framed

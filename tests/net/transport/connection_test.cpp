@@ -160,6 +160,17 @@ TEST(WaitHistogram, AQuantileIsTheUpperBoundOfItsBucket) {
   EXPECT_EQ(sides, 46);
 }
 
+// A bucket counts past 2^32 (a 1 kHz source's frames in 50 days): a count
+// folded in whole, not cut to 32 bits.
+TEST(WaitHistogram, ABucketCountsPastTwoToTheThirtySecond) {
+  server::WaitHistogram h;
+  const std::uint64_t many = (std::uint64_t{1} << 32) + 5;
+  h.add_to_bucket(4, many);  // [8, 16) us
+  h.add(std::chrono::microseconds(5000));
+  EXPECT_EQ(h.count(), many + 1);
+  EXPECT_DOUBLE_EQ(h.quantile_seconds(0.99), 16e-6);
+}
+
 TEST(ConnectionWatchdog, TicksOfManyConnectionsFallDueTogether) {
   server::ConnectionLimits limits;
   limits.heartbeat_interval = std::chrono::milliseconds(5000);
