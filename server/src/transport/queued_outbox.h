@@ -144,8 +144,8 @@ class QueuedOutbox : public Outbox {
   bool read_paused_ = false;
   bool reads_held_ = false;  // hold_reading
   bool at_handler_ = false;  // a request body is with the Handler (reading waits)
-  // Set under the lock; congested() reads both without it first (relaxed:
-  // plain loads and stores on x86, so the write path pays nothing).
+  // congested() reads both without the lock first (relaxed atomics: plain
+  // loads and stores on x86, so the write path pays nothing).
   RelaxedFlag writing_;
   bool writing_frames_ = false;  // the write in flight holds frames
   RelaxedFlag flush_posted_;     // a write was handed to the I/O thread, not taken yet
