@@ -40,3 +40,18 @@ if(GMR_FUZZ)
   endif()
   add_compile_options(-fsanitize=fuzzer-no-link)
 endif()
+# GMR_FUZZ_HARNESSES: the harnesses in a GMR_SANITIZE tree, which instruments
+# for coverage only the code they fuzz (fuzz/coverage-allowlist.txt): the
+# tree's tests keep ASan's speed (coverage everywhere made them half again as
+# slow) and its Highway kernels keep every target, and CI builds the library
+# and the server under ASan once, not twice (make fuzz-smoke).
+if(GMR_FUZZ_HARNESSES)
+  if(NOT GMR_SANITIZE OR NOT CMAKE_CXX_COMPILER_ID MATCHES "Clang")
+    message(FATAL_ERROR "GMR_FUZZ_HARNESSES needs GMR_SANITIZE=ON and clang (libFuzzer)")
+  endif()
+  if(GMR_FUZZ)
+    message(FATAL_ERROR "GMR_FUZZ_HARNESSES is GMR_FUZZ with less coverage: use one of them")
+  endif()
+  add_compile_options(-fsanitize=fuzzer-no-link
+                      -fsanitize-coverage-allowlist=${PROJECT_SOURCE_DIR}/fuzz/coverage-allowlist.txt)
+endif()

@@ -6,7 +6,8 @@
 # Seeds: the corpus files of ../shared/data with the harness's extension, and
 # fuzz/seeds/<harness>/ (files made here: .gmr has no third-party corpus).
 # A crash (or a failed property) stops that harness, keeps the input in
-# build-fuzz/artifacts/ and makes this script fail; turn it into a test.
+# $BUILD/artifacts/ (build-fuzz, or the sanitizer tree for make fuzz-smoke)
+# and makes this script fail; turn it into a test.
 #   scripts/fuzz.sh [harness ...]      (default: all)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,9 +16,15 @@ if [ "${CI:-}" = true ]; then SECONDS_EACH=${FUZZ_SECONDS:-10}; else SECONDS_EAC
 JOBS=${JOBS:-$(nproc)}
 DATA=../shared/data
 
-cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DGMR_FUZZ=ON \
-  -DGMR_BUILD_TESTS=OFF -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_TOOLS=OFF -DGMR_BUILD_NET=ON -DGMR_INSTALL=OFF >/dev/null
-cmake --build "$BUILD" -j "$JOBS" --target gmr_fuzzers
+if [ "${FUZZ_PREBUILT:-}" = 1 ]; then
+  # make fuzz-smoke: the sanitizer tree (GMR_FUZZ_HARNESSES, configured by
+  # make test-sanitize) built the harnesses; configuring it here would undo that.
+  [ -x "$BUILD/fuzz/gmr_fuzz_bvh" ] || { echo "fuzz: no harnesses in $BUILD/fuzz (make test-sanitize builds them)" >&2; exit 1; }
+else
+  cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DGMR_FUZZ=ON \
+    -DGMR_BUILD_TESTS=OFF -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_TOOLS=OFF -DGMR_BUILD_NET=ON -DGMR_INSTALL=OFF >/dev/null
+  cmake --build "$BUILD" -j "$JOBS" --target gmr_fuzzers
+fi
 
 harnesses=("$@")
 [ ${#harnesses[@]} -eq 0 ] && harnesses=(bvh gmr gmrb asf amc c3d trc csv model wire requests client)
