@@ -99,7 +99,7 @@ bool Client::Impl::take_messages() {
 void Client::Impl::arm_heartbeat() {
   // As often as the server's idle rule needs: a third of its idle timeout
   // (without one, its heartbeat interval), 10 ms at the least. Before, it was
-  // the server's heartbeat interval when shorter (5 s against 10 s by
+  // the server's heartbeat interval when shorter (then 5 s against 10 s by
   // default): twice the heartbeats the rule needs, each a wake-up and a read
   // for the server (docs/performance.md, "Multicast's keep-alive").
   const std::uint32_t idle_third = hello.idle_timeout_ms / 3;

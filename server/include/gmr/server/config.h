@@ -132,8 +132,11 @@ struct ServerConfig {
   std::size_t max_remote_sources = 1024;
   // A connection that sends nothing (not even a heartbeat) for this long is closed.
   std::chrono::milliseconds idle_timeout{30000};
-  // The server sends a heartbeat when it wrote nothing for this long.
-  std::chrono::milliseconds heartbeat_interval{5000};
+  // The server sends a heartbeat when it wrote nothing for this long. Half
+  // the idle timeout: no client needs it to stay connected (the idle rule
+  // counts what a client sends), and at 10,000 multicast subscribers a 5 s
+  // interval was a third of the server's CPU (docs/performance.md).
+  std::chrono::milliseconds heartbeat_interval{15000};
   // A write that makes no progress for this long means a dead client: closed.
   std::chrono::milliseconds write_timeout{20000};
   // A subscription whose frames wait this long behind a write in flight (TCP,
