@@ -40,7 +40,8 @@ test-sanitize: setup
 # The server and client tests (the server's thread, the clients' shared
 # EventLoop threads, 1,000 subscribers across them) under ThreadSanitizer; a
 # race fails the test (TSan's exit code). Only gmr_net_tests is built here,
-# at -O1: every access is still instrumented, and the build is a fifth shorter.
+# at -O1: every access is still instrumented, and a server file compiles in a
+# fifth less time than at -O2.
 test-tsan: setup
 	@cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DGMR_TSAN=ON \
 	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g -DNDEBUG" \
