@@ -25,11 +25,11 @@ set(GMR_PCH_PROTO
   <google/protobuf/repeated_field.h>)
 set(GMR_PCH_TEST <gtest/gtest.h>)
 
-# gmr_precompile(target [ASIO] [LOG] [PROTO] [TEST]): the core list and the
-# others named, for that target. A target of one or two files gains nothing
-# (the header is compiled once per target), so the callers leave those out.
+# gmr_precompile(target CORE|ASIO|LOG|PROTO|TEST...): the lists named, added
+# to what the target has. A target of one or two files gains nothing (the
+# header is compiled once per target), so the callers leave those out.
 function(gmr_precompile target)
-  set(headers ${GMR_PCH_CORE})
+  set(headers "")
   foreach(kind IN LISTS ARGN)
     list(APPEND headers ${GMR_PCH_${kind}})
   endforeach()
