@@ -55,6 +55,7 @@ int main(int argc, char** argv) {
   long long write_ms = cfg.write_timeout.count();
   long long congested_ms = cfg.congested_after.count();
   long long handshake_ms = cfg.handshake_timeout.count();
+  double tick_grid_ms = std::chrono::duration<double, std::milli>(cfg.tick_grid).count();
   app.add_option("--library", library_dir,
                  "Folder of BVH, ASF/AMC and GMR files (default: the built-in demo library); watched while running: "
                  "files added, replaced or removed are picked up, and SIGHUP reads it again (docs/protocol.md, "
@@ -150,6 +151,11 @@ int main(int argc, char** argv) {
                  "Compute no frames for a subscription whose frames have waited this long behind a stalled write "
                  "(or UDP lane)")
       ->capture_default_str();
+  app.add_option("--tick-grid-ms", tick_grid_ms,
+                 "Own streams start on a grid of their period this fine, so streams of one rate tick together in a few "
+                 "groups (0: each from the moment it starts)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1000.0));
   app.add_option("--load-threads", threads, "Threads loading the library (0: one per core)");
   std::string auth_file, anonymous;
   app.add_option("--auth-file", auth_file,
@@ -264,6 +270,7 @@ int main(int argc, char** argv) {
   cfg.write_timeout = std::chrono::milliseconds(write_ms);
   cfg.congested_after = std::chrono::milliseconds(congested_ms);
   cfg.handshake_timeout = std::chrono::milliseconds(handshake_ms);
+  cfg.tick_grid = std::chrono::microseconds(std::llround(tick_grid_ms * 1000.0));
 
   // The auth file, at start and on SIGHUP; a readable-by-others warning is logged.
   auto read_credentials = [&auth_file]() -> gmr::Result<std::shared_ptr<const Credentials>> {

@@ -7,9 +7,11 @@
 #   bench/server/run.sh [BUILD_DIR] [OUT_DIR]
 #     SUBSCRIBERS="100 1000 3000 10000"  REPEATS=3  SECONDS_PER_POINT=10  RATE=120
 #     MOTION_FILE=../shared/data/bvh/cmu/01_01.bvh  TRANSPORTS="tcp udp"  MODES="own shared"
-#     CLIENTS_PER_PROCESS=(what the open-files limit allows)  LOAD_THREADS=1  PHASES=17
-#     SERVER_CPUS=0  LOAD_CPUS=1  FLOOR=1
+#     CLIENTS_PER_PROCESS=(what the open-files limit allows)  LOAD_THREADS=1  PHASES=5
+#     SERVER_CPUS=0  LOAD_CPUS=1  FLOOR=1  SERVER_FLAGS=
 #
+# SERVER_FLAGS are more gmr-server options, word-split (say
+# SERVER_FLAGS="--tick-grid-ms 0" for own streams that tick from when they start).
 # SERVER_CPUS and LOAD_CPUS are taskset lists: SERVER_CPUS=0,1 LOAD_CPUS=0,1
 # gives the server both cores (one I/O thread per CPU), shared with the load
 # generator; FLOOR=0 skips the floor (it is pinned to CPUs 0 and 1 whatever
@@ -19,10 +21,12 @@
 # many times, pinned the same way: the same frames, of the same size (BYTES,
 # default 510: a 01_01 frame at float32 with its head), sent with sendmmsg or
 # writev and nothing else. The CSV gives gmr's CPU per frame as a ratio to it.
-# Own streams start at different times, so their frames leave in about 17
-# groups a period (gmr-server's clock runs ticks due within 0.5 ms together),
-# not in one burst: for them the floor also runs with --phases PHASES, and
-# the CSV gives the ratio to that floor too (phased_floor_*).
+# Own streams start at different times, but on the server's grid (2 ms by
+# default, --tick-grid-ms), so at 120 Hz their frames leave in 5 groups a
+# period, not in one burst: for them the floor also runs with --phases
+# PHASES, and the CSV gives the ratio to that floor too (phased_floor_*).
+# Without the grid (SERVER_FLAGS="--tick-grid-ms 0") the clock's 0.5 ms
+# grain leaves about 17 groups a period: PHASES=17 is that floor.
 #
 # Writes OUT_DIR/runs/*.json (every run, gmr-load --json; the floor's in
 # runs/floor/, in phases in runs/floor/phased/), OUT_DIR/grid.csv (one row per point, medians over the
@@ -42,10 +46,11 @@ load_threads=${LOAD_THREADS:-1}
 transports=${TRANSPORTS:-tcp udp}
 modes=${MODES:-own shared}
 bytes=${BYTES:-510}
-phases=${PHASES:-17}
+phases=${PHASES:-5}
 server_cpus=${SERVER_CPUS:-0}
 load_cpus=${LOAD_CPUS:-1}
 run_floor=${FLOOR:-1}
+read -r -a server_flags <<<"${SERVER_FLAGS:-}"
 bin="$build/bin"
 here=$(dirname "$0")
 
@@ -87,7 +92,7 @@ for n in $subscribers; do
         [ "$transport" = udp ] && flags+=(--udp)
         [ "$mode" = shared ] && flags+=(--shared)
         start_server "$server_cpus" --http-port -1 --max-connections 30000 --max-connections-per-address 0 \
-          --max-pending-handshakes 30000 --send-budget 0 --log-level warn
+          --max-pending-handshakes 30000 --send-budget 0 --log-level warn "${server_flags[@]}"
         per_process=$(clients_per_process)
         processes=$(( (n + per_process - 1) / per_process ))
         pids=(); parts=()

@@ -71,7 +71,7 @@ struct Server::Impl {
   MulticastGroup multicast;
   FkBlocks fk_blocks{cfg.fk_cache_bytes};
   StreamCounters counters{.tick_lateness = &metrics.tick_lateness(), .fk_blocks = &fk_blocks};
-  StreamRegistry streams{io, counters};
+  StreamRegistry streams{io, counters, cfg.tick_grid};
   Replicas replicas{io, cfg, catalog};
   Beacon beacon{io, cfg, [this] { return describe(); }};
   // Long view edits run here (RequestHandler::edit_view): one thread, so

@@ -37,7 +37,7 @@ struct ServerParts {
   server::MulticastGroup multicast;
   server::FkBlocks fk_blocks{cfg.fk_cache_bytes};
   server::StreamCounters counters{.tick_lateness = &metrics.tick_lateness(), .fk_blocks = &fk_blocks};
-  server::StreamRegistry streams{io, counters};
+  server::StreamRegistry streams{io, counters, cfg.tick_grid};
   server::Replicas replicas{io, cfg, catalog};
   server::net::thread_pool edit_pool{1};
   server::Services services{cfg, io,        edit_pool, catalog,    admission, streams, counters,

@@ -33,8 +33,10 @@ double Stream::position(std::uint64_t tick) const {
 Clock::duration Stream::period() const {
   return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / settings_.schedule.rate));
 }
-void Stream::rebase(Clock::time_point now, double pos) {
-  base_time_ = now;
+void Stream::rebase(double pos) {
+  // On the clock's grid: streams of one rate that start close together tick
+  // together (stream_clock.h).
+  base_time_ = clock_.align(Clock::now(), settings_.schedule.rate);
   base_pos_ = pos;
   base_tick_ = tick_;
 }
@@ -50,7 +52,7 @@ void Stream::arm() {
 
 void Stream::start() {
   if (live_) return;  // its source's frames drive it
-  rebase(Clock::now(), 0.0);
+  rebase(0.0);
   arm();
 }
 
@@ -65,7 +67,7 @@ void Stream::resume() {
   if (!paused_) return;
   paused_ = false;
   if (live_) return;
-  rebase(Clock::now(), pause_pos_);
+  rebase(pause_pos_);
   arm();
 }
 
@@ -77,7 +79,7 @@ void Stream::seek(std::uint32_t frame) {
     return;
   }
   stop();
-  rebase(Clock::now(), pos);
+  rebase(pos);
   arm();
 }
 
@@ -97,10 +99,14 @@ std::shared_ptr<Stream> Stream::split_off(std::uint64_t id, const Target* target
   s->live_next_ = live_next_;
   s->last_frame_ = last_frame_;
   s->paused_ = paused_;
-  const double pos = paused_ ? pause_pos_ : position(tick_);
-  s->pause_pos_ = pos;
+  s->pause_pos_ = paused_ ? pause_pos_ : position(tick_);
   if (!paused_) {
-    s->rebase(Clock::now(), pos);
+    // Its next tick is due when this one's is: the same frame at the same
+    // time, in the same group of the clock.
+    s->base_time_ = base_time_;
+    s->base_pos_ = base_pos_;
+    s->base_tick_ = base_tick_;
+    s->tick_ = tick_;
     s->arm();
   }
   auto it = std::find_if(targets_.begin(), targets_.end(), [&](const Entry& e) { return e.target.get() == target; });

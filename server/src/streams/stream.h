@@ -154,7 +154,8 @@ class Stream : public std::enable_shared_from_this<Stream> {
   double step() const;
   double position(std::uint64_t tick) const;
   Clock::duration period() const;
-  void rebase(Clock::time_point now, double pos);
+  // Position `pos` is due at the first point of the clock's grid from now.
+  void rebase(double pos);
   Clock::time_point due(std::uint64_t tick) const;
   void arm();
   void on_tick();

@@ -1,8 +1,21 @@
 #include "streams/stream_clock.h"
 
+#include <cmath>
+
 #include "streams/stream.h"
 
 namespace gmr::server {
+
+Clock::time_point StreamClock::align(Clock::time_point t, double rate_hz) const {
+  if (grid_ <= Clock::duration::zero() || !(rate_hz > 0) || t <= epoch_) return t;
+  using Seconds = std::chrono::duration<double>;
+  const double period = 1.0 / rate_hz;
+  const double points = std::max(1.0, std::ceil(period / Seconds(grid_).count() - 1e-9));
+  const double step = period / points;
+  // Days after the epoch, n * step is still within a nanosecond of the grid.
+  const double n = std::ceil(Seconds(t - epoch_).count() / step);
+  return std::max(t, epoch_ + std::chrono::duration_cast<Clock::duration>(Seconds(n * step)));
+}
 
 void StreamClock::schedule(std::weak_ptr<Stream> stream, Clock::time_point due, std::uint64_t generation) {
   if (stopped_) return;

@@ -14,6 +14,16 @@
 // stream's first) waits for the next pass even when due: a stream far
 // behind catches up one tick per pass, between the loop's other handlers,
 // as it did with a timer of its own.
+//
+// Streams that start at different times would still tick at as many phases
+// of their period as there are streams, and each phase's sends are a burst
+// of their own (on loopback each burst wakes the receiver, which the sending
+// CPU pays for). So a stream starts on a grid (ServerConfig::tick_grid): at
+// rate R, the first of ceil(1 / (R * grid)) points evenly spaced over its
+// period, counted from the clock's epoch, at or after the moment it is asked
+// to start. Streams of one rate then tick in that many groups at most (5 a
+// period at 120 Hz with the 2 ms default), and a start waits less than the
+// grid.
 #pragma once
 
 #include <cstdint>
@@ -31,7 +41,13 @@ class StreamClock {
  public:
   static constexpr Clock::duration kGrain = std::chrono::microseconds(500);
 
-  explicit StreamClock(net::io_context& io) : timer_(io) {}
+  // `grid`: see above; zero puts no grid (a stream starts when asked).
+  explicit StreamClock(net::io_context& io, Clock::duration grid = Clock::duration::zero())
+      : timer_(io), grid_(grid), epoch_(Clock::now()) {}
+
+  // The first point of the grid of streams at `rate_hz` at or after `t` (`t`
+  // itself without a grid).
+  Clock::time_point align(Clock::time_point t, double rate_hz) const;
 
   // `stream`'s tick `generation` is due at `due`: then its on_clock(generation)
   // runs (the stream ignores a generation it has since cancelled). Control
@@ -58,6 +74,8 @@ class StreamClock {
   void run_due();
 
   net::steady_timer timer_;
+  Clock::duration grid_;
+  Clock::time_point epoch_;
   // A min-heap by due time (std::push_heap / pop_heap with std::greater): a
   // tick's entry is moved out of it, not copied (its weak_ptr's count is
   // shared with every other user of the stream).

@@ -17,7 +17,9 @@ namespace gmr::server {
 
 class StreamRegistry {
  public:
-  StreamRegistry(net::io_context& io, StreamCounters& counters) : clock_(io), counters_(counters) {}
+  // `tick_grid`: ServerConfig::tick_grid, the clock's.
+  StreamRegistry(net::io_context& io, StreamCounters& counters, Clock::duration tick_grid = Clock::duration::zero())
+      : clock_(io, tick_grid), counters_(counters) {}
 
   // The key naming everything that shapes a stream's bytes: the motion, its
   // skeleton version and joint structure, the viewpoint, the joints,

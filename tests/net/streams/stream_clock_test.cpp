@@ -87,6 +87,91 @@ TEST(StreamClock, OwnStreamsShareWakeUpsAndEachGetsEveryFrameInOrder) {
   EXPECT_EQ(clock.waiting(), 0u) << "an ended stream leaves nothing on the clock";
 }
 
+// The grid (ServerConfig::tick_grid): a start waits for the first of its
+// points at or after it, less than a point's spacing, and the points of a
+// rate are evenly spaced over its period, so streams that start on them tick
+// together.
+TEST(StreamClock, AGridPutsStartsOnEvenlySpacedPointsOfThePeriod) {
+  server::net::io_context io;
+  const server::StreamClock none(io);
+  const auto t0 = server::Clock::now() + std::chrono::milliseconds(1);
+  EXPECT_EQ(none.align(t0, 120.0), t0) << "without a grid a stream starts when asked";
+
+  const server::StreamClock clock(io, std::chrono::milliseconds(2));
+  struct Rate {
+    double hz;
+    int points;  // ceil(period / 2 ms)
+  };
+  using Nanoseconds = std::chrono::duration<double, std::nano>;
+  for (const Rate r : {Rate{120.0, 5}, Rate{60.0, 9}, Rate{30.0, 17}, Rate{1000.0, 1}, Rate{500.0, 1}}) {
+    const double step_ns = 1e9 / r.hz / r.points;
+    const auto first = clock.align(t0, r.hz);
+    int checked = 0;
+    for (int k = 0; k < 2000; ++k) {
+      // Times about 0.37 ms apart, so every point of the period is met.
+      const auto t = t0 + std::chrono::nanoseconds(370'001LL * k);
+      const auto a = clock.align(t, r.hz);
+      ASSERT_GE(a, t) << r.hz << " Hz, " << k;
+      EXPECT_LT(Nanoseconds(a - t).count(), step_ns + 1) << r.hz << " Hz, " << k;
+      // On the grid: a whole number of steps from the first point, within a nanosecond.
+      const double steps = Nanoseconds(a - first).count() / step_ns;
+      EXPECT_NEAR(steps * step_ns, std::round(steps) * step_ns, 1.0) << r.hz << " Hz, " << k;
+      ++checked;
+    }
+    EXPECT_EQ(checked, 2000);
+  }
+}
+
+// 300 streams at one rate that start at scattered times on a 2 ms grid tick
+// in at most 5 groups a period at 120 Hz (a wake-up each), where without it
+// they tick at every phase.
+TEST(StreamClock, StreamsOnTheGridTickInAFewGroupsAndEachGetsEveryFrame) {
+  spdlog::set_level(spdlog::level::warn);
+  server::ServerConfig cfg;
+  cfg.send_budget = 0;
+  cfg.tick_grid = std::chrono::milliseconds(2);
+  ServerParts parts(cfg, test_library());
+#ifdef GMR_SANITIZED
+  constexpr int kStreams = 40;
+#else
+  constexpr int kStreams = 300;
+#endif
+  constexpr std::uint64_t kFrames = 24;
+  std::vector<RecordedSession> sessions;
+  for (int i = 0; i < kStreams; ++i) {
+    RecordedSession s(parts.services, static_cast<std::uint64_t>(i + 1));
+    const std::uint32_t view = s.create_view("walk");
+    ASSERT_NE(view, 0u);
+    const auto r = s.ask(own_subscription(view, 120.0, kFrames));
+    ASSERT_TRUE(r.has_subscribed()) << r.DebugString();
+    sessions.push_back(std::move(s));
+    // Starts scattered over two periods.
+    if (i % (kStreams / 20) == 0) run_for(parts, 1);
+  }
+  const auto until = server::Clock::now() + std::chrono::seconds(10);
+  auto all_ended = [&] {
+    return std::all_of(sessions.begin(), sessions.end(),
+                       [](const RecordedSession& s) { return s.ended().has_value(); });
+  };
+  while (!all_ended() && server::Clock::now() < until) run_for(parts, 20);
+  ASSERT_TRUE(all_ended()) << "every stream ends after its max_frames";
+  std::uint64_t frames = 0;
+  for (const auto& s : sessions) {
+    ASSERT_EQ(s.box->frames.size() + s.ended()->frames_skipped(), kFrames);
+    for (std::size_t k = 1; k < s.box->frames.size(); ++k) {
+      EXPECT_LT(s.box->frames[k - 1].frame().sequence(), s.box->frames[k].frame().sequence());
+    }
+    frames += s.box->frames.size();
+  }
+  const auto& clock = parts.streams.clock();
+  std::fprintf(stderr, "stream clock on a 2 ms grid: %d streams, %llu ticks in %llu wake-ups\n", kStreams,
+               static_cast<unsigned long long>(clock.ticks()), static_cast<unsigned long long>(clock.wakeups()));
+  EXPECT_GE(clock.ticks(), frames);
+  // Five groups a period: kStreams / 5 ticks a wake-up when every group is
+  // full; half that allows for the first and last periods' partial groups.
+  EXPECT_GE(clock.ticks(), clock.wakeups() * (kStreams / 10)) << "streams on one point share its wake-up";
+}
+
 // A paused stream's tick is cancelled, and it resumes where it was; a
 // stopped one's never runs.
 TEST(StreamClock, PausedStreamsTickNoMoreUntilResumed) {
