@@ -34,9 +34,9 @@ Clock::duration Stream::period() const {
   return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / settings_.schedule.rate));
 }
 void Stream::rebase(double pos) {
-  // On the clock's grid: streams of one rate that start close together tick
-  // together (stream_clock.h).
-  base_time_ = clock_.align(Clock::now(), settings_.schedule.rate);
+  // On the clock's grid: streams of one rate tick in a few groups, evenly
+  // filled (stream_clock.h).
+  base_time_ = clock_.start_at(Clock::now(), settings_.schedule.rate);
   base_pos_ = pos;
   base_tick_ = tick_;
 }

@@ -6,15 +6,25 @@
 
 namespace gmr::server {
 
-Clock::time_point StreamClock::align(Clock::time_point t, double rate_hz) const {
+Clock::time_point StreamClock::start_at(Clock::time_point t, double rate_hz) {
   if (grid_ <= Clock::duration::zero() || !(rate_hz > 0) || t <= epoch_) return t;
   using Seconds = std::chrono::duration<double>;
   const double period = 1.0 / rate_hz;
-  const double points = std::max(1.0, std::ceil(period / Seconds(grid_).count() - 1e-9));
-  const double step = period / points;
-  // Days after the epoch, n * step is still within a nanosecond of the grid.
-  const double n = std::ceil(Seconds(t - epoch_).count() / step);
-  return std::max(t, epoch_ + std::chrono::duration_cast<Clock::duration>(Seconds(n * step)));
+  const double points_d = std::max(1.0, std::ceil(period / Seconds(grid_).count() - 1e-9));
+  const auto points = static_cast<std::uint64_t>(points_d);
+  const double step = period / points_d;
+  // The first point at or after t (days after the epoch, n * step is still
+  // within a nanosecond of the grid), then this rate's turn from there.
+  auto n = static_cast<std::uint64_t>(std::ceil(Seconds(t - epoch_).count() / step));
+  const auto period_ns = static_cast<std::uint64_t>(std::llround(period * 1e9));
+  std::uint64_t& turn = turn_[(period_ns * 0x9E3779B97F4A7C15ull) >> 58];
+  auto point = [&](std::uint64_t k) {
+    return epoch_ + std::chrono::duration_cast<Clock::duration>(Seconds(static_cast<double>(k) * step));
+  };
+  const std::uint64_t ahead = (turn % points + points - n % points) % points;
+  if (point(n + ahead) - t <= kLongestStartWait) n += ahead;
+  turn = (n + 1) % points;
+  return std::max(t, point(n));
 }
 
 void StreamClock::schedule(std::weak_ptr<Stream> stream, Clock::time_point due, std::uint64_t generation) {

@@ -19,16 +19,20 @@
 // of their period as there are streams, and each phase's sends are a burst
 // of their own (on loopback each burst wakes the receiver, which the sending
 // CPU pays for). So a stream starts on a grid (ServerConfig::tick_grid): at
-// rate R, the first of ceil(1 / (R * grid)) points evenly spaced over its
-// period, counted from the clock's epoch, at or after the moment it is asked
-// to start. Streams of one rate then tick in that many groups at most (5 a
-// period at 120 Hz with the 2 ms default), and a start waits less than the
-// grid.
+// rate R, one of ceil(1 / (R * grid)) points evenly spaced over its period,
+// counted from the clock's epoch. Streams of one rate then tick in that many
+// groups at most (5 a period at 120 Hz with the 2 ms default). The points are
+// taken in turn, so streams that start together (a client that subscribes
+// to a hundred at once) spread evenly over the period instead of making one
+// burst: a start waits for its turn's point, less than a period, but not
+// more than kLongestStartWait (past it, it takes the first point, out of
+// turn, which waits less than the grid).
 #pragma once
 
 #include <cstdint>
 #include <memory>
 #include <algorithm>
+#include <array>
 #include <vector>
 
 #include "transport/net.h"
@@ -40,14 +44,15 @@ class Stream;
 class StreamClock {
  public:
   static constexpr Clock::duration kGrain = std::chrono::microseconds(500);
+  static constexpr Clock::duration kLongestStartWait = std::chrono::milliseconds(10);
 
   // `grid`: see above; zero puts no grid (a stream starts when asked).
   explicit StreamClock(net::io_context& io, Clock::duration grid = Clock::duration::zero())
       : timer_(io), grid_(grid), epoch_(Clock::now()) {}
 
-  // The first point of the grid of streams at `rate_hz` at or after `t` (`t`
-  // itself without a grid).
-  Clock::time_point align(Clock::time_point t, double rate_hz) const;
+  // When a stream at `rate_hz` asked to start at `t` starts: its point of the
+  // grid, the next in turn at or after `t` (`t` itself without a grid).
+  Clock::time_point start_at(Clock::time_point t, double rate_hz);
 
   // `stream`'s tick `generation` is due at `due`: then its on_clock(generation)
   // runs (the stream ignores a generation it has since cancelled). Control
@@ -76,6 +81,10 @@ class StreamClock {
   net::steady_timer timer_;
   Clock::duration grid_;
   Clock::time_point epoch_;
+  // Each rate's next point in turn, by its period's hash: a fixed table, so
+  // clients asking for many different rates cannot grow it (rates that share
+  // a slot share a turn, which still spreads them).
+  std::array<std::uint64_t, 64> turn_{};
   // A min-heap by due time (std::push_heap / pop_heap with std::greater): a
   // tick's entry is moved out of it, not copied (its weak_ptr's count is
   // shared with every other user of the stream).

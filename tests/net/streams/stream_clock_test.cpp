@@ -87,44 +87,55 @@ TEST(StreamClock, OwnStreamsShareWakeUpsAndEachGetsEveryFrameInOrder) {
   EXPECT_EQ(clock.waiting(), 0u) << "an ended stream leaves nothing on the clock";
 }
 
-// The grid (ServerConfig::tick_grid): a start waits for the first of its
-// points at or after it, less than a point's spacing, and the points of a
-// rate are evenly spaced over its period, so streams that start on them tick
-// together.
-TEST(StreamClock, AGridPutsStartsOnEvenlySpacedPointsOfThePeriod) {
+// The grid (ServerConfig::tick_grid): a start waits for a point of its
+// rate's grid, evenly spaced over the period; the points are taken in turn,
+// so streams that start together spread over them evenly, and no start waits
+// more than StreamClock::kLongestStartWait.
+TEST(StreamClock, AGridSpreadsStartsEvenlyOverItsPointsOfThePeriod) {
+  using Nanoseconds = std::chrono::duration<double, std::nano>;
   server::net::io_context io;
-  const server::StreamClock none(io);
+  server::StreamClock none(io);
   const auto t0 = server::Clock::now() + std::chrono::milliseconds(1);
-  EXPECT_EQ(none.align(t0, 120.0), t0) << "without a grid a stream starts when asked";
+  EXPECT_EQ(none.start_at(t0, 120.0), t0) << "without a grid a stream starts when asked";
 
-  const server::StreamClock clock(io, std::chrono::milliseconds(2));
   struct Rate {
     double hz;
     int points;  // ceil(period / 2 ms)
   };
-  using Nanoseconds = std::chrono::duration<double, std::nano>;
-  for (const Rate r : {Rate{120.0, 5}, Rate{60.0, 9}, Rate{30.0, 17}, Rate{1000.0, 1}, Rate{500.0, 1}}) {
+  const double longest_ns = Nanoseconds(server::StreamClock::kLongestStartWait).count();
+  int checked = 0;
+  for (const Rate r : {Rate{120.0, 5}, Rate{240.0, 3}, Rate{60.0, 9}, Rate{30.0, 17}, Rate{1000.0, 1}}) {
     const double step_ns = 1e9 / r.hz / r.points;
-    const auto first = clock.align(t0, r.hz);
-    int checked = 0;
-    for (int k = 0; k < 2000; ++k) {
-      // Times about 0.37 ms apart, so every point of the period is met.
-      const auto t = t0 + std::chrono::nanoseconds(370'001LL * k);
-      const auto a = clock.align(t, r.hz);
-      ASSERT_GE(a, t) << r.hz << " Hz, " << k;
-      EXPECT_LT(Nanoseconds(a - t).count(), step_ns + 1) << r.hz << " Hz, " << k;
-      // On the grid: a whole number of steps from the first point, within a nanosecond.
-      const double steps = Nanoseconds(a - first).count() / step_ns;
-      EXPECT_NEAR(steps * step_ns, std::round(steps) * step_ns, 1.0) << r.hz << " Hz, " << k;
-      ++checked;
+    const bool all_in_reach = (r.points - 1) * step_ns <= longest_ns;
+    // Starts asked for all at once, then about 0.37 ms apart (every phase of the period).
+    for (const long long apart_ns : {0LL, 370'001LL}) {
+      server::StreamClock clock(io, std::chrono::milliseconds(2));
+      const auto first = clock.start_at(t0, r.hz);
+      std::vector<int> at_point(static_cast<std::size_t>(r.points), 0);
+      for (int k = 1; k <= 100 * r.points; ++k) {
+        const auto t = t0 + std::chrono::nanoseconds(apart_ns * k);
+        const auto a = clock.start_at(t, r.hz);
+        ASSERT_GE(a, t) << r.hz << " Hz, " << k;
+        EXPECT_LE(Nanoseconds(a - t).count(), longest_ns) << r.hz << " Hz, " << k;
+        EXPECT_LT(Nanoseconds(a - t).count(), 1e9 / r.hz) << r.hz << " Hz, " << k;
+        // On the grid: a whole number of steps from the first start, within a nanosecond.
+        const double steps = Nanoseconds(a - first).count() / step_ns;
+        EXPECT_NEAR(steps * step_ns, std::round(steps) * step_ns, 1.0) << r.hz << " Hz, " << k;
+        ++at_point[static_cast<std::size_t>((std::llround(steps) % r.points + r.points) % r.points)];
+        ++checked;
+      }
+      if (all_in_reach) {
+        const auto [fewest, most] = std::minmax_element(at_point.begin(), at_point.end());
+        EXPECT_LE(*most - *fewest, 1) << r.hz << " Hz, starts " << apart_ns << " ns apart: each point in turn";
+      }
     }
-    EXPECT_EQ(checked, 2000);
   }
+  EXPECT_EQ(checked, 2 * 100 * (5 + 3 + 9 + 17 + 1));
 }
 
-// 300 streams at one rate that start at scattered times on a 2 ms grid tick
-// in at most 5 groups a period at 120 Hz (a wake-up each), where without it
-// they tick at every phase.
+// 300 streams at one rate that start on a 2 ms grid tick in 5 groups a
+// period at 120 Hz (a wake-up each), where without it they tick at every
+// phase their starts fell on.
 TEST(StreamClock, StreamsOnTheGridTickInAFewGroupsAndEachGetsEveryFrame) {
   spdlog::set_level(spdlog::level::warn);
   server::ServerConfig cfg;
@@ -145,8 +156,6 @@ TEST(StreamClock, StreamsOnTheGridTickInAFewGroupsAndEachGetsEveryFrame) {
     const auto r = s.ask(own_subscription(view, 120.0, kFrames));
     ASSERT_TRUE(r.has_subscribed()) << r.DebugString();
     sessions.push_back(std::move(s));
-    // Starts scattered over two periods.
-    if (i % (kStreams / 20) == 0) run_for(parts, 1);
   }
   const auto until = server::Clock::now() + std::chrono::seconds(10);
   auto all_ended = [&] {

@@ -209,11 +209,12 @@ struct ServerConfig {
   // now. Tests raise it so that a slow (sanitizer) build still sends every frame.
   std::chrono::milliseconds max_catch_up{250};
   // Own streams start on a grid of their period (StreamClock,
-  // streams/stream_clock.h): at rate R on the first of ceil(1 / (R * grid))
-  // evenly spaced points after they are asked to, so streams of one rate tick
-  // in that many groups and their sends leave in that many bursts a period
+  // streams/stream_clock.h): at rate R on one of ceil(1 / (R * grid)) evenly
+  // spaced points, taken in turn, so streams of one rate tick in that many
+  // evenly filled groups and their sends leave in that many bursts a period
   // (docs/performance.md, "Own streams on a grid"). A start, resume or seek
-  // waits less than this. 0: each stream ticks from the moment it starts.
+  // waits less than a period and at most 10 ms (or less than the grid, when
+  // that is coarser). 0: each stream ticks from the moment it starts.
   std::chrono::microseconds tick_grid{2000};
   // How long a graceful stop waits for replies to drain before closing.
   std::chrono::milliseconds shutdown_grace{2000};
