@@ -152,8 +152,8 @@ int main(int argc, char** argv) {
                  "(or UDP lane)")
       ->capture_default_str();
   app.add_option("--tick-grid-ms", tick_grid_ms,
-                 "Own streams start on points of their period this far apart, taken in turn, so streams of one rate tick "
-                 "in a few evenly filled groups; a start waits at most 10 ms (0: each from the moment it starts)")
+                 "Own streams start on points of their period this far apart, taken in turn, so streams of one rate "
+                 "tick in a few evenly filled groups; a start waits at most 10 ms (0: each from the moment it starts)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1000.0));
   app.add_option("--load-threads", threads, "Threads loading the library (0: one per core)");
