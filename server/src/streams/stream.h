@@ -154,7 +154,7 @@ class Stream : public std::enable_shared_from_this<Stream> {
   double step() const;
   double position(std::uint64_t tick) const;
   Clock::duration period() const;
-  // Position `pos` is due at the first point of the clock's grid from now.
+  // Position `pos` is due at the clock's start_at(now): its rate's next point in turn.
   void rebase(double pos);
   Clock::time_point due(std::uint64_t tick) const;
   void arm();
