@@ -28,38 +28,49 @@ void run_for(ServerParts& parts, int ms) {
   parts.io.run_for(std::chrono::milliseconds(ms));
 }
 
-// Before, each stream had a timer: a wake-up and a timer update per tick.
-TEST(StreamClock, OwnStreamsShareWakeUpsAndEachGetsEveryFrameInOrder) {
-  spdlog::set_level(spdlog::level::warn);
-  server::ServerConfig cfg;
-  cfg.send_budget = 0;
-  ServerParts parts(cfg, test_library());
 #ifdef GMR_SANITIZED
-  constexpr int kStreams = 40;
+constexpr int kManyStreams = 40;
 #else
-  constexpr int kStreams = 300;
+constexpr int kManyStreams = 300;
 #endif
-  constexpr std::uint64_t kFrames = 30;
-  std::vector<RecordedSession> sessions;
-  for (int i = 0; i < kStreams; ++i) {
+
+// `count` own streams of the demo walk, stream i at rate_of(i) Hz for
+// `frames` frames, subscribed one after another (into `sessions`); then the
+// loop runs until every one has ended (10 s at most).
+void run_own_streams(ServerParts& parts, int count, double (*rate_of)(int), std::uint64_t frames,
+                     std::vector<RecordedSession>& sessions) {
+  for (int i = 0; i < count; ++i) {
     RecordedSession s(parts.services, static_cast<std::uint64_t>(i + 1));
     const std::uint32_t view = s.create_view("walk");
     ASSERT_NE(view, 0u);
-    // Rates differ, so ticks fall at every phase.
-    const auto r = s.ask(own_subscription(view, 100.0 + i % 7, kFrames));
+    const auto r = s.ask(own_subscription(view, rate_of(i), frames));
     ASSERT_TRUE(r.has_subscribed()) << r.DebugString();
     ASSERT_FALSE(r.subscribed().joined_running()) << "own streams";
     sessions.push_back(std::move(s));
   }
   const auto until = server::Clock::now() + std::chrono::seconds(10);
   auto all_ended = [&] {
-    for (const auto& s : sessions) {
-      if (!s.ended()) return false;
-    }
-    return true;
+    return std::all_of(sessions.begin(), sessions.end(),
+                       [](const RecordedSession& s) { return s.ended().has_value(); });
   };
   while (!all_ended() && server::Clock::now() < until) run_for(parts, 20);
   ASSERT_TRUE(all_ended()) << "every stream ends after its max_frames";
+}
+
+// Before, each stream had a timer: a wake-up and a timer update per tick.
+TEST(StreamClock, OwnStreamsShareWakeUpsAndEachGetsEveryFrameInOrder) {
+  spdlog::set_level(spdlog::level::warn);
+  server::ServerConfig cfg;
+  cfg.send_budget = 0;
+  cfg.tick_grid = {};  // the clock's grain alone (the grid is the next test's)
+  ServerParts parts(cfg, test_library());
+  constexpr int kStreams = kManyStreams;
+  constexpr std::uint64_t kFrames = 30;
+  std::vector<RecordedSession> sessions;
+  // Rates differ, so ticks fall at many phases.
+  run_own_streams(
+      parts, kStreams, [](int i) { return 100.0 + i % 7; }, kFrames, sessions);
+  ASSERT_FALSE(HasFatalFailure());
 
   std::uint64_t frames = 0, late = 0;
   for (const auto& s : sessions) {
@@ -144,28 +155,12 @@ TEST(StreamClock, StreamsOnTheGridTickInAFewGroupsAndEachGetsEveryFrame) {
   cfg.send_budget = 0;
   cfg.tick_grid = std::chrono::milliseconds(2);
   ServerParts parts(cfg, test_library());
-#ifdef GMR_SANITIZED
-  constexpr int kStreams = 40;
-#else
-  constexpr int kStreams = 300;
-#endif
+  constexpr int kStreams = kManyStreams;
   constexpr std::uint64_t kFrames = 24;
   std::vector<RecordedSession> sessions;
-  for (int i = 0; i < kStreams; ++i) {
-    RecordedSession s(parts.services, static_cast<std::uint64_t>(i + 1));
-    const std::uint32_t view = s.create_view("walk");
-    ASSERT_NE(view, 0u);
-    const auto r = s.ask(own_subscription(view, 120.0, kFrames));
-    ASSERT_TRUE(r.has_subscribed()) << r.DebugString();
-    sessions.push_back(std::move(s));
-  }
-  const auto until = server::Clock::now() + std::chrono::seconds(10);
-  auto all_ended = [&] {
-    return std::all_of(sessions.begin(), sessions.end(),
-                       [](const RecordedSession& s) { return s.ended().has_value(); });
-  };
-  while (!all_ended() && server::Clock::now() < until) run_for(parts, 20);
-  ASSERT_TRUE(all_ended()) << "every stream ends after its max_frames";
+  run_own_streams(
+      parts, kStreams, [](int) { return 120.0; }, kFrames, sessions);
+  ASSERT_FALSE(HasFatalFailure());
   std::uint64_t frames = 0;
   for (const auto& s : sessions) {
     ASSERT_EQ(s.box->frames.size() + s.ended()->frames_skipped(), kFrames);
