@@ -49,6 +49,7 @@ Result<SubscriptionInfo> Client::subscribe(std::uint32_t view, const SubscribeOp
   s->set_shared(o.shared);
   to_proto(o.conventions, *s->mutable_conventions());
   s->set_max_frames(o.max_frames);
+  s->set_paused(o.paused);
   // Zero: no bound, which the wire says with the largest (0 there is the server's default).
   const auto staleness_ms = o.max_staleness.count() <= 0
                                 ? std::numeric_limits<std::uint32_t>::max()

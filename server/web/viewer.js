@@ -461,13 +461,14 @@ class Viewer {
       speed: Number($('speed').value),
       precision: 'PRECISION_FLOAT64',
       maxStalenessMs: STALENESS_MS,
+      // Held (its first frame drawn, then nothing) until Play.
+      paused: !this.playing,
     } });
     const sub = reply.subscribed;
     this.subs[key] = sub;
     this.panels[key].setSkeleton(view.skeleton.joints.map(jointOf), sub.joints || [], sub.skeletonVersion || 0);
     this.panels[key].paint(this.selected);
     this.figures.lastSeq.delete(sub.subscriptionId);
-    if (!this.playing) await this.socket.ask({ pause: { subscriptionId: sub.subscriptionId } });
   }
 
   async unsubscribe(key) {

@@ -351,6 +351,22 @@ class DemoLibrary(unittest.TestCase):
         c.unsubscribe(sub.id)
         c.close_view(v.id)
 
+    def test_a_paused_start_holds_its_first_frame(self):
+        c = self.client
+        v = c.create_view("jump")
+        sub = c.subscribe(v.id, start_frame=30, loop=True, paused=True)
+        first = next(iter(sub))
+        self.assertEqual(first.frame_index, 30)
+        time.sleep(0.1)  # a dozen ticks at the motion's rate
+        c.stats()  # a round trip: what was sent before it has arrived
+        self.assertEqual([f.frame_index for f in sub.frames()], [])
+        c.resume(sub.id)
+        resumed = next(iter(sub))
+        self.assertEqual(resumed.frame_index, 30)
+        self.assertEqual(resumed.sequence, first.sequence + 1)
+        c.unsubscribe(sub.id)
+        c.close_view(v.id)
+
     def test_connection_errors_are_clear(self):
         with self.assertRaises(gmr_client.GmrError) as e:
             gmr_client.Client(port=1, timeout=2)

@@ -204,7 +204,8 @@ class Client:
                   speed: float = 1.0, rate_hz: float = 0.0, skip_repeats: bool = False, orientations: bool = False,
                   local_transforms: bool = False, joints: Sequence[str] = (), udp: bool = False,
                   float64: bool = False, shared: bool = False, max_frames: int = 0,
-                  conventions: ConventionsLike = None, max_staleness_ms: int = 0) -> Subscription:
+                  conventions: ConventionsLike = None, max_staleness_ms: int = 0,
+                  paused: bool = False) -> Subscription:
         """Starts streaming frames of a view (docs/protocol.md, "Streams").
 
         By default (max_staleness_ms=0) every frame that reaches this client
@@ -214,7 +215,10 @@ class Client:
         Blender add-on) gives a bound, e.g. 100: frames older than it are
         never handed out (the server drops those that waited in its queue,
         this client those that arrive older) and are counted in
-        Subscription.frames_stale."""
+        Subscription.frames_stale.
+
+        paused=True starts held at start_frame: that one frame comes, then
+        nothing until resume()."""
         if udp:
             self.register_udp()
         m = pb.ClientMessage()
@@ -233,6 +237,7 @@ class Client:
         s.precision = pb.PRECISION_FLOAT64 if float64 else pb.PRECISION_FLOAT32
         s.shared = shared
         s.max_frames = max_frames
+        s.paused = paused
         s.max_staleness_ms = max_staleness_ms if max_staleness_ms > 0 else 0xFFFFFFFF  # 0 on the wire: 100 ms
         _set_conventions(conventions, s.conventions)
         # Frames and pushes can come before the reply is handled (in the same

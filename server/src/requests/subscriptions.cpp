@@ -84,6 +84,11 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
                    "UDP transport: register this connection's UDP endpoint first (send the session token to UDP port " +
                        std::to_string(link_.services.udp.port()) + ")"};
   }
+  if (use_multicast && r.paused()) {
+    return Refusal{pb::ERROR_CODE_BAD_REQUEST,
+                   "a multicast subscription follows its shared stream: it cannot start paused (subscribe over TCP or "
+                   "UDP to play on your own)"};
+  }
   const std::vector<std::string> names(r.joints().begin(), r.joints().end());
   auto joints = views_.resolve_joints(*v, names);
   if (!joints.ok()) return Refusal{pb::ERROR_CODE_NOT_FOUND, joints.error().message};
@@ -105,7 +110,9 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   const std::string shown = source ? v->motion_name() + "#live" + std::to_string(source->serial()) : v->motion_name();
   // Multicast is for shared streams: one send per frame for all their subscribers.
   const std::string key = r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
-  std::shared_ptr<Stream> stream = key.empty() ? nullptr : link_.services.streams.find_running(key);
+  // One that starts paused gets a stream of its own (a running one does not
+  // wait for it); others can join it once it runs.
+  std::shared_ptr<Stream> stream = key.empty() || r.paused() ? nullptr : link_.services.streams.find_running(key);
   const bool joined = stream != nullptr;
   // Admission: what all subscriptions cost stays within what the server can
   // send (docs/protocol.md, "Admission"), each counted by its kind. Committed from here on.
@@ -145,7 +152,11 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
       Subscription{v->id(),        stream,        target,         names, rate_mhz, v->content()->skeleton_version,
                    settings.basis, use_multicast, r.conventions()};
   if (!joined) {
-    stream->start();
+    if (r.paused()) {
+      stream->start_paused();
+    } else {
+      stream->start();
+    }
     if (source) attach_live(*source, stream);
   }
 

@@ -45,6 +45,21 @@ Clock::time_point Stream::due(std::uint64_t tick) const {
                           static_cast<double>(tick - base_tick_) / settings_.schedule.rate));
 }
 
+std::optional<std::uint64_t> Stream::frame_at(double pos) const {
+  const Schedule& sched = settings_.schedule;
+  const double length = static_cast<double>(sched.end - sched.start);
+  double p = pos;
+  if (sched.loop) {
+    p = std::fmod(pos, length);
+    if (p < 0) p += length;
+  } else if (pos >= length - 1e-9) {
+    return std::nullopt;
+  }
+  const auto offset =
+      std::min<std::uint64_t>(static_cast<std::uint64_t>(std::floor(p + 1e-9)), static_cast<std::uint64_t>(length) - 1);
+  return sched.start + offset;
+}
+
 void Stream::arm() {
   if (live_) return;  // its source's frames drive it
   clock_.schedule(weak_from_this(), due(tick_), ++armed_);
@@ -54,6 +69,13 @@ void Stream::start() {
   if (live_) return;  // its source's frames drive it
   rebase(0.0);
   arm();
+}
+
+void Stream::start_paused() {
+  paused_ = true;
+  pause_pos_ = 0.0;
+  if (live_) return;  // its source's frames pass it by until it resumes
+  clock_.schedule(weak_from_this(), Clock::now(), ++armed_);
 }
 
 void Stream::pause() {
@@ -169,7 +191,11 @@ void Stream::fan_out(const std::vector<Entry>& targets, const std::shared_ptr<co
 }
 
 void Stream::on_tick() {
-  if (paused_ || targets_.empty()) return;
+  if (targets_.empty()) return;
+  if (paused_) {
+    send_still();  // pause() cancels a tick it finds waiting: this is start_paused's
+    return;
+  }
   saw_dead_ = true;  // not known until mark_ready() runs
   // The tick's clock readings: its start, and its fan-out's (after the FK
   // and the encoding), which also serves the catch-up check at its end.
@@ -179,21 +205,11 @@ void Stream::on_tick() {
     counters_.tick_lateness->observe(now - due(tick_));
   }
   const Schedule& sched = settings_.schedule;
-  const double pos = position(tick_);
-  const double length = static_cast<double>(sched.end - sched.start);
+  const std::optional<std::uint64_t> at = frame_at(position(tick_));
   std::vector<std::pair<std::shared_ptr<Target>, std::uint64_t>> ended;
-  bool finished = false;
-  double p = pos;
-  if (sched.loop) {
-    p = std::fmod(pos, length);
-    if (p < 0) p += length;
-  } else if (pos >= length - 1e-9) {
-    finished = true;
-  }
+  const bool finished = !at;
   if (!finished) {
-    const auto offset = std::min<std::uint64_t>(static_cast<std::uint64_t>(std::floor(p + 1e-9)),
-                                                static_cast<std::uint64_t>(length) - 1);
-    const std::uint64_t frame = sched.start + offset;
+    const std::uint64_t frame = *at;
     if (!(sched.skip_repeats && static_cast<std::int64_t>(frame) == last_frame_)) {
       // Copy the targets first: a target may end a subscription re-entrantly.
       visiting_ = targets_;
@@ -277,6 +293,29 @@ void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_
     }
   }
   visiting_.clear();
+  count_one_sent();
+}
+
+void Stream::send_still() {
+  // Held past the end of its range: its last frame.
+  const std::uint64_t frame = frame_at(pause_pos_).value_or(settings_.schedule.end - 1);
+  visiting_ = targets_;
+  const std::vector<Entry>& targets = visiting_;
+  if (mark_ready(targets)) {
+    last_frame_ = static_cast<std::int64_t>(frame);
+    const auto body = encode(frame, frame);
+    fan_out(targets, body, Clock::now());
+  } else {
+    ++sequence_;
+    for (std::size_t i = 0; i < targets.size(); ++i) {
+      if (alive_[i]) targets[i].target->skipped(1);
+    }
+  }
+  visiting_.clear();
+  count_one_sent();
+}
+
+void Stream::count_one_sent() {
   std::vector<std::pair<std::shared_ptr<Target>, std::uint64_t>> ended;
   for (auto& e : targets_) {
     ++e.sent;

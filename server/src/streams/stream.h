@@ -23,6 +23,7 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -117,6 +118,10 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void remove(const Target* target);
 
   void start();
+  // Starts held at the schedule's first frame: that frame goes to the
+  // targets once, on the clock's next pass (after the reply that asked for
+  // it), then nothing until resume(). A live stream sends nothing.
+  void start_paused();
   void pause();
   void resume();
   void seek(std::uint32_t frame);
@@ -157,8 +162,14 @@ class Stream : public std::enable_shared_from_this<Stream> {
   // Position `pos` is due at the clock's start_at(now): its rate's next point in turn.
   void rebase(double pos);
   Clock::time_point due(std::uint64_t tick) const;
+  // The frame at position `pos`; none past the end of a range that does not loop.
+  std::optional<std::uint64_t> frame_at(double pos) const;
   void arm();
   void on_tick();
+  // Paused: the frame it holds, once (start_paused).
+  void send_still();
+  // Each target got one more frame: those at their max_frames end, the dead go.
+  void count_one_sent();
   // Ticks to skip after one that no target could take.
   std::uint64_t congested_ticks() const;
   // Computes and encodes frame `frame` of the content's motion (the shared

@@ -139,6 +139,63 @@ TEST(Streaming, PauseResumeAndSeek) {
   EXPECT_FALSE(c->pause(sub->id).ok());
 }
 
+TEST(Streaming, APausedStartSendsItsFirstFrameOnceThenResumesFromIt) {
+  TestServer s;
+  auto c = s.connect();
+  ASSERT_NE(c, nullptr);
+  auto v = c->create_view("walk");
+  ASSERT_TRUE(v.ok());
+  Sink sink;
+  sink.until = [](const ReceivedFrame&) { return true; };
+  client::SubscribeOptions o;
+  o.start_frame = 40;
+  o.loop = true;
+  o.rate_hz = 200;
+  o.paused = true;
+  auto sub = c->subscribe(v->id, o, sink.on_frame(), sink.on_end());
+  ASSERT_TRUE(sub.ok()) << sub.error().to_string();
+  ASSERT_TRUE(sink.reached.wait().has_value());
+  // Held: 20 ticks' worth of time later, still the one frame.
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  ASSERT_TRUE(c->stats().ok());  // a round trip: anything sent before it has arrived
+  auto held = sink.copy();
+  ASSERT_EQ(held.size(), 1u);
+  EXPECT_EQ(held[0].frame_index, 40u);
+  {
+    std::lock_guard lock(sink.mutex);
+    sink.until = [](const ReceivedFrame& f) { return f.frame_index >= 50; };
+  }
+  sink.reached.reset();
+  ASSERT_TRUE(c->resume(sub->id).ok());
+  ASSERT_TRUE(sink.reached.wait().has_value());
+  const auto frames = sink.copy();
+  EXPECT_EQ(frames[1].frame_index, 40u);  // plays from the frame it held
+  for (std::size_t k = 1; k < frames.size(); ++k) EXPECT_EQ(frames[k].sequence, frames[k - 1].sequence + 1);
+  EXPECT_TRUE(c->unsubscribe(sub->id).ok());
+
+  // A paused start does not join a running shared stream (which does not
+  // wait for it), and with max_frames 1 its one frame is its last.
+  o.paused = false;
+  o.shared = true;
+  Sink running;
+  auto first = c->subscribe(v->id, o, running.on_frame(), running.on_end());
+  ASSERT_TRUE(first.ok());
+  o.paused = true;
+  o.max_frames = 1;
+  Sink one;
+  auto second = c->subscribe(v->id, o, one.on_frame(), one.on_end());
+  ASSERT_TRUE(second.ok()) << second.error().to_string();
+  EXPECT_FALSE(second->joined_running);
+  EXPECT_NE(second->stream_id, first->stream_id);
+  const auto end = one.ended.wait();
+  ASSERT_TRUE(end.has_value());
+  EXPECT_EQ(end->reason, "max_frames reached");
+  EXPECT_EQ(end->frames_sent, 1u);
+  const auto got = one.copy();
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].frame_index, 40u);
+}
+
 TEST(Streaming, SharedStreamsComputeAndEncodeOncePerTick) {
   TestServer s;
   auto a = s.connect();

@@ -152,6 +152,11 @@ TEST(Multicast, OneSendPerFrameReachesEverySubscriberWithExactPositions) {
   const auto paused = clients[0]->pause(sub->id);
   ASSERT_FALSE(paused.ok());
   EXPECT_NE(paused.error().message.find("multicast"), std::string::npos);
+  // Nor start paused.
+  so.paused = true;
+  const auto held = clients[0]->subscribe(v->id, so, [](const client::ReceivedFrame&) {});
+  ASSERT_FALSE(held.ok());
+  EXPECT_NE(held.error().message.find("cannot start paused"), std::string::npos) << held.error().message;
 }
 
 // However many subscribers a shared stream has over multicast, they are one

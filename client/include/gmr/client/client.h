@@ -170,6 +170,9 @@ struct SubscribeOptions {
   // The client joins the group on the interface it reaches the server by.
   bool multicast = false;
   std::uint64_t max_frames = 0;  // 0: no limit
+  // Start held at start_frame: that one frame comes, then nothing until
+  // resume() (not for multicast).
+  bool paused = false;
   // Frames older than this are never delivered: the server drops those that
   // waited longer in its queue, this client those that arrive older (after a
   // stall, the kernel's buffers still hold them); both are counted. Zero: no
