@@ -93,8 +93,11 @@ TEST(StreamClock, OwnStreamsShareWakeUpsAndEachGetsEveryFrameInOrder) {
                static_cast<unsigned long long>(late));
   EXPECT_GE(clock.ticks(), frames);
   // 300 streams at ~100 Hz: a tick due every 33 us on average, so a
-  // wake-up per kGrain (500 us) serves about 15 of them.
-  EXPECT_LT(clock.wakeups() * 3, clock.ticks()) << "streams due close together share a wake-up";
+  // wake-up per kGrain (500 us) serves about 15 of them. The 40 of a
+  // sanitizer's build have one due every 250 us: about 3 a wake-up (3.4 seen
+  // under TSan), so there the bound is 2.
+  constexpr std::uint64_t kSharing = kStreams >= 300 ? 3 : 2;
+  EXPECT_LT(clock.wakeups() * kSharing, clock.ticks()) << "streams due close together share a wake-up";
   EXPECT_EQ(clock.waiting(), 0u) << "an ended stream leaves nothing on the clock";
 }
 
