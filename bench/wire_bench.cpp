@@ -48,6 +48,21 @@ void BM_EncodeBody(benchmark::State& state) {
 }
 BENCHMARK(BM_EncodeBody)->Name("frame/encode_body_f64");
 
+// What an own stream of CMU 01_01 sends: float32 positions of its 31 joints.
+void BM_EncodeBodyF32(benchmark::State& state) {
+  static const std::vector<double> p = positions();
+  const std::vector<float> f(p.begin(), p.begin() + 31 * 3);
+  wire::FrameContent c;
+  c.skeleton_version = 3;
+  c.frame_index = 1234;
+  c.motion_time = 10.28;
+  c.sequence = 99999;
+  c.server_send_time_ns = 1795000000000000000;
+  c.positions = f;
+  for (auto _ : state) benchmark::DoNotOptimize(wire::encode_frame_body(c));
+}
+BENCHMARK(BM_EncodeBodyF32)->Name("frame/encode_body_f32_31_joints");
+
 // The same body through a pb::Frame, as encode_frame_body did before it
 // wrote the fields itself (the reference for its figure).
 void BM_EncodeBodyByProtobuf(benchmark::State& state) {

@@ -34,50 +34,59 @@ constexpr std::uint64_t tag(int number, int wire_type) { return (static_cast<std
 namespace {
 
 // The body's fields as protobuf writes them (by field number; zeros and empty
-// lists left out; packed lists little-endian), into `out`, or only counted
-// when `out` is null: a frame is encoded per stream tick, and building a
+// lists left out; packed lists little-endian), at `out`, which has room for
+// max_body_size(): a frame is encoded per stream tick, and building a
 // pb::Frame to serialize it copies every value and allocates three times.
+// One pass: the room is a bound, not a count (a count is a second pass).
 class BodyWriter {
  public:
   explicit BodyWriter(char* out) : p_(out) {}
-  std::size_t size() const { return n_; }
+  char* end() const { return p_; }
 
   void varint_field(int number, std::uint64_t v) {
     if (v == 0) return;
-    varint(tag(number, 0));
-    varint(v);
+    p_ = put_varint(p_, tag(number, 0));
+    p_ = put_varint(p_, v);
   }
   void double_field(int number, double v) {
     std::uint64_t raw = 0;
     std::memcpy(&raw, &v, sizeof raw);
     if (raw == 0) return;  // +0.0 only, as protobuf
-    varint(tag(number, 1));
-    bytes(&raw, sizeof raw);
+    p_ = put_varint(p_, tag(number, 1));
+    std::memcpy(p_, &raw, sizeof raw);
+    p_ += sizeof raw;
   }
   template <class T>
   void packed_field(int number, std::span<const T> v) {
     if (v.empty()) return;
-    varint(tag(number, 2));
-    varint(v.size_bytes());
-    bytes(v.data(), v.size_bytes());
+    p_ = put_varint(p_, tag(number, 2));
+    p_ = put_varint(p_, v.size_bytes());
+    std::memcpy(p_, v.data(), v.size_bytes());
+    p_ += v.size_bytes();
   }
 
  private:
-  void varint(std::uint64_t v) {
-    if (p_ != nullptr) p_ = put_varint(p_, v);
-    n_ += varint_size(v);
-  }
-  void bytes(const void* data, std::size_t n) {
-    if (p_ != nullptr) {
-      std::memcpy(p_, data, n);
-      p_ += n;
-    }
-    n_ += n;
-  }
-
   char* p_;
-  std::size_t n_ = 0;
 };
+
+// Room for any body of `c`: each tag and varint at its widest.
+std::size_t max_body_size(const FrameContent& c) {
+  constexpr std::size_t kTag = 5, kVarint = 10;  // a field number's tag is a varint32
+  std::size_t n = 5 * (kTag + kVarint) + kTag + sizeof(double);
+  const auto packed = [&](auto span) { n += span.empty() ? 0 : kTag + kVarint + span.size_bytes(); };
+  if (c.float64) {
+    packed(c.positions_f64);
+    packed(c.orientations_f64);
+    packed(c.local_rotations_f64);
+    packed(c.local_translations_f64);
+  } else {
+    packed(c.positions);
+    packed(c.orientations);
+    packed(c.local_rotations);
+    packed(c.local_translations);
+  }
+  return n;
+}
 
 void write_body(BodyWriter& w, const FrameContent& c) {
   static_assert(std::endian::native == std::endian::little, "packed floats are copied as they are in memory");
@@ -116,11 +125,10 @@ std::string encode_frame_body(const FrameContent& c) {
                 F::kPositionsF64FieldNumber < F::kOrientationsF64FieldNumber &&
                 F::kOrientationsF64FieldNumber < F::kLocalRotationsF64FieldNumber &&
                 F::kLocalRotationsF64FieldNumber < F::kLocalTranslationsF64FieldNumber);
-  BodyWriter count(nullptr);
-  write_body(count, c);
-  std::string out(count.size(), '\0');
+  std::string out(max_body_size(c), '\0');
   BodyWriter writer(out.data());
   write_body(writer, c);
+  out.resize(static_cast<std::size_t>(writer.end() - out.data()));
   return out;
 }
 
