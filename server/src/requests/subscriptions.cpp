@@ -110,8 +110,9 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
   const std::string shown = source ? v->motion_name() + "#live" + std::to_string(source->serial()) : v->motion_name();
   // Multicast is for shared streams: one send per frame for all their subscribers.
   const std::string key = r.shared() || use_multicast ? StreamRegistry::share_key(shown, *v->content(), settings) : "";
-  // One that starts paused gets a stream of its own (a running one does not
-  // wait for it); others can join it once it runs.
+  // One that starts paused gets a stream of its own, as a pause gives one: a
+  // running stream does not wait for it, and nobody joins it (nor does it
+  // take a running stream's place under its key).
   std::shared_ptr<Stream> stream = key.empty() || r.paused() ? nullptr : link_.services.streams.find_running(key);
   const bool joined = stream != nullptr;
   // Admission: what all subscriptions cost stays within what the server can
@@ -125,7 +126,7 @@ Reply Subscriptions::subscribe(const pb::Subscribe& r) {
     return Refusal{pb::ERROR_CODE_RESOURCE_EXHAUSTED, std::move(*refused)};
   }
   if (!stream) {
-    stream = link_.services.streams.create(v->content(), settings, key);
+    stream = link_.services.streams.create(v->content(), settings, r.paused() ? std::string() : key);
     if (source) stream->set_live();
   }
 

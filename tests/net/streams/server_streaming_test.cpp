@@ -194,6 +194,14 @@ TEST(Streaming, APausedStartSendsItsFirstFrameOnceThenResumesFromIt) {
   const auto got = one.copy();
   ASSERT_EQ(got.size(), 1u);
   EXPECT_EQ(got[0].frame_index, 40u);
+  // The running shared stream is still the one a joiner finds.
+  o.paused = false;
+  o.max_frames = 0;
+  Sink joiner;
+  auto third = c->subscribe(v->id, o, joiner.on_frame(), joiner.on_end());
+  ASSERT_TRUE(third.ok()) << third.error().to_string();
+  EXPECT_TRUE(third->joined_running);
+  EXPECT_EQ(third->stream_id, first->stream_id);
 }
 
 TEST(Streaming, SharedStreamsComputeAndEncodeOncePerTick) {
