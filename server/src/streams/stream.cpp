@@ -280,30 +280,22 @@ void Stream::live_frame(std::shared_ptr<const ViewContent> content, std::uint64_
   live_next_ = index + 1;
   content_ = std::move(content);
   if (paused_ || targets_.empty()) return;
-  // Copy the targets first: a target may end a subscription re-entrantly.
-  visiting_ = targets_;
-  const std::vector<Entry>& targets = visiting_;
-  if (mark_ready(targets)) {
-    const auto body = encode(0, index);
-    fan_out(targets, body, Clock::now());
-  } else {
-    ++sequence_;
-    for (std::size_t i = 0; i < targets.size(); ++i) {
-      if (alive_[i]) targets[i].target->skipped(1);
-    }
-  }
-  visiting_.clear();
-  count_one_sent();
+  send_one(0, index);
 }
 
 void Stream::send_still() {
   // Held past the end of its range: its last frame.
   const std::uint64_t frame = frame_at(pause_pos_).value_or(settings_.schedule.end - 1);
+  if (send_one(frame, frame)) last_frame_ = static_cast<std::int64_t>(frame);
+}
+
+bool Stream::send_one(std::uint64_t frame, std::uint64_t index) {
+  // Copy the targets first: a target may end a subscription re-entrantly.
   visiting_ = targets_;
   const std::vector<Entry>& targets = visiting_;
-  if (mark_ready(targets)) {
-    last_frame_ = static_cast<std::int64_t>(frame);
-    const auto body = encode(frame, frame);
+  const bool sent = mark_ready(targets);
+  if (sent) {
+    const auto body = encode(frame, index);
     fan_out(targets, body, Clock::now());
   } else {
     ++sequence_;
@@ -313,6 +305,7 @@ void Stream::send_still() {
   }
   visiting_.clear();
   count_one_sent();
+  return sent;
 }
 
 void Stream::count_one_sent() {

@@ -168,6 +168,10 @@ class Stream : public std::enable_shared_from_this<Stream> {
   void on_tick();
   // Paused: the frame it holds, once (start_paused).
   void send_still();
+  // Frame `frame`, which clients are told is `index`, to the targets that
+  // take it now (the others count a skip), outside the clock's ticks (a live
+  // frame, a still); false when none took it.
+  bool send_one(std::uint64_t frame, std::uint64_t index);
   // Each target got one more frame: those at their max_frames end, the dead go.
   void count_one_sent();
   // Ticks to skip after one that no target could take.
