@@ -30,15 +30,21 @@ std::vector<double> positions() {
   return p;
 }
 
-std::string body() {
-  static const std::vector<double> p = positions();
+// A frame's fields but its values.
+wire::FrameContent header() {
   wire::FrameContent c;
-  c.float64 = true;
   c.skeleton_version = 3;
   c.frame_index = 1234;
   c.motion_time = 10.28;
   c.sequence = 99999;
   c.server_send_time_ns = 1795000000000000000;
+  return c;
+}
+
+std::string body() {
+  static const std::vector<double> p = positions();
+  wire::FrameContent c = header();
+  c.float64 = true;
   c.positions_f64 = p;
   return wire::encode_frame_body(c);
 }
@@ -52,12 +58,7 @@ BENCHMARK(BM_EncodeBody)->Name("frame/encode_body_f64");
 void BM_EncodeBodyF32(benchmark::State& state) {
   static const std::vector<double> p = positions();
   const std::vector<float> f(p.begin(), p.begin() + 31 * 3);
-  wire::FrameContent c;
-  c.skeleton_version = 3;
-  c.frame_index = 1234;
-  c.motion_time = 10.28;
-  c.sequence = 99999;
-  c.server_send_time_ns = 1795000000000000000;
+  wire::FrameContent c = header();
   c.positions = f;
   for (auto _ : state) benchmark::DoNotOptimize(wire::encode_frame_body(c));
 }
@@ -93,12 +94,7 @@ BENCHMARK(BM_Head)->Name("frame/subscriber_head");
 std::string float32_message() {
   static const std::vector<double> p = positions();
   const std::vector<float> pf(p.begin(), p.end());
-  wire::FrameContent c;
-  c.skeleton_version = 3;
-  c.frame_index = 1234;
-  c.motion_time = 10.28;
-  c.sequence = 99999;
-  c.server_send_time_ns = 1795000000000000000;
+  wire::FrameContent c = header();
   c.positions = pf;
   return wire::frame_message_for(1, 2, 3, wire::encode_frame_body(c), 1795000000000100000);
 }
